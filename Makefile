@@ -1,0 +1,41 @@
+# One entry point for set-up, checks, the demo and benchmarks. Everything installs into .venv.
+PYTHON ?= python3
+VENV := .venv
+PY := $(VENV)/bin/python
+STAMP := $(VENV)/.installed
+OUT ?= out
+
+.PHONY: test lint typecheck pytest demo bench clean
+
+$(PY):
+	$(PYTHON) -m venv $(VENV)
+	$(PY) -m pip install --quiet --upgrade pip
+
+$(STAMP): pyproject.toml | $(PY)
+	$(PY) -m pip install --quiet -e '.[dev]'
+	touch $(STAMP)
+
+test: $(STAMP) lint typecheck pytest
+
+lint: $(STAMP)
+	$(VENV)/bin/ruff check planner gcs sitl_stub tests bench
+	$(VENV)/bin/ruff format --check planner gcs sitl_stub tests bench
+
+typecheck: $(STAMP)
+	$(VENV)/bin/mypy
+
+pytest: $(STAMP)
+	$(VENV)/bin/pytest -q
+
+demo: $(STAMP)
+	mkdir -p $(OUT)
+	$(PY) -m planner plan scenarios/paper_three_uav.yaml --seed 1 --out $(OUT)/plan.json
+	$(PY) -m planner plot $(OUT)/plan.json --out $(OUT)/paths.png
+	@echo "demo: plan in $(OUT)/plan.json, plot in $(OUT)/paths.png"
+
+bench: $(STAMP)
+	$(PY) bench/bench_planner.py
+	$(PY) bench/bench_sitl_stub.py
+
+clean:
+	rm -rf $(VENV) $(OUT) .mypy_cache .ruff_cache .pytest_cache .hypothesis

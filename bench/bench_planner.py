@@ -1,0 +1,122 @@
+"""Planner benchmark: 3, 10, 30 and 100 UAVs on the paper's 200 km map.
+
+For each team size: wall time of the full plan (world, grid, exact search, ACO, smoothing,
+profiles, checks), the worst and mean ACO cost ratio to the exact optimum on the same graph,
+and the peak traced memory. Run: ``.venv/bin/python bench/bench_planner.py [--sizes 3 10]``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import os
+import platform
+import resource
+import subprocess
+import sys
+import time
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from planner.plan import build_terrain, plan
+from planner.scenario import load_scenario, parse_scenario
+
+ROOT = Path(__file__).resolve().parents[1]
+PAPER = ROOT / "scenarios" / "paper_three_uav.yaml"
+
+
+def team_scenario(n: int, seed: int = 0) -> dict[str, Any]:
+    """The paper's map and static threats with ``n`` vehicles from the west and south edges.
+
+    Goals sit on rings 3-15 km around the target at (200, 200) km, at least 800 m apart.
+    """
+    base = load_scenario(PAPER).model_dump(mode="json", exclude_none=True)
+    base["threats"] = [t for t in base["threats"] if "appears" not in t]
+    rng = np.random.default_rng(seed)
+    terrain = build_terrain(parse_scenario(base))
+    template = base["vehicles"][0]
+    vehicles = []
+    goals: list[tuple[float, float]] = []
+    while len(vehicles) < n:
+        k = len(vehicles)
+        if k % 2 == 0:
+            start = (60_000.0, float(rng.uniform(60_000, 240_000)))
+        else:
+            start = (float(rng.uniform(60_000, 240_000)), 60_000.0)
+        ground = terrain.elevation_m(np.array([start[0]]), np.array([start[1]]))
+        if float(ground[0]) > 900.0:  # launch sites in the lowlands
+            continue
+        r, a = float(rng.uniform(3_000, 15_000)), float(rng.uniform(math.pi, 1.5 * math.pi))
+        goal = (200_000 + r * math.cos(a), 200_000 + r * math.sin(a))
+        if any(math.dist(goal, g) < 800 for g in goals):
+            continue
+        goals.append(goal)
+        v = dict(template)
+        v["id"] = f"U{k:03d}"
+        v["start"] = {"east_m": start[0], "north_m": start[1], "alt_m": 1000}
+        v["goal"] = {"east_m": goal[0], "north_m": goal[1], "alt_m": 1000}
+        vehicles.append(v)
+    base["vehicles"] = vehicles
+    base["buffers"] = []
+    return base
+
+
+def run(n: int, seed: int) -> dict[str, Any]:
+    """Plan one team (in this process) and return the figures."""
+    scenario = parse_scenario(team_scenario(n, seed)) if n != 3 else load_scenario(PAPER)
+    t0 = time.perf_counter()
+    result = plan(scenario, "aco", rng=np.random.default_rng(seed))
+    wall = time.perf_counter() - t0
+    ratios = [r.cost / r.optimal_cost for r in result.routes]
+    return {
+        "uavs": n,
+        "wall_s": wall,
+        "iterations": result.result.iterations,
+        "ratio_max": max(ratios),
+        "ratio_mean": float(np.mean(ratios)),
+        "peak_rss_mib": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024,
+        "status": str(result.result.status),
+        "min_separation_m": result.min_separation_m,
+    }
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__)
+    parser.add_argument("--sizes", type=int, nargs="*", default=[3, 10, 30, 100])
+    parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--one", type=int, help=argparse.SUPPRESS)
+    args = parser.parse_args()
+    if args.one is not None:
+        print(json.dumps(run(args.one, args.seed)))
+        return
+    print(
+        f"machine: {platform.machine()}, {os.cpu_count()} cores, "
+        f"{platform.python_implementation()} {platform.python_version()}, numpy {np.__version__}"
+    )
+    print(
+        "| UAVs | wall (s) | ACO iterations | cost / optimal, max | mean "
+        "| peak RSS (MiB) | status | min separation (m) |"
+    )
+    print("|---:|---:|---:|---:|---:|---:|---|---:|")
+    for n in args.sizes:
+        # A fresh process per size, so peak RSS is that size's own.
+        out = subprocess.run(
+            [sys.executable, __file__, "--one", str(n), "--seed", str(args.seed)],
+            capture_output=True,
+            text=True,
+            check=True,
+        )
+        r = json.loads(out.stdout)
+        print(
+            f"| {r['uavs']} | {r['wall_s']:.2f} | {r['iterations']} | {r['ratio_max']:.4f} | "
+            f"{r['ratio_mean']:.4f} | {r['peak_rss_mib']:.0f} | {r['status']} | "
+            f"{r['min_separation_m']:.0f} |",
+            flush=True,
+        )
+
+
+if __name__ == "__main__":
+    main()

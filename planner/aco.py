@@ -1,0 +1,393 @@
+"""Multi-colony ant colony optimisation (section 3.1 of the reference paper, STEP1-STEP6).
+
+One colony per vehicle. Ants of every colony walk the grid together, vectorised with numpy.
+The state transition weighs each move by pheromone ``tau ** alpha`` and visibility
+``eta ** beta``, where the visibility comes from the exact cost-to-go field: a move's regret
+(its edge cost plus the cost-to-go of where it leads, minus the cost-to-go of where the ant
+stands) is 0 on an optimal move, so ``eta = 1 / (1 + regret / step_cost)``. With probability
+``q0`` an ant takes the best-weighted move (the ACS pseudo-random proportional rule).
+
+The colonies share knowledge through the comprehensive cost: a candidate route's own graph cost
+plus penalties for (a) no common feasible arrival time given the other colonies' best routes
+(eq. 1's window intersection) and (b) separation below ``d_s`` from the other vehicles' best
+routes, each vehicle flown at constant speed to the team's nominal arrival. Pheromone follows
+the MAX-MIN rule: evaporation, deposit on the colony's best and iteration-best nodes, bounds.
+
+STEP5 is the inner loop (iterate a colony until its best stops improving or the cap is hit);
+STEP6 is the outer loop (refresh the shared knowledge, re-evaluate every colony's best against
+it, stop when the integrated cost settles).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+
+from planner.coupling import positions_at, team_timing, window_gap_s
+from planner.grid import MOVE_LENGTH
+from planner.problem import Problem, Route, SolveResult, Status, polyline_length_m
+from planner.search import solve_exact
+
+IntArray = NDArray[np.int64]
+FloatArray = NDArray[np.float64]
+
+
+@dataclass(frozen=True, slots=True)
+class AcoOptions:
+    """Parameters of the multi-colony ACO (defaults tuned on the paper scenario)."""
+
+    ants: int = 12
+    alpha: float = 1.0
+    beta: float = 4.0
+    q0: float = 0.7
+    rho: float = 0.25
+    tau_min: float = 0.05
+    tau_max: float = 1.0
+    max_iter: int = 10
+    patience: int = 3
+    rounds: int = 3
+    tol: float = 1e-3
+    tabu: int = 8
+    max_steps_factor: float = 2.5
+    time_penalty_m_per_s: float = 100.0
+    separation_penalty: float = 20.0
+    candidates: int = 4
+
+
+@dataclass(slots=True)
+class _Best:
+    nodes: IntArray
+    points: FloatArray
+    cost: float
+    length_m: float
+    score: float
+
+
+class _Colonies:
+    """Mutable search state; one instance per solve call."""
+
+    def __init__(self, problem: Problem, opts: AcoOptions, rng: np.random.Generator) -> None:
+        self.p = problem
+        self.o = opts
+        self.rng = rng
+        tasks = problem.tasks
+        grid = tasks[0].cost_map.grid
+        self.neighbors = tasks[0].cost_map.neighbors
+        self.step_cost = grid.resolution_m
+        maps: dict[int, int] = {}
+        stacks: list[FloatArray] = []
+        cls: list[int] = []
+        for t in tasks:
+            key = id(t.cost_map)
+            if key not in maps:
+                maps[key] = len(stacks)
+                stacks.append(t.cost_map.edge_cost)
+            cls.append(maps[key])
+        self.edge = np.stack(stacks)
+        self.cls = np.asarray(cls, dtype=np.int64)
+        self.h = np.stack([problem.cost_to_go(i)[0] for i in range(len(tasks))])
+        self.start = np.array([t.start_node for t in tasks], dtype=np.int64)
+        self.goal = np.array([t.goal_node for t in tasks], dtype=np.int64)
+        self.tau = np.full((len(tasks), grid.size), opts.tau_max, dtype=np.float64)
+        hops = [
+            max(
+                abs(int(t.start_node % grid.n_east) - int(t.goal_node % grid.n_east)),
+                abs(int(t.start_node // grid.n_east) - int(t.goal_node // grid.n_east)),
+            )
+            for t in tasks
+        ]
+        self.max_steps = int(opts.max_steps_factor * max(hops)) + 20
+
+    def walk(self, colonies: IntArray) -> tuple[IntArray, list[IntArray | None]]:
+        """All ants of the given colonies walk once; returns each ant's colony and nodes."""
+        o = self.o
+        col = np.repeat(colonies, o.ants)
+        n_ants = len(col)
+        pos = self.start[col].copy()
+        goal = self.goal[col]
+        trail = np.full((n_ants, self.max_steps + 1), -1, dtype=np.int64)
+        trail[:, 0] = pos
+        recent = np.full((n_ants, o.tabu), -1, dtype=np.int64)
+        recent[:, 0] = pos
+        alive = np.ones(n_ants, dtype=bool)
+        arrived = pos == goal
+        length = np.zeros(n_ants, dtype=np.int64)
+        for step in range(1, self.max_steps + 1):
+            act = np.flatnonzero(alive & ~arrived)
+            if act.size == 0:
+                break
+            u = pos[act]
+            c = col[act]
+            nb = self.neighbors[u]
+            safe = np.where(nb >= 0, nb, 0)
+            ec = self.edge[self.cls[c], u]
+            regret = ec + self.h[c[:, None], safe] - self.h[c, u][:, None]
+            valid = np.isfinite(regret)
+            valid &= ~(nb[:, :, None] == recent[act][:, None, :]).any(axis=-1)
+            eta = 1.0 / (1.0 + np.where(valid, regret, 0.0) / self.step_cost)
+            w = self.tau[c[:, None], safe] ** o.alpha * eta**o.beta
+            w = np.where(valid, w, 0.0)
+            total = w.sum(axis=1)
+            ok = total > 0.0
+            alive[act[~ok]] = False
+            greedy = self.rng.random(act.size) < o.q0
+            r = self.rng.random(act.size) * total
+            k_roulette = np.minimum((np.cumsum(w, axis=1) < r[:, None]).sum(axis=1), 7)
+            k = np.where(greedy, np.argmax(w, axis=1), k_roulette)
+            nxt = nb[np.arange(act.size), k]
+            act, nxt = act[ok], nxt[ok]
+            pos[act] = nxt
+            trail[act, step] = nxt
+            recent[act, step % o.tabu] = nxt
+            length[act] = step
+            arrived[act] = nxt == goal[act]
+        routes: list[IntArray | None] = []
+        for a in range(n_ants):
+            if not arrived[a]:
+                routes.append(None)
+                continue
+            routes.append(_erase_loops(trail[a, : length[a] + 1]))
+        return col, routes
+
+    def path_cost(self, colony: int, nodes: IntArray) -> float:
+        return float(self.p.tasks[colony].cost_map.path_cost(nodes))
+
+
+def _erase_loops(nodes: IntArray) -> IntArray:
+    """Remove cycles from a walk (keep the path from each node's last visit)."""
+    if len(np.unique(nodes)) == len(nodes):
+        return nodes
+    out: list[int] = []
+    where: dict[int, int] = {}
+    for v in nodes.tolist():
+        if v in where:
+            cut = where[v]
+            for dropped in out[cut + 1 :]:
+                del where[dropped]
+            del out[cut + 1 :]
+        else:
+            where[v] = len(out)
+            out.append(v)
+    return np.asarray(out, dtype=np.int64)
+
+
+class _Shared:
+    """The colonies' shared knowledge: every vehicle's best route and nominal timing."""
+
+    def __init__(self, problem: Problem, bests: list[_Best], opts: AcoOptions) -> None:
+        self.problem = problem
+        limits = [t.timing for t in problem.tasks]
+        self.limits = limits
+        self.lengths = np.array([b.length_m for b in bests])
+        self.timing = team_timing(self.lengths.tolist(), limits, problem.required_arrival_s)
+        vmax = max(lim.speed_max_m_s for lim in limits)
+        self.dt = max(problem.separation_m / (4.0 * vmax), 0.5)
+        t0 = min(self.timing.takeoff_s)
+        t1 = max(self.timing.arrival_s)
+        self.times = np.arange(t0, t1 + self.dt, self.dt)
+        self.positions = np.stack(
+            [self._track(b.points, i, b.length_m) for i, b in enumerate(bests)]
+        )
+
+    def _track(self, points: FloatArray, index: int, length_m: float) -> FloatArray:
+        """Positions on the shared time grid; NaN while not airborne."""
+        takeoff = self.timing.takeoff_s[index]
+        speed = self.timing.speed_m_s[index]
+        pos = positions_at(points, takeoff, speed, self.times)
+        airborne = (self.times >= takeoff) & (self.times <= takeoff + length_m / speed)
+        pos[~airborne] = np.nan
+        return pos
+
+    def update(self, index: int, best: _Best) -> None:
+        """Publish a colony's new best route (timing reference kept until the next round)."""
+        self.lengths[index] = best.length_m
+        takeoff, speed = self.candidate_timing(index, best.length_m)
+        pos = positions_at(best.points, takeoff, speed, self.times)
+        airborne = (self.times >= takeoff) & (self.times <= takeoff + best.length_m / speed)
+        pos[~airborne] = np.nan
+        self.positions[index] = pos
+
+    def candidate_timing(self, index: int, length_m: float) -> tuple[float, float]:
+        """Takeoff and speed of vehicle ``index`` flying ``length_m`` to the team reference."""
+        lim = self.limits[index]
+        t_min = lim.takeoff_lo_s + length_m / lim.speed_max_m_s
+        t_max = lim.takeoff_hi_s + length_m / lim.speed_min_m_s
+        target = min(max(self.timing.reference_s + lim.slot_offset_s, t_min), t_max)
+        depart = min(max(target - length_m / lim.cruise_m_s, lim.takeoff_lo_s), lim.takeoff_hi_s)
+        speed = min(
+            max(length_m / max(target - depart, 1e-9), lim.speed_min_m_s), lim.speed_max_m_s
+        )
+        return depart, speed
+
+    def time_gap(self, index: int, lengths_m: FloatArray) -> FloatArray:
+        """Team window miss (s) for candidate lengths of vehicle ``index``, others fixed."""
+        team = np.tile(self.lengths, (len(lengths_m), 1))
+        team[:, index] = lengths_m
+        return window_gap_s(team, self.limits, self.problem.required_arrival_s)
+
+    def separation_shortfall(self, index: int, points: FloatArray, length_m: float) -> float:
+        """Summed shortfall (m) below ``d_s`` against every other vehicle's best route."""
+        if len(self.lengths) < 2:
+            return 0.0
+        takeoff, speed = self.candidate_timing(index, length_m)
+        mine = positions_at(points, takeoff, speed, self.times)
+        airborne = (self.times >= takeoff) & (self.times <= takeoff + length_m / speed)
+        mine[~airborne] = np.nan
+        others = np.delete(self.positions, index, axis=0)
+        d = np.hypot(others[..., 0] - mine[None, :, 0], others[..., 1] - mine[None, :, 1])
+        d = np.where(np.isnan(d), np.inf, d)
+        shortfall = np.maximum(self.problem.separation_m - d.min(axis=1), 0.0)
+        return float(shortfall.sum())
+
+
+def _score(
+    shared: _Shared | None,
+    index: int,
+    cost: float,
+    points: FloatArray,
+    length: float,
+    o: AcoOptions,
+) -> tuple[float, float, float]:
+    """Comprehensive cost, time miss (s) and separation shortfall (m) of one route."""
+    if shared is None:
+        return cost, 0.0, 0.0
+    gap = float(shared.time_gap(index, np.array([length]))[0])
+    short = shared.separation_shortfall(index, points, length)
+    # Any loss of separation costs at least a full d_s, so a small shortfall is never cheap.
+    sep_cost = o.separation_penalty * (short + (shared.problem.separation_m if short > 0 else 0.0))
+    return cost + o.time_penalty_m_per_s * gap + sep_cost, gap, short
+
+
+def solve_aco(
+    problem: Problem, *, rng: np.random.Generator, options: AcoOptions | None = None
+) -> SolveResult:
+    """Plan every vehicle's route with the multi-colony ACO.
+
+    Returns APPROXIMATE when every colony found a route meeting the team constraints,
+    INFEASIBLE when a goal is unreachable, and TIMEOUT when the iteration caps ended the
+    search with routes that still miss the arrival windows or the separation.
+    """
+    o = options or AcoOptions()
+    exact = solve_exact(problem)  # cost-to-go fields (visibility) and reachability
+    if exact.status is Status.INFEASIBLE:
+        return exact
+    n = len(problem.tasks)
+    state = _Colonies(problem, o, rng)  # STEP1
+    bests: list[_Best | None] = [None] * n
+    shared: _Shared | None = None
+    iterations = 0
+    previous_total = math.inf
+    gaps = np.zeros(n)
+    shorts = np.zeros(n)
+    for _round in range(o.rounds):  # STEP2 / STEP6
+        stall = np.zeros(n, dtype=np.int64)
+        for _it in range(o.max_iter):  # STEP3-STEP5
+            running = np.flatnonzero(stall < o.patience)
+            if running.size == 0:
+                break
+            iterations += 1
+            col, walks = state.walk(running)
+            iter_best: dict[int, _Best] = {}
+            for c in running.tolist():
+                best = bests[c]
+                if best is not None and shared is not None:
+                    best.score, _, _ = _score(shared, c, best.cost, best.points, best.length_m, o)
+                seen: set[bytes] = set()
+                cands: list[tuple[float, IntArray, FloatArray, float, float]] = []
+                for a in np.flatnonzero(col == c).tolist():
+                    nodes = walks[a]
+                    if nodes is None or nodes.tobytes() in seen:
+                        continue
+                    seen.add(nodes.tobytes())
+                    pts = problem.route_points(c, nodes)
+                    length = polyline_length_m(pts)
+                    cost = state.path_cost(c, nodes)
+                    quick = cost
+                    if shared is not None:
+                        gap = float(shared.time_gap(c, np.array([length]))[0])
+                        quick += o.time_penalty_m_per_s * gap
+                    cands.append((quick, nodes, pts, cost, length))
+                cands.sort(key=lambda x: x[0])
+                for _q, nodes, pts, cost, length in cands[: o.candidates]:
+                    score, _, _ = _score(shared, c, cost, pts, length, o)
+                    if c not in iter_best or score < iter_best[c].score:
+                        iter_best[c] = _Best(nodes, pts, cost, length, score)
+                cand = iter_best.get(c)
+                if cand is not None and (best is None or cand.score < best.score * (1 - o.tol)):
+                    bests[c] = cand
+                    stall[c] = 0
+                    if shared is not None:
+                        shared.update(c, cand)  # Gauss-Seidel: later colonies see it now
+                else:
+                    stall[c] += 1
+            # STEP4: pheromone update, MAX-MIN style.
+            state.tau[running] *= 1.0 - o.rho
+            for c in running.tolist():
+                for b, share in ((bests[c], 1.0), (iter_best.get(c), 0.5)):
+                    if b is not None:
+                        state.tau[c, b.nodes] += o.rho * o.tau_max * share
+            np.clip(state.tau, o.tau_min, o.tau_max, out=state.tau)
+        if any(b is None for b in bests):
+            missing = next(problem.tasks[i].vehicle_id for i, b in enumerate(bests) if b is None)
+            return SolveResult(
+                Status.TIMEOUT,
+                tuple(None for _ in bests),
+                iterations,
+                f"vehicle {missing}: no ant reached the goal within the step limit",
+            )
+        found = [b for b in bests if b is not None]
+        shared = _Shared(problem, found, o)
+        total = 0.0
+        for c, b in enumerate(found):
+            b.score, gaps[c], shorts[c] = _score(shared, c, b.cost, b.points, b.length_m, o)
+            total += b.score
+        if abs(previous_total - total) <= o.tol * total:
+            break
+        previous_total = total
+    final = [b for b in bests if b is not None]
+    routes = tuple(
+        Route(t.vehicle_id, tuple(int(v) for v in b.nodes), b.cost, b.length_m)
+        for t, b in zip(problem.tasks, final, strict=True)
+    )
+    gap_s = float(gaps.max()) if n else 0.0
+    short_m = float(shorts.max()) if n else 0.0
+    min_sep = _min_separation(shared) if shared is not None else math.inf
+    total = float(sum(b.score for b in final))
+    if gap_s > 0.0 or short_m > 0.0:
+        return SolveResult(
+            Status.TIMEOUT,
+            routes,
+            iterations,
+            f"iteration cap reached with the team constraint missed by {gap_s:.1f} s "
+            f"and separation short by {short_m:.0f} m",
+            total,
+            gap_s,
+            min_sep,
+        )
+    return SolveResult(
+        Status.APPROXIMATE,
+        routes,
+        iterations,
+        "routes meet the team constraints",
+        total,
+        0.0,
+        min_sep,
+    )
+
+
+def _min_separation(shared: _Shared) -> float:
+    pos = shared.positions
+    best = math.inf
+    for i in range(len(pos)):
+        for j in range(i + 1, len(pos)):
+            d = np.hypot(pos[i, :, 0] - pos[j, :, 0], pos[i, :, 1] - pos[j, :, 1])
+            d = d[~np.isnan(d)]
+            if d.size:
+                best = min(best, float(d.min()))
+    return best
+
+
+__all__ = ["MOVE_LENGTH", "AcoOptions", "solve_aco"]

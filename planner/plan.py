@@ -1,0 +1,680 @@
+"""From a scenario to flyable routes: build the world, solve on the grid, smooth, profile, check.
+
+The pipeline is pure: terrain, threats and cost maps from the scenario; the exact search or
+the multi-colony ACO on the grid; each route shortened by line-of-sight where that costs no
+more, smoothed with Dubins arcs at the minimum turn radius (section 3.2), given an altitude
+profile that keeps terrain clearance within the climb gradient, and checked against the
+constraints of eq. (4) and the forbidden zones. A route that breaks a safety constraint is an
+error naming the vehicle; it is never returned as a plan.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Literal
+
+import numpy as np
+from numpy.typing import NDArray
+from scipy.ndimage import map_coordinates
+
+from planner.aco import AcoOptions, solve_aco
+from planner.coupling import TimingLimits, team_timing
+from planner.errors import InfeasibleError
+from planner.flightpath import FlightPath, Violation, check_polyline, smooth_polyline
+from planner.geo import LocalFrame
+from planner.grid import CostMap, Grid, VehicleClass, build_cost_map
+from planner.problem import Problem, SolveResult, Status, VehicleTask
+from planner.scenario import (
+    FlatTerrain,
+    Scenario,
+    Simultaneous,
+    Spaced,
+    SrtmTerrainSpec,
+    SyntheticTerrainSpec,
+    Vehicle,
+    Windows,
+)
+from planner.search import solve_exact
+from planner.terrain import SrtmTerrain, SyntheticTerrain, Terrain
+from planner.threats import ThreatZone, active, build_threats, forbidden_at, polyline_clearance_m
+
+FloatArray = NDArray[np.float64]
+Method = Literal["aco", "astar"]
+PROFILE_STEP_M = 50.0
+
+
+@dataclass(frozen=True)
+class _Flat:
+    elevation: float
+
+    def elevation_m(self, east_m: FloatArray, north_m: FloatArray) -> FloatArray:
+        return np.full(np.broadcast(east_m, north_m).shape, self.elevation, dtype=np.float64)
+
+
+def build_terrain(scenario: Scenario) -> Terrain:
+    """The scenario's terrain source; SRTM tiles are checked to cover the area up front."""
+    spec = scenario.terrain
+    area = scenario.area
+    if isinstance(spec, FlatTerrain):
+        return _Flat(spec.elevation_m)
+    if isinstance(spec, SyntheticTerrainSpec):
+        return SyntheticTerrain.generate(
+            seed=spec.seed,
+            min_east_m=area.min_east_m,
+            max_east_m=area.max_east_m,
+            min_north_m=area.min_north_m,
+            max_north_m=area.max_north_m,
+            base_m=spec.base_m,
+            peak_m=spec.peak_m,
+            hills=spec.hills,
+        )
+    assert isinstance(spec, SrtmTerrainSpec)
+    terrain = SrtmTerrain(Path(spec.directory), scenario.frame())
+    terrain.require_area(area.min_east_m, area.max_east_m, area.min_north_m, area.max_north_m)
+    return terrain
+
+
+def timing_limits(scenario: Scenario) -> list[TimingLimits]:
+    """Each vehicle's timing limits under the scenario's arrival constraint."""
+    arrival = scenario.arrival
+    order = [v.id for v in scenario.vehicles]
+    offsets = dict.fromkeys(order, 0.0)
+    own: dict[str, tuple[float, float]] = {}
+    if isinstance(arrival, Spaced):
+        for k, vid in enumerate(arrival.order or order):
+            offsets[vid] = k * arrival.interval_s
+    elif isinstance(arrival, Windows):
+        own = {w.vehicle: (w.earliest_s, w.latest_s) for w in arrival.windows}
+    out = []
+    for v in scenario.vehicles:
+        lo, hi = (0.0, 0.0) if v.airborne else v.takeoff_window_s
+        w_lo, w_hi = own.get(v.id, (-math.inf, math.inf))
+        out.append(
+            TimingLimits(
+                v.speed_min_m_s, v.speed_max_m_s, v.cruise_m_s, lo, hi, offsets[v.id], w_lo, w_hi
+            )
+        )
+    return out
+
+
+def required_arrival_s(scenario: Scenario) -> float | None:
+    arrival = scenario.arrival
+    if isinstance(arrival, Simultaneous):
+        return arrival.required_s
+    if isinstance(arrival, Spaced):
+        return arrival.first_s
+    return None
+
+
+@dataclass(frozen=True, eq=False)
+class World:
+    """Everything the planner derives from a scenario once: frame, terrain, grid, threats."""
+
+    scenario: Scenario
+    frame: LocalFrame
+    terrain: Terrain
+    grid: Grid
+    terrain_grid_m: FloatArray
+    threats: tuple[ThreatZone, ...]
+
+
+def build_world(scenario: Scenario, takeoff_s: Mapping[str, float] | None = None) -> World:
+    area = scenario.area
+    grid = Grid.covering(
+        area.min_east_m, area.min_north_m, area.width_m, area.height_m, area.resolution_m
+    )
+    terrain = build_terrain(scenario)
+    east, north = grid.coords()
+    return World(
+        scenario,
+        scenario.frame(),
+        terrain,
+        grid,
+        np.asarray(terrain.elevation_m(east, north), dtype=np.float64),
+        tuple(build_threats(scenario, takeoff_s)),
+    )
+
+
+def _vehicle_class(v: Vehicle) -> VehicleClass:
+    return VehicleClass(v.clearance_m, v.alt_min_m, v.alt_max_m, max(v.start.alt_m, v.goal.alt_m))
+
+
+def _free_node(cmap: CostMap, east_m: float, north_m: float) -> int | None:
+    """The nearest unblocked node within two cells of a point."""
+    grid = cmap.grid
+    best, best_d = None, math.inf
+    centre = grid.nearest(east_m, north_m)
+    ci, cj = centre % grid.n_east, centre // grid.n_east
+    for dj in range(-2, 3):
+        for di in range(-2, 3):
+            i, j = ci + di, cj + dj
+            if not (0 <= i < grid.n_east and 0 <= j < grid.n_north):
+                continue
+            node = j * grid.n_east + i
+            if cmap.blocked[node]:
+                continue
+            d = math.hypot(
+                grid.min_east_m + i * grid.resolution_m - east_m,
+                grid.min_north_m + j * grid.resolution_m - north_m,
+            )
+            if d < best_d:
+                best, best_d = node, d
+    return best
+
+
+def build_problem(
+    world: World,
+    *,
+    threats: Sequence[ThreatZone],
+    starts: Mapping[str, tuple[float, float, float]] | None = None,
+    vehicles: Sequence[str] | None = None,
+) -> Problem:
+    """The grid problem for the chosen vehicles from their scenario (or given) starts.
+
+    Raises
+    ------
+    InfeasibleError
+        A start or goal inside a forbidden zone, or with no free grid node near it.
+    """
+    scenario = world.scenario
+    frame = world.frame
+    chosen = [scenario.vehicle(v) for v in vehicles] if vehicles else list(scenario.vehicles)
+    limits = dict(zip([v.id for v in scenario.vehicles], timing_limits(scenario), strict=True))
+    maps: dict[VehicleClass, CostMap] = {}
+    neighbors = world.grid.neighbors()
+    w = scenario.weights
+    tasks = []
+    for v in chosen:
+        key = _vehicle_class(v)
+        if key not in maps:
+            maps[key] = build_cost_map(
+                world.grid,
+                world.terrain_grid_m,
+                threats,
+                key,
+                threat_weight=w.threat,
+                terrain_weight=w.terrain,
+                neighbors=neighbors,
+            )
+        cmap = maps[key]
+        start = (starts or {}).get(v.id)
+        if start is None:
+            se, sn = v.start.local(frame)
+            start = (se, sn, v.start.alt_m)
+        ge, gn = v.goal.local(frame)
+        nodes = []
+        for name, (e, n, alt) in (("start", start), ("goal", (ge, gn, v.goal.alt_m))):
+            zone = forbidden_at(threats, e, n, alt)
+            if zone is not None:
+                raise InfeasibleError(
+                    f"vehicle {v.id}: {name} ({e:.0f}, {n:.0f}) m "
+                    f"is inside forbidden zone {zone.id}"
+                )
+            node = _free_node(cmap, e, n)
+            if node is None:
+                raise InfeasibleError(
+                    f"vehicle {v.id}: {name} ({e:.0f}, {n:.0f}) m has no free grid node nearby "
+                    "(too close to a forbidden zone, or terrain above alt_max_m)"
+                )
+            nodes.append(node)
+        tasks.append(
+            VehicleTask(
+                v.id, nodes[0], nodes[1], (start[0], start[1]), (ge, gn), cmap, limits[v.id]
+            )
+        )
+    return Problem(tuple(tasks), required_arrival_s(scenario), scenario.separation_m)
+
+
+def solve(
+    problem: Problem,
+    method: Method = "aco",
+    *,
+    rng: np.random.Generator | None = None,
+    options: AcoOptions | None = None,
+) -> SolveResult:
+    """One entry point for both solvers."""
+    if method == "astar":
+        return solve_exact(problem)
+    if method == "aco":
+        return solve_aco(
+            problem, rng=rng if rng is not None else np.random.default_rng(0), options=options
+        )
+    raise ValueError(f"method must be 'aco' or 'astar', not {method!r}")
+
+
+# --- route post-processing -------------------------------------------------------------
+
+
+def _sample_segment(a: FloatArray, b: FloatArray, step_m: float) -> FloatArray:
+    n = max(2, int(math.ceil(float(np.hypot(*(b - a))) / step_m)) + 1)
+    t = np.linspace(0.0, 1.0, n)[:, None]
+    return np.asarray(a + (b - a) * t, dtype=np.float64)
+
+
+def _grid_field(cmap: CostMap, values: FloatArray, pts: FloatArray) -> FloatArray:
+    """Bilinear interpolation of a node field at points (order-1 spline)."""
+    g = cmap.grid
+    i = (pts[:, 0] - g.min_east_m) / g.resolution_m
+    j = (pts[:, 1] - g.min_north_m) / g.resolution_m
+    field = values.reshape(g.n_north, g.n_east)
+    return np.asarray(map_coordinates(field, [j, i], order=1, mode="nearest"), dtype=np.float64)
+
+
+def simplify_route(
+    points_m: FloatArray,
+    cmap: CostMap,
+    threats: Sequence[ThreatZone],
+    terrain: Terrain,
+    margin_m: float,
+) -> FloatArray:
+    """Line-of-sight shortening of a grid route.
+
+    A chord replaces a run of grid legs only when it keeps ``margin_m`` from every forbidden
+    zone, stays flyable under the vehicle's ceiling, and costs no more than the legs it
+    replaces (so exposure never grows).
+    """
+    v = cmap.vehicle
+    step = 0.25 * cmap.grid.resolution_m
+    seg_len = np.hypot(*np.diff(points_m, axis=0).T)
+    cost_mid = _grid_field(cmap, cmap.node_cost, 0.5 * (points_m[:-1] + points_m[1:]))
+    leg_cost = np.concatenate([[0.0], np.cumsum(seg_len * cost_mid)])
+
+    def chord_ok(i: int, j: int) -> bool:
+        a, b = points_m[i], points_m[j]
+        pts = _sample_segment(a, b, step)
+        alt = np.maximum(terrain.elevation_m(pts[:, 0], pts[:, 1]) + v.clearance_m, v.alt_min_m)
+        if float(alt.max()) > v.alt_max_m:
+            return False
+        cost = float(np.hypot(*(b - a))) * float(_grid_field(cmap, cmap.node_cost, pts).mean())
+        if cost > leg_cost[j] - leg_cost[i] + 1e-6:
+            return False
+        for t in threats:
+            if not t.forbidden or float(alt.min()) >= t.ceiling_m:
+                continue
+            if t.segment_distance_m(a[0], a[1], b[0], b[1]) < margin_m:
+                return False
+        return True
+
+    keep = [0]
+    i = 0
+    last = len(points_m) - 1
+    while i < last:
+        j = i + 1
+        while j + 1 <= last and chord_ok(i, j + 1):
+            j += 1
+        keep.append(j)
+        i = j
+    return np.asarray(points_m[keep], dtype=np.float64)
+
+
+def refine_corners(points_m: FloatArray, radius_m: float) -> FloatArray:
+    """Add collinear points near each corner so midpoint smoothing hugs the corner.
+
+    Section 3.2 joins the midpoints of adjacent legs by a Dubins path. On legs much longer
+    than the turn radius that path is nearly the straight chord between the midpoints and cuts
+    far inside the corner. Splitting each leg at twice the fillet tangent distance
+    ``r tan(theta / 2)`` from its corners puts the midpoints where the Dubins path becomes the
+    fillet arc itself; the long middle part of each leg stays straight.
+    """
+    pts = np.asarray(points_m, dtype=np.float64)
+    if len(pts) < 3:
+        return pts
+    legs = np.diff(pts, axis=0)
+    length = np.hypot(legs[:, 0], legs[:, 1])
+    heading = np.arctan2(legs[:, 0], legs[:, 1])
+    turn = np.abs((np.diff(heading) + np.pi) % (2 * np.pi) - np.pi)
+    tangent = 1.05 * radius_m * np.tan(np.minimum(turn, np.radians(170.0)) / 2.0)
+    # Distance to split at, from the start and from the end of each leg.
+    at_start = np.concatenate([[0.0], 2.0 * tangent])
+    at_end = np.concatenate([2.0 * tangent, [0.0]])
+    out = [pts[0]]
+    for k in range(len(legs)):
+        a, b, d = pts[k], pts[k + 1], length[k]
+        unit = legs[k] / d
+        first, last = at_start[k], d - at_end[k]
+        if first > 0.0 and first + 1.0 < last:
+            out.append(a + unit * first)
+        if last < d and first + 1.0 < last:
+            out.append(a + unit * last)
+        out.append(b)
+    return np.asarray(out, dtype=np.float64)
+
+
+@dataclass(frozen=True)
+class AltitudeProfile:
+    """Waypoints with altitudes, and the clearance they give along the flown legs."""
+
+    waypoints_m: FloatArray
+    s_m: FloatArray
+    alt_m: FloatArray
+    min_clearance_m: float
+    min_clearance_s_m: float
+    max_gradient: float
+    violations: tuple[Violation, ...]
+
+
+def _envelope(req: FloatArray, s: FloatArray, g: float) -> FloatArray:
+    """Lowest profile above ``req`` whose slope stays within ``g`` (an upper cone envelope)."""
+    fwd = np.maximum.accumulate(req + g * s) - g * s
+    bwd = (np.maximum.accumulate((req - g * s)[::-1]))[::-1] + g * s
+    return np.asarray(np.maximum(fwd, bwd), dtype=np.float64)
+
+
+def _upper_hull(s: FloatArray, z: FloatArray) -> list[int]:
+    """Indices of the upper convex hull of points sorted by ``s`` (monotone chain)."""
+    hull: list[int] = []
+    for k in range(len(s)):
+        while len(hull) >= 2:
+            i, j = hull[-2], hull[-1]
+            if (s[j] - s[i]) * (z[k] - z[i]) - (z[j] - z[i]) * (s[k] - s[i]) >= 0.0:
+                hull.pop()
+            else:
+                break
+        hull.append(k)
+    return hull
+
+
+def _leg_breakpoints(
+    s: FloatArray, lifted: FloatArray, floor: FloatArray, lo: int, hi: int
+) -> list[int]:
+    """Few breakpoints on samples ``lo..hi`` whose chords stay above ``floor``.
+
+    Chords join points of the upper hull of ``lifted`` (the requirement plus a buffer), so
+    they are never steeper than the requirement's own gradient bound.
+    """
+    hull = [lo + k for k in _upper_hull(s[lo : hi + 1], lifted[lo : hi + 1])]
+    keep = [hull[0]]
+    i = 0
+    while i < len(hull) - 1:
+        j = i + 1
+        while j + 1 < len(hull):
+            a, b = hull[i], hull[j + 1]
+            chord = np.interp(s[a : b + 1], [s[a], s[b]], [lifted[a], lifted[b]])
+            if (chord < floor[a : b + 1] - 1e-6).any():
+                break
+            j += 1
+        keep.append(hull[j])
+        i = j
+    return keep
+
+
+def altitude_profile(
+    path: FlightPath, terrain: Terrain, v: Vehicle, start_alt_m: float, buffer_m: float = 30.0
+) -> AltitudeProfile:
+    """Waypoints and altitudes that keep ``clearance_m`` within ``climb_gradient``.
+
+    The required altitude along the smoothed path is terrain + clearance (not below
+    ``alt_min_m``), spread into an envelope whose slope stays within the gradient and bounded
+    below by the start and goal altitudes. The autopilot flies straight lines between
+    waypoints, so the waypoints are the path's own (segment ends, arc points) plus breakpoints
+    of the envelope's upper hull where a straight climb or descent would cut below it.
+    """
+    g = v.climb_gradient
+    length = path.length_m
+    poses = path.sample(PROFILE_STEP_M)
+    ps = np.asarray(poses[:, :2], dtype=np.float64)
+    s = np.linspace(0.0, length, len(ps))
+    ground = terrain.elevation_m(ps[:, 0], ps[:, 1])
+    ends = np.maximum(start_alt_m - g * s, v.goal.alt_m - g * (length - s))
+    req = np.maximum(ground + v.clearance_m, v.alt_min_m)
+    floor = np.maximum(_envelope(req, s, g), ends)
+    lifted = np.maximum(_envelope(req + buffer_m, s, g), ends)
+    lifted = np.maximum(np.minimum(lifted, max(v.alt_max_m, 0.0)), floor)
+    base = path.waypoints()
+    base_s = np.array([path.project(float(e), float(n)) for e, n in base])
+    base_s[0], base_s[-1] = 0.0, length
+    idx = np.unique(np.clip(np.searchsorted(s, base_s), 0, len(s) - 1))
+    chosen: list[int] = [int(idx[0])]
+    for lo, hi in zip(idx[:-1].tolist(), idx[1:].tolist(), strict=True):
+        chosen.extend(_leg_breakpoints(s, lifted, floor, lo, hi)[1:])
+    wp_s = s[chosen]
+    wp_alt = lifted[chosen]
+    wps = np.array([[p.east_m, p.north_m] for p in (path.pose_at(float(x)) for x in wp_s)])
+    wps[0], wps[-1] = ps[0], ps[-1]
+    flown = np.interp(s, wp_s, wp_alt)
+    clearance = flown - ground
+    k = int(np.argmin(clearance))
+    ds = np.diff(wp_s)
+    grad = np.abs(np.diff(wp_alt)) / np.where(ds > 0, ds, np.inf)
+    violations = []
+    if clearance[k] < v.clearance_m - 1.0:
+        violations.append(
+            Violation(
+                "clearance",
+                k,
+                float(clearance[k]),
+                v.clearance_m,
+                f"{clearance[k]:.0f} m above terrain at {s[k]:.0f} m along the path",
+            )
+        )
+    top = float(wp_alt.max())
+    if top > v.alt_max_m + 1e-6:
+        violations.append(
+            Violation(
+                "altitude",
+                int(np.argmax(wp_alt)),
+                top,
+                v.alt_max_m,
+                f"needs {top:.0f} m, above alt_max_m {v.alt_max_m:.0f}",
+            )
+        )
+    return AltitudeProfile(
+        wps,
+        wp_s,
+        wp_alt,
+        float(clearance[k]),
+        float(s[k]),
+        float(grad.max(initial=0.0)),
+        tuple(violations),
+    )
+
+
+@dataclass(frozen=True)
+class PlannedRoute:
+    """One vehicle's flyable route and its figures."""
+
+    vehicle_id: str
+    grid_nodes: tuple[int, ...]
+    grid_points_m: FloatArray
+    simplified_m: FloatArray
+    path: FlightPath
+    waypoints_m: FloatArray
+    profile: AltitudeProfile
+    cost: float
+    optimal_cost: float
+    grid_length_m: float
+    min_threat_distance_m: float
+    nearest_threat: str | None
+    constraints: tuple[Violation, ...]
+
+    @property
+    def length_m(self) -> float:
+        return self.path.length_m
+
+
+@dataclass(frozen=True)
+class Plan:
+    """The team's planned routes and the solver's account of them."""
+
+    scenario: Scenario
+    method: Method
+    result: SolveResult
+    routes: tuple[PlannedRoute, ...]
+    min_separation_m: float
+    nominal_takeoff_s: tuple[float, ...]
+    nominal_arrival_s: tuple[float, ...]
+
+
+def finish_route(
+    world: World,
+    problem: Problem,
+    index: int,
+    nodes: Sequence[int],
+    cost: float,
+    *,
+    threats: Sequence[ThreatZone],
+    start_alt_m: float | None = None,
+    start_heading_rad: float | None = None,
+) -> PlannedRoute:
+    """Simplify, smooth, profile and check one grid route.
+
+    Raises
+    ------
+    InfeasibleError
+        The smoothed route enters a forbidden zone, turns tighter than the minimum radius,
+        loses terrain clearance, or exceeds the vehicle's range or ceiling.
+    """
+    task = problem.tasks[index]
+    v = world.scenario.vehicle(task.vehicle_id)
+    dist, _ = problem.cost_to_go(index)
+    optimal = float(dist[task.start_node])
+    pts = problem.route_points(index, np.asarray(nodes))
+    grid_length = float(np.hypot(*np.diff(pts, axis=0).T).sum())
+    margin = max(v.min_turn_radius_m, 0.5 * world.grid.resolution_m)
+    start_alt = v.start.alt_m if start_alt_m is None else start_alt_m
+    route: PlannedRoute | None = None
+    failure = ""
+    for candidate in (
+        simplify_route(pts, task.cost_map, threats, world.terrain, margin),
+        simplify_route(pts, task.cost_map, threats, world.terrain, 3.0 * margin),
+        pts,
+    ):
+        path = smooth_polyline(
+            refine_corners(candidate, v.min_turn_radius_m),
+            v.min_turn_radius_m,
+            start_heading_rad=start_heading_rad,
+        )
+        profile = altitude_profile(path, world.terrain, v, start_alt)
+        wps = profile.waypoints_m
+        samples = path.sample(PROFILE_STEP_M)[:, :2]
+        samp_alt = np.interp(
+            np.linspace(0.0, path.length_m, len(samples)), profile.s_m, profile.alt_m
+        )
+        d_flown, zone_flown = polyline_clearance_m(threats, wps, profile.alt_m)
+        d_curve = math.inf
+        zone_curve = None
+        for t in threats:
+            if t.forbidden:
+                below = samp_alt < t.ceiling_m
+                if below.any():
+                    d = float(t.distance_m(samples[below, 0], samples[below, 1]).min())
+                    if d < d_curve:
+                        d_curve, zone_curve = d, t.id
+        d_min, zone = (d_flown, zone_flown) if d_flown <= d_curve else (d_curve, zone_curve)
+        constraints = list(
+            check_polyline(
+                candidate,
+                min_leg_m=v.min_leg_length_m,
+                max_turn_rad=math.radians(v.max_turn_deg),
+                max_range_m=v.max_range_m,
+            )
+        )
+        constraints.extend(profile.violations)
+        if path.length_m > v.max_range_m:
+            constraints.append(
+                Violation(
+                    "range",
+                    0,
+                    path.length_m,
+                    v.max_range_m,
+                    f"path {path.length_m / 1000:.1f} km exceeds max_range_m",
+                )
+            )
+        if profile.max_gradient > v.climb_gradient + 1e-3:
+            constraints.append(
+                Violation(
+                    "climb",
+                    0,
+                    profile.max_gradient,
+                    v.climb_gradient,
+                    f"climb gradient {profile.max_gradient:.3f} between waypoints",
+                )
+            )
+        hard = [c for c in constraints if c.constraint in ("clearance", "altitude", "range")]
+        if d_min < 0.0:
+            failure = f"vehicle {v.id}: smoothed path enters forbidden zone {zone}"
+            continue
+        if path.minimum_turn_radius_m() < v.min_turn_radius_m - 1e-6:
+            failure = f"vehicle {v.id}: smoothed path turns tighter than min_turn_radius_m"
+            continue
+        if hard:
+            failure = f"vehicle {v.id}: {hard[0].constraint}: {hard[0].message}"
+            continue
+        route = PlannedRoute(
+            v.id,
+            tuple(int(n) for n in nodes),
+            pts,
+            candidate,
+            path,
+            wps,
+            profile,
+            cost,
+            optimal,
+            grid_length,
+            d_min,
+            zone,
+            tuple(constraints),
+        )
+        break
+    if route is None:
+        raise InfeasibleError(failure)
+    return route
+
+
+def plan(
+    scenario: Scenario,
+    method: Method = "aco",
+    *,
+    rng: np.random.Generator | None = None,
+    options: AcoOptions | None = None,
+) -> Plan:
+    """Plan every vehicle's flyable route for the static threats of a scenario.
+
+    Raises
+    ------
+    InfeasibleError
+        A start or goal inside a forbidden zone, an unreachable goal, or a route that cannot be
+        made flyable; the message names the vehicle.
+    """
+    world = build_world(scenario)
+    threats = active(world.threats, None)
+    problem = build_problem(world, threats=threats)
+    result = solve(problem, method, rng=rng, options=options)
+    if result.status is Status.INFEASIBLE or not all(result.routes):
+        raise InfeasibleError(result.message)
+    routes = []
+    for i, r in enumerate(result.routes):
+        assert r is not None
+        routes.append(finish_route(world, problem, i, r.nodes, r.cost, threats=threats))
+    limits = [t.timing for t in problem.tasks]
+    timing = team_timing([r.length_m for r in routes], limits, problem.required_arrival_s)
+    sep = _min_separation(routes, timing.takeoff_s, timing.speed_m_s, scenario.separation_m)
+    return Plan(scenario, method, result, tuple(routes), sep, timing.takeoff_s, timing.arrival_s)
+
+
+def _min_separation(
+    routes: Sequence[PlannedRoute],
+    takeoff_s: Sequence[float],
+    speed_m_s: Sequence[float],
+    d_s: float,
+) -> float:
+    from planner.coupling import pair_min_separation
+
+    vmax = max(speed_m_s) if speed_m_s else 1.0
+    best = math.inf
+    for i in range(len(routes)):
+        for j in range(i + 1, len(routes)):
+            d, _ = pair_min_separation(
+                routes[i].path.sample(PROFILE_STEP_M)[:, :2],
+                takeoff_s[i],
+                speed_m_s[i],
+                routes[j].path.sample(PROFILE_STEP_M)[:, :2],
+                takeoff_s[j],
+                speed_m_s[j],
+                step_s=max(d_s / (8.0 * vmax), 0.25),
+            )
+            best = min(best, d)
+    return best

@@ -1,0 +1,119 @@
+"""The grid planning problem both solvers take, and the result both return (OMPL style).
+
+``solve(problem, method, rng=...)`` is the single entry point: the exact search and the
+multi-colony ACO look alike from outside. An approximate answer is a status, not an exception.
+"""
+
+from __future__ import annotations
+
+import enum
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+
+import numpy as np
+from numpy.typing import NDArray
+from scipy.sparse import csgraph
+
+from planner.coupling import TimingLimits
+from planner.grid import CostMap
+
+IntArray = NDArray[np.int64]
+FloatArray = NDArray[np.float64]
+
+
+class Status(enum.StrEnum):
+    EXACT = "exact"
+    APPROXIMATE = "approximate"
+    TIMEOUT = "timeout"
+    INFEASIBLE = "infeasible"
+
+
+@dataclass(frozen=True, eq=False)
+class VehicleTask:
+    """One vehicle's part of the problem: its nodes, cost map and timing limits."""
+
+    vehicle_id: str
+    start_node: int
+    goal_node: int
+    start_m: tuple[float, float]
+    goal_m: tuple[float, float]
+    cost_map: CostMap
+    timing: TimingLimits
+
+
+@dataclass(frozen=True, eq=False)
+class Problem:
+    """The team problem on one grid: tasks, team arrival reference and separation ``d_s``."""
+
+    tasks: tuple[VehicleTask, ...]
+    required_arrival_s: float | None
+    separation_m: float
+    _cost_to_go: dict[int, tuple[FloatArray, IntArray]] = field(default_factory=dict, repr=False)
+
+    def cost_to_go(self, index: int) -> tuple[FloatArray, IntArray]:
+        """Exact cost-to-go field (to the task's goal) and predecessors toward the goal.
+
+        The graph is symmetric, so Dijkstra from the goal gives every node's cost to reach it;
+        ``predecessors[u]`` is the next node from ``u`` on an optimal path.
+        """
+        if index not in self._cost_to_go:
+            task = self.tasks[index]
+            dist, pred = csgraph.dijkstra(  # type: ignore[call-overload]
+                task.cost_map.graph(),
+                directed=True,
+                indices=task.goal_node,
+                return_predecessors=True,
+            )
+            self._cost_to_go[index] = (
+                np.asarray(dist, dtype=np.float64),
+                np.asarray(pred, dtype=np.int64),
+            )
+        return self._cost_to_go[index]
+
+    def route_points(self, index: int, nodes: Sequence[int] | IntArray) -> FloatArray:
+        """Polyline (K, 2) in metres: the exact start, the grid nodes, the exact goal."""
+        task = self.tasks[index]
+        pts = task.cost_map.grid.node_coords(nodes)
+        start = np.array([task.start_m])
+        goal = np.array([task.goal_m])
+        if np.allclose(pts[0], start[0]):
+            start = start[:0]
+        if np.allclose(pts[-1], goal[0]):
+            goal = goal[:0]
+        return np.concatenate([start, pts, goal])
+
+
+@dataclass(frozen=True)
+class Route:
+    """One vehicle's grid route: nodes, graph cost and polyline length."""
+
+    vehicle_id: str
+    nodes: tuple[int, ...]
+    cost: float
+    length_m: float
+
+
+@dataclass(frozen=True)
+class SolveResult:
+    """What a solver returns (scipy.optimize style: status, message, iterations)."""
+
+    status: Status
+    routes: tuple[Route | None, ...]
+    iterations: int
+    message: str
+    comprehensive_cost: float = math.nan
+    time_gap_s: float = 0.0
+    min_separation_m: float = math.inf
+
+    @property
+    def success(self) -> bool:
+        return self.status in (Status.EXACT, Status.APPROXIMATE)
+
+    @property
+    def costs(self) -> tuple[float, ...]:
+        return tuple(r.cost if r is not None else math.inf for r in self.routes)
+
+
+def polyline_length_m(points_m: FloatArray) -> float:
+    return float(np.hypot(*np.diff(points_m, axis=0).T).sum())

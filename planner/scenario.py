@@ -1,0 +1,436 @@
+"""Scenario files: the pydantic model of the file format and its loader.
+
+A scenario names the planning area (a geographic origin and a rectangle in local metres about
+it), the terrain source, the threats, the vehicles with their limits, the team's time
+constraint, the separation minimum ``d_s``, loiter buffer areas and pop-up threats.
+
+Positions are given either in local metres about the origin (``east_m``/``north_m``) or as
+WGS84 degrees (``lat_deg``/``lon_deg``); altitudes are metres above mean sea level.
+Times are mission seconds: ``0`` is the moment the mission is started.
+
+The models here are the edge of the planner: :func:`load_scenario` validates a file and raises
+one :class:`~planner.errors.ScenarioError` naming the field; the pure code downstream works on
+the validated model.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+from typing import Annotated, Any, Literal, Self
+
+import yaml
+from pydantic import (
+    BaseModel,
+    ConfigDict,
+    Field,
+    ValidationError,
+    field_validator,
+    model_validator,
+)
+
+from planner.errors import ScenarioError
+from planner.geo import LocalFrame
+
+PositiveM = Annotated[float, Field(gt=0.0)]
+PositiveSpeed = Annotated[float, Field(gt=0.0, le=400.0)]
+MissionTimeS = Annotated[float, Field(ge=0.0)]
+
+
+class _Model(BaseModel):
+    model_config = ConfigDict(extra="forbid", frozen=True)
+
+
+class Point(_Model):
+    """A horizontal position, local (``east_m``, ``north_m``) or geographic (degrees)."""
+
+    east_m: float | None = None
+    north_m: float | None = None
+    lat_deg: Annotated[float, Field(ge=-90.0, le=90.0)] | None = None
+    lon_deg: Annotated[float, Field(ge=-180.0, le=180.0)] | None = None
+
+    @model_validator(mode="after")
+    def _one_form(self) -> Self:
+        local = self.east_m is not None or self.north_m is not None
+        geo = self.lat_deg is not None or self.lon_deg is not None
+        if local == geo:
+            raise ValueError("give either east_m and north_m, or lat_deg and lon_deg")
+        if local and (self.east_m is None or self.north_m is None):
+            raise ValueError("east_m and north_m must both be given")
+        if geo and (self.lat_deg is None or self.lon_deg is None):
+            raise ValueError("lat_deg and lon_deg must both be given")
+        return self
+
+    def local(self, frame: LocalFrame) -> tuple[float, float]:
+        """Local (east_m, north_m) of this point in ``frame``."""
+        if self.east_m is not None and self.north_m is not None:
+            return float(self.east_m), float(self.north_m)
+        assert self.lat_deg is not None and self.lon_deg is not None
+        east, north = frame.to_local(self.lat_deg, self.lon_deg)
+        return float(east), float(north)
+
+
+class Point3(Point):
+    """A position with an altitude in metres above mean sea level."""
+
+    alt_m: Annotated[float, Field(ge=-500.0, le=20000.0)]
+
+
+class Origin(_Model):
+    lat_deg: Annotated[float, Field(ge=-85.0, le=85.0)]
+    lon_deg: Annotated[float, Field(ge=-180.0, le=180.0)]
+
+
+class Area(_Model):
+    """The planning rectangle: local metres about a geographic origin."""
+
+    origin: Origin
+    min_east_m: float = 0.0
+    min_north_m: float = 0.0
+    width_m: Annotated[float, Field(gt=0.0, le=2_000_000.0)]
+    height_m: Annotated[float, Field(gt=0.0, le=2_000_000.0)]
+    resolution_m: Annotated[float, Field(gt=0.0)] = 1000.0
+
+    @model_validator(mode="after")
+    def _grid_size(self) -> Self:
+        cells = (self.width_m / self.resolution_m + 1) * (self.height_m / self.resolution_m + 1)
+        if cells > 4_000_000:
+            raise ValueError(
+                f"resolution_m {self.resolution_m:g} gives {cells:.0f} grid nodes (limit 4000000)"
+            )
+        if self.width_m / self.resolution_m < 2 or self.height_m / self.resolution_m < 2:
+            raise ValueError("resolution_m is too coarse: the grid needs at least 3 x 3 nodes")
+        return self
+
+    @property
+    def max_east_m(self) -> float:
+        return self.min_east_m + self.width_m
+
+    @property
+    def max_north_m(self) -> float:
+        return self.min_north_m + self.height_m
+
+    def frame(self) -> LocalFrame:
+        return LocalFrame(self.origin.lat_deg, self.origin.lon_deg)
+
+    def contains(self, east_m: float, north_m: float) -> bool:
+        return (
+            self.min_east_m <= east_m <= self.max_east_m
+            and self.min_north_m <= north_m <= self.max_north_m
+        )
+
+
+class FlatTerrain(_Model):
+    kind: Literal["flat"]
+    elevation_m: float = 0.0
+
+
+class SyntheticTerrainSpec(_Model):
+    kind: Literal["synthetic"]
+    seed: int = 0
+    base_m: float = 200.0
+    peak_m: Annotated[float, Field(ge=0.0)] = 1800.0
+    hills: Annotated[int, Field(ge=0, le=10_000)] = 40
+
+
+class SrtmTerrainSpec(_Model):
+    kind: Literal["srtm"]
+    directory: str = Field(description="folder of .hgt tiles; relative to the scenario file")
+
+
+TerrainSpec = Annotated[
+    FlatTerrain | SyntheticTerrainSpec | SrtmTerrainSpec, Field(discriminator="kind")
+]
+
+
+class Appearance(_Model):
+    """When a pop-up threat appears: a mission time, or a delay after a vehicle's takeoff."""
+
+    at_s: MissionTimeS | None = None
+    after_takeoff_of: str | None = None
+    delay_s: Annotated[float, Field(ge=0.0)] = 0.0
+
+    @model_validator(mode="after")
+    def _one_form(self) -> Self:
+        if (self.at_s is None) == (self.after_takeoff_of is None):
+            raise ValueError("give either at_s, or after_takeoff_of with delay_s")
+        return self
+
+
+class Radar(_Model):
+    """A radar site: detects below ``ceiling_m`` (AMSL) within ``radius_m``."""
+
+    kind: Literal["radar"]
+    id: str
+    center: Point
+    radius_m: PositiveM
+    ceiling_m: float = 30_000.0
+    forbidden: bool = False
+    appears: Appearance | None = None
+
+
+class NoFly(_Model):
+    """A no-fly polygon (vertices in order, not closed), below ``ceiling_m``."""
+
+    kind: Literal["no_fly"]
+    id: str
+    polygon: Annotated[list[Point], Field(min_length=3)]
+    ceiling_m: float = 30_000.0
+    forbidden: bool = True
+    appears: Appearance | None = None
+
+
+Threat = Annotated[Radar | NoFly, Field(discriminator="kind")]
+
+
+class Buffer(_Model):
+    """A loiter buffer area: a disc where holding turns are allowed."""
+
+    id: str
+    center: Point
+    radius_m: PositiveM
+    vehicles: list[str] | None = Field(
+        default=None, description="vehicles allowed to loiter here; all when absent"
+    )
+
+
+class Vehicle(_Model):
+    id: Annotated[str, Field(min_length=1, max_length=32, pattern=r"^[A-Za-z0-9_.-]+$")]
+    start: Point3
+    goal: Point3
+    speed_min_m_s: PositiveSpeed
+    speed_max_m_s: PositiveSpeed
+    cruise_speed_m_s: PositiveSpeed | None = Field(
+        default=None, description="planned cruise speed; the middle of the range when absent"
+    )
+    min_turn_radius_m: PositiveM
+    max_range_m: PositiveM
+    alt_min_m: float = 0.0
+    alt_max_m: float = 5000.0
+    clearance_m: Annotated[float, Field(ge=0.0)] = 150.0
+    climb_gradient: Annotated[float, Field(gt=0.0, le=1.0)] = Field(
+        default=0.1, description="steepest climb or descent, metres per metre flown"
+    )
+    max_turn_deg: Annotated[float, Field(gt=0.0, le=180.0)] = 135.0
+    min_leg_m: Annotated[float, Field(ge=0.0)] | None = Field(
+        default=None, description="shortest straight leg; 2 x min_turn_radius_m when absent"
+    )
+    takeoff_window_s: tuple[MissionTimeS, MissionTimeS] = (0.0, 0.0)
+    airborne: bool = Field(default=False, description="already flying at start (no takeoff)")
+
+    @model_validator(mode="after")
+    def _limits(self) -> Self:
+        if self.speed_min_m_s > self.speed_max_m_s:
+            raise ValueError(
+                f"speed_min_m_s {self.speed_min_m_s:g} is above "
+                f"speed_max_m_s {self.speed_max_m_s:g}"
+            )
+        cruise = self.cruise_speed_m_s
+        if cruise is not None and not self.speed_min_m_s <= cruise <= self.speed_max_m_s:
+            raise ValueError(
+                f"cruise_speed_m_s {cruise:g} is outside "
+                f"[{self.speed_min_m_s:g}, {self.speed_max_m_s:g}]"
+            )
+        if self.alt_min_m > self.alt_max_m:
+            raise ValueError(f"alt_min_m {self.alt_min_m:g} is above alt_max_m {self.alt_max_m:g}")
+        for name, point in (("start", self.start), ("goal", self.goal)):
+            if not self.alt_min_m <= point.alt_m <= self.alt_max_m:
+                raise ValueError(
+                    f"{name}.alt_m {point.alt_m:g} is outside "
+                    f"[alt_min_m {self.alt_min_m:g}, alt_max_m {self.alt_max_m:g}]"
+                )
+        lo, hi = self.takeoff_window_s
+        if lo > hi:
+            raise ValueError(f"takeoff_window_s [{lo:g}, {hi:g}] ends before it begins")
+        return self
+
+    @property
+    def cruise_m_s(self) -> float:
+        if self.cruise_speed_m_s is not None:
+            return self.cruise_speed_m_s
+        return 0.5 * (self.speed_min_m_s + self.speed_max_m_s)
+
+    @property
+    def min_leg_length_m(self) -> float:
+        return self.min_leg_m if self.min_leg_m is not None else 2.0 * self.min_turn_radius_m
+
+
+class Simultaneous(_Model):
+    """Every vehicle arrives at the same time."""
+
+    kind: Literal["simultaneous"]
+    required_s: MissionTimeS | None = Field(
+        default=None, description="requested arrival; the earliest common feasible time if absent"
+    )
+
+
+class Spaced(_Model):
+    """Arrivals in order, ``interval_s`` apart (waves or landing slots)."""
+
+    kind: Literal["spaced"]
+    interval_s: Annotated[float, Field(gt=0.0)]
+    first_s: MissionTimeS | None = None
+    order: list[str] | None = Field(default=None, description="arrival order; file order if absent")
+
+
+class Window(_Model):
+    vehicle: str
+    earliest_s: MissionTimeS
+    latest_s: MissionTimeS
+
+    @model_validator(mode="after")
+    def _ordered(self) -> Self:
+        if self.earliest_s > self.latest_s:
+            raise ValueError(f"earliest_s {self.earliest_s:g} is after latest_s {self.latest_s:g}")
+        return self
+
+
+class Windows(_Model):
+    """Each vehicle arrives within its own window."""
+
+    kind: Literal["windows"]
+    windows: Annotated[list[Window], Field(min_length=1)]
+
+
+ArrivalConstraint = Annotated[Simultaneous | Spaced | Windows, Field(discriminator="kind")]
+
+
+class CostWeights(_Model):
+    """Weights of the planning cost: length x (1 + threat x exposure + terrain x penalty)."""
+
+    threat: Annotated[float, Field(ge=0.0)] = 4.0
+    terrain: Annotated[float, Field(ge=0.0)] = 1.0
+
+
+class Scenario(_Model):
+    name: str = "scenario"
+    area: Area
+    terrain: TerrainSpec = Field(default_factory=lambda: FlatTerrain(kind="flat"))
+    separation_m: PositiveM = Field(description="minimum safe distance d_s between vehicles")
+    arrival: ArrivalConstraint
+    vehicles: Annotated[list[Vehicle], Field(min_length=1, max_length=1000)]
+    threats: list[Threat] = Field(default_factory=list)
+    buffers: list[Buffer] = Field(default_factory=list)
+    weights: CostWeights = Field(default_factory=CostWeights)
+
+    @field_validator("vehicles")
+    @classmethod
+    def _unique_ids(cls, vehicles: list[Vehicle]) -> list[Vehicle]:
+        seen: set[str] = set()
+        for v in vehicles:
+            if v.id in seen:
+                raise ValueError(f"vehicle id {v.id!r} is used twice")
+            seen.add(v.id)
+        return vehicles
+
+    @model_validator(mode="after")
+    def _cross_references(self) -> Self:
+        ids = {v.id for v in self.vehicles}
+        frame = self.area.frame()
+        for i, v in enumerate(self.vehicles):
+            for name, p in (("start", v.start), ("goal", v.goal)):
+                e, n = p.local(frame)
+                if not self.area.contains(e, n):
+                    raise ValueError(
+                        f"vehicles[{i}] ({v.id}).{name} at ({e:.0f}, {n:.0f}) m is outside the area"
+                    )
+        threat_ids: set[str] = set()
+        for t in self.threats:
+            if t.id in threat_ids:
+                raise ValueError(f"threat id {t.id!r} is used twice")
+            threat_ids.add(t.id)
+            if t.appears is not None and t.appears.after_takeoff_of not in (None, *ids):
+                raise ValueError(
+                    f"threat {t.id}: appears.after_takeoff_of names unknown vehicle "
+                    f"{t.appears.after_takeoff_of!r}"
+                )
+        for b in self.buffers:
+            for vid in b.vehicles or []:
+                if vid not in ids:
+                    raise ValueError(f"buffer {b.id}: vehicles names unknown vehicle {vid!r}")
+        arrival = self.arrival
+        if (
+            isinstance(arrival, Spaced)
+            and arrival.order is not None
+            and sorted(arrival.order) != sorted(ids)
+        ):
+            raise ValueError("arrival.order must name every vehicle exactly once")
+        if isinstance(arrival, Windows):
+            named = [w.vehicle for w in arrival.windows]
+            if sorted(named) != sorted(ids):
+                raise ValueError("arrival.windows must give exactly one window per vehicle")
+        return self
+
+    def vehicle(self, vehicle_id: str) -> Vehicle:
+        for v in self.vehicles:
+            if v.id == vehicle_id:
+                return v
+        raise KeyError(vehicle_id)
+
+    def frame(self) -> LocalFrame:
+        return self.area.frame()
+
+
+def _error_line(source: str, err: ValidationError) -> str:
+    first = err.errors()[0]
+    loc = ".".join(str(p) if not isinstance(p, int) else f"[{p}]" for p in first["loc"])
+    loc = loc.replace(".[", "[")
+    msg = first["msg"]
+    if msg.startswith("Value error, "):
+        msg = msg[len("Value error, ") :]
+    if first["type"] == "extra_forbidden":
+        msg = "unknown field"
+    more = err.error_count() - 1
+    tail = f" (and {more} more error{'s' if more > 1 else ''})" if more else ""
+    where = f"{source}: {loc}" if loc else source
+    return f"{where}: {msg}{tail}"
+
+
+def parse_scenario(data: Any, source: str = "scenario") -> Scenario:
+    """Validate already-parsed data; raise ScenarioError with one line naming the field."""
+    if not isinstance(data, dict):
+        raise ScenarioError(f"{source}: the top level must be a mapping")
+    try:
+        return Scenario.model_validate(data)
+    except ValidationError as err:
+        raise ScenarioError(_error_line(source, err)) from None
+
+
+def load_scenario(path: str | Path) -> Scenario:
+    """Read a YAML or JSON scenario file.
+
+    Relative terrain directories are resolved against the file's folder.
+    """
+    p = Path(path)
+    try:
+        text = p.read_text(encoding="utf-8")
+    except OSError as err:
+        raise ScenarioError(f"{p}: cannot read scenario file ({err.strerror})") from None
+    try:
+        data = json.loads(text) if p.suffix.lower() == ".json" else yaml.safe_load(text)
+    except (yaml.YAMLError, json.JSONDecodeError) as err:
+        first = str(err).strip().splitlines()[0] if str(err).strip() else type(err).__name__
+        raise ScenarioError(f"{p}: not valid YAML/JSON: {first}") from None
+    scenario = parse_scenario(data, str(p))
+    if isinstance(scenario.terrain, SrtmTerrainSpec):
+        directory = Path(scenario.terrain.directory)
+        if not directory.is_absolute():
+            directory = (p.parent / directory).resolve()
+        scenario = scenario.model_copy(
+            update={"terrain": SrtmTerrainSpec(kind="srtm", directory=str(directory))}
+        )
+    return scenario
+
+
+def json_schema() -> dict[str, Any]:
+    """The JSON Schema of scenario files (published as docs/scenario.schema.json)."""
+    schema = Scenario.model_json_schema()
+    schema["$schema"] = "https://json-schema.org/draft/2020-12/schema"
+    schema["title"] = "Time-coordinated UAV team scenario"
+    return schema
+
+
+def heading_between(a: tuple[float, float], b: tuple[float, float]) -> float:
+    """Compass heading in radians from local point ``a`` to ``b``."""
+    return math.atan2(b[0] - a[0], b[1] - a[1]) % (2.0 * math.pi)

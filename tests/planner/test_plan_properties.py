@@ -1,0 +1,135 @@
+"""Safety properties of whole plans over random scenarios (hypothesis)."""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import numpy as np
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+
+from planner.errors import InfeasibleError
+from planner.plan import build_world, plan
+from planner.scenario import parse_scenario
+
+
+@st.composite
+def scenarios(draw: st.DrawFn) -> dict[str, Any]:
+    km = 1000.0
+    radius = draw(st.sampled_from([100.0, 200.0, 350.0]))
+    threats: list[dict[str, Any]] = []
+    for k in range(draw(st.integers(0, 3))):
+        threats.append(
+            {
+                "kind": "radar",
+                "id": f"R{k}",
+                "center": {
+                    "east_m": draw(st.floats(5 * km, 25 * km)),
+                    "north_m": draw(st.floats(5 * km, 25 * km)),
+                },
+                "radius_m": draw(st.floats(1.5 * km, 5 * km)),
+                "forbidden": draw(st.booleans()),
+            }
+        )
+    if draw(st.booleans()):
+        e0, n0 = draw(st.floats(4 * km, 20 * km)), draw(st.floats(4 * km, 20 * km))
+        w, h = draw(st.floats(2 * km, 8 * km)), draw(st.floats(2 * km, 8 * km))
+        threats.append(
+            {
+                "kind": "no_fly",
+                "id": "NFZ",
+                "polygon": [
+                    {"east_m": e0, "north_m": n0},
+                    {"east_m": e0 + w, "north_m": n0},
+                    {"east_m": e0 + w / 2, "north_m": n0 + h},
+                ],
+            }
+        )
+    vehicles = []
+    for k in range(draw(st.integers(1, 2))):
+        corner = draw(st.sampled_from([(1, 1), (1, 29), (29, 1)]))
+        vehicles.append(
+            {
+                "id": f"V{k}",
+                "start": {
+                    "east_m": corner[0] * km + k * 500,
+                    "north_m": corner[1] * km,
+                    "alt_m": 900,
+                },
+                "goal": {"east_m": 29 * km - k * 800, "north_m": 29 * km, "alt_m": 900},
+                "speed_min_m_s": 18,
+                "speed_max_m_s": 30,
+                "min_turn_radius_m": radius,
+                "max_range_m": 500 * km,
+                "alt_min_m": 200,
+                "alt_max_m": 1700,
+                "clearance_m": 100,
+                "climb_gradient": draw(st.sampled_from([0.05, 0.1, 0.2])),
+                "takeoff_window_s": [0, 1800],
+            }
+        )
+    return {
+        "area": {
+            "origin": {"lat_deg": -33.0, "lon_deg": 151.0},
+            "width_m": 30 * km,
+            "height_m": 30 * km,
+            "resolution_m": 1000,
+        },
+        "terrain": {
+            "kind": "synthetic",
+            "seed": draw(st.integers(0, 10_000)),
+            "base_m": 100,
+            "peak_m": draw(st.floats(0.0, 1500.0)),
+            "hills": 8,
+        },
+        "separation_m": 200,
+        "arrival": {"kind": "simultaneous"},
+        "vehicles": vehicles,
+        "threats": threats,
+    }
+
+
+@settings(max_examples=20, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(scenarios(), st.sampled_from(["aco", "astar"]), st.integers(0, 3))
+def test_plans_never_enter_forbidden_zones_nor_lose_clearance(
+    data: dict[str, Any], method: str, seed: int
+) -> None:
+    scenario = parse_scenario(data)
+    try:
+        result = plan(scenario, method, rng=np.random.default_rng(seed))  # type: ignore[arg-type]
+    except InfeasibleError as err:
+        assert str(err).startswith("vehicle V")
+        return
+    world = build_world(scenario)
+    forbidden = [t for t in world.threats if t.forbidden]
+    for route in result.routes:
+        v = scenario.vehicle(route.vehicle_id)
+        path = route.path
+        # Exact start and goal, never tighter than the minimum radius.
+        assert math.dist((path.start.east_m, path.start.north_m), v.start.local(world.frame)) < 1e-6
+        assert math.dist((path.end.east_m, path.end.north_m), v.goal.local(world.frame)) < 1e-6
+        assert path.minimum_turn_radius_m() >= v.min_turn_radius_m - 1e-9
+        assert route.cost >= route.optimal_cost - 1e-6
+        # The smoothed curve and the straight legs the autopilot flies stay out of every zone.
+        curve = path.sample(20.0)[:, :2]
+        wps = route.profile.waypoints_m
+        chords = np.concatenate([np.linspace(wps[i], wps[i + 1], 60) for i in range(len(wps) - 1)])
+        for zone in forbidden:
+            assert zone.distance_m(curve[:, 0], curve[:, 1]).min() > 0.0, zone.id
+            assert zone.distance_m(chords[:, 0], chords[:, 1]).min() > 0.0, zone.id
+        # Altitudes: straight-line climbs between waypoints keep the clearance, within limits.
+        s = np.linspace(0.0, path.length_m, len(curve))
+        alt = np.interp(s, route.profile.s_m, route.profile.alt_m)
+        ground = world.terrain.elevation_m(curve[:, 0], curve[:, 1])
+        assert (alt - ground).min() >= v.clearance_m - 1.0
+        chord_alt = np.concatenate(
+            [
+                np.linspace(route.profile.alt_m[i], route.profile.alt_m[i + 1], 60)
+                for i in range(len(wps) - 1)
+            ]
+        )
+        chord_ground = world.terrain.elevation_m(chords[:, 0], chords[:, 1])
+        assert (chord_alt - chord_ground).min() >= v.clearance_m - 5.0
+        assert route.profile.alt_m.max() <= v.alt_max_m + 1e-6
+        assert route.profile.max_gradient <= v.climb_gradient + 1e-6
