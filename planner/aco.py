@@ -27,7 +27,6 @@ import numpy as np
 from numpy.typing import NDArray
 
 from planner.coupling import positions_at, team_timing, window_gap_s
-from planner.grid import MOVE_LENGTH
 from planner.problem import Problem, Route, SolveResult, Status, polyline_length_m
 from planner.search import solve_exact
 
@@ -390,4 +389,4 @@ def _min_separation(shared: _Shared) -> float:
     return best
 
 
-__all__ = ["MOVE_LENGTH", "AcoOptions", "solve_aco"]
+__all__ = ["AcoOptions", "solve_aco"]

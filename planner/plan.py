@@ -356,6 +356,14 @@ class AltitudeProfile:
     violations: tuple[Violation, ...]
 
 
+def sample_by_distance(path: FlightPath, step_m: float) -> tuple[FloatArray, FloatArray]:
+    """Evenly spaced along-path distances (m) and the (N, 2) positions there."""
+    n = max(2, int(math.ceil(path.length_m / step_m)) + 1)
+    s = np.linspace(0.0, path.length_m, n)
+    pts = np.array([[p.east_m, p.north_m] for p in (path.pose_at(float(x)) for x in s)])
+    return s, pts
+
+
 def _envelope(req: FloatArray, s: FloatArray, g: float) -> FloatArray:
     """Lowest profile above ``req`` whose slope stays within ``g`` (an upper cone envelope)."""
     fwd = np.maximum.accumulate(req + g * s) - g * s
@@ -414,9 +422,7 @@ def altitude_profile(
     """
     g = v.climb_gradient
     length = path.length_m
-    poses = path.sample(PROFILE_STEP_M)
-    ps = np.asarray(poses[:, :2], dtype=np.float64)
-    s = np.linspace(0.0, length, len(ps))
+    s, ps = sample_by_distance(path, PROFILE_STEP_M)
     ground = terrain.elevation_m(ps[:, 0], ps[:, 1])
     ends = np.maximum(start_alt_m - g * s, v.goal.alt_m - g * (length - s))
     req = np.maximum(ground + v.clearance_m, v.alt_min_m)
@@ -549,10 +555,8 @@ def finish_route(
         )
         profile = altitude_profile(path, world.terrain, v, start_alt)
         wps = profile.waypoints_m
-        samples = path.sample(PROFILE_STEP_M)[:, :2]
-        samp_alt = np.interp(
-            np.linspace(0.0, path.length_m, len(samples)), profile.s_m, profile.alt_m
-        )
+        samp_s, samples = sample_by_distance(path, PROFILE_STEP_M)
+        samp_alt = np.interp(samp_s, profile.s_m, profile.alt_m)
         d_flown, zone_flown = polyline_clearance_m(threats, wps, profile.alt_m)
         d_curve = math.inf
         zone_curve = None

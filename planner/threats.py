@@ -90,23 +90,38 @@ class NoFlyZone:
         return self.contains(east_m, north_m).astype(np.float64)
 
     def segment_distance_m(self, e0: float, n0: float, e1: float, n1: float) -> float:
-        """Smallest distance (m) from the boundary to the segment; negative if it enters."""
-        pts_e = np.array([e0, e1])
-        pts_n = np.array([n0, n1])
-        if self.contains(pts_e, pts_n).any():
+        """Smallest distance (m) from the boundary to the segment; negative if it enters.
+
+        A segment that only touches the boundary (through a vertex or along an edge) without
+        entering gets 0. Entering through vertices, with no proper edge crossing, is caught
+        by testing the pieces between successive boundary contacts for containment.
+        """
+        if self.contains(np.array([e0, e1]), np.array([n0, n1])).any():
             return -1.0
         best = math.inf
+        contacts = [0.0, 1.0]
         verts = self.vertices_m
+        de, dn = e1 - e0, n1 - n0
+        length2 = de * de + dn * dn
         for i, (ax, ay) in enumerate(verts):
             bx, by = verts[(i + 1) % len(verts)]
             if _segments_intersect(e0, n0, e1, n1, ax, ay, bx, by):
                 return -1.0
+            d_vertex = _point_segment_distance(ax, ay, e0, n0, e1, n1)
+            if d_vertex <= 1e-9 and length2 > 0.0:
+                contacts.append(((ax - e0) * de + (ay - n0) * dn) / length2)
             best = min(
                 best,
-                _point_segment_distance(ax, ay, e0, n0, e1, n1),
+                d_vertex,
                 _point_segment_distance(e0, n0, ax, ay, bx, by),
                 _point_segment_distance(e1, n1, ax, ay, bx, by),
             )
+        if best <= 1e-9:
+            t = np.unique(np.clip(contacts, 0.0, 1.0))
+            mid = 0.5 * (t[:-1] + t[1:])
+            if self.contains(e0 + de * mid, n0 + dn * mid).any():
+                return -1.0
+            return 0.0
         return best
 
 

@@ -3,10 +3,11 @@
 from __future__ import annotations
 
 import math
+import os
 from typing import Any
 
 import numpy as np
-from hypothesis import HealthCheck, given, settings
+from hypothesis import HealthCheck, example, given, settings
 from hypothesis import strategies as st
 
 from planner.errors import InfeasibleError
@@ -90,8 +91,44 @@ def scenarios(draw: st.DrawFn) -> dict[str, Any]:
     }
 
 
-@settings(max_examples=20, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+REGRESSION_UNEVEN_SAMPLES: dict[str, Any] = {
+    # Found by hypothesis: altitudes were once read at the wrong along-path distance.
+    "area": {
+        "origin": {"lat_deg": -33.0, "lon_deg": 151.0},
+        "width_m": 30000.0,
+        "height_m": 30000.0,
+        "resolution_m": 1000,
+    },
+    "terrain": {"kind": "synthetic", "seed": 1098, "base_m": 100, "peak_m": 1116.0, "hills": 8},
+    "separation_m": 200,
+    "arrival": {"kind": "simultaneous"},
+    "vehicles": [
+        {
+            "id": "V0",
+            "start": {"east_m": 1000.0, "north_m": 1000.0, "alt_m": 900},
+            "goal": {"east_m": 29000.0, "north_m": 29000.0, "alt_m": 900},
+            "speed_min_m_s": 18,
+            "speed_max_m_s": 30,
+            "min_turn_radius_m": 100.0,
+            "max_range_m": 500000.0,
+            "alt_min_m": 200,
+            "alt_max_m": 1700,
+            "clearance_m": 100,
+            "climb_gradient": 0.05,
+            "takeoff_window_s": [0, 1800],
+        }
+    ],
+    "threats": [],
+}
+
+
+@settings(
+    max_examples=int(os.environ.get("PLAN_EXAMPLES", "20")),
+    deadline=None,
+    suppress_health_check=[HealthCheck.too_slow],
+)
 @given(scenarios(), st.sampled_from(["aco", "astar"]), st.integers(0, 3))
+@example(REGRESSION_UNEVEN_SAMPLES, "aco", 0)
 def test_plans_never_enter_forbidden_zones_nor_lose_clearance(
     data: dict[str, Any], method: str, seed: int
 ) -> None:
@@ -112,14 +149,14 @@ def test_plans_never_enter_forbidden_zones_nor_lose_clearance(
         assert path.minimum_turn_radius_m() >= v.min_turn_radius_m - 1e-9
         assert route.cost >= route.optimal_cost * (1 - 1e-9)
         # The smoothed curve and the straight legs the autopilot flies stay out of every zone.
-        curve = path.sample(20.0)[:, :2]
+        s = np.linspace(0.0, path.length_m, int(path.length_m / 20.0) + 2)
+        curve = np.array([[q.east_m, q.north_m] for q in (path.pose_at(float(x)) for x in s)])
         wps = route.profile.waypoints_m
         chords = np.concatenate([np.linspace(wps[i], wps[i + 1], 60) for i in range(len(wps) - 1)])
         for zone in forbidden:
             assert zone.distance_m(curve[:, 0], curve[:, 1]).min() > 0.0, zone.id
             assert zone.distance_m(chords[:, 0], chords[:, 1]).min() > 0.0, zone.id
         # Altitudes: straight-line climbs between waypoints keep the clearance, within limits.
-        s = np.linspace(0.0, path.length_m, len(curve))
         alt = np.interp(s, route.profile.s_m, route.profile.alt_m)
         ground = world.terrain.elevation_m(curve[:, 0], curve[:, 1])
         assert (alt - ground).min() >= v.clearance_m - 1.0

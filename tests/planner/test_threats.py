@@ -34,12 +34,21 @@ def test_segment_distance_is_the_minimum_over_samples(
         exact = zone.segment_distance_m(e0, n0, e1, n1)
         t = np.linspace(0.0, 1.0, 2001)
         d = zone.distance_m(e0 + (e1 - e0) * t, n0 + (n1 - n0) * t)
-        if d.min() <= 0.0:  # a touch on the boundary counts as entering
+        step = math.hypot(e1 - e0, n1 - n0) / 2000
+        if d.min() < -1e-9:  # a sample inside: the segment enters (up to round-off)
             assert exact <= 1e-9
-        else:
-            step = math.hypot(e1 - e0, n1 - n0) / 2000
-            assert exact <= d.min() + 1e-9
-            assert exact >= d.min() - step - 1e-9
+        if exact > 0.0:  # clear: no sample comes closer, and one comes within a step
+            assert d.min() >= exact - 1e-9
+            assert d.min() <= exact + step + 1e-9
+        else:  # enters or touches: the samples reach the boundary within a step
+            assert d.min() <= step + 1e-9
+
+
+def test_a_segment_through_two_vertices_enters_the_polygon() -> None:
+    # Diagonally across the square, through its corners: no proper edge crossing.
+    assert SQUARE.segment_distance_m(31.0, 31.0, -1.0, -1.0) < 0.0
+    assert SQUARE.segment_distance_m(-5.0, 0.0, 15.0, 0.0) <= 0.0  # along an edge: no margin
+    assert SQUARE.segment_distance_m(-1.0, 11.0, 11.0, 23.0) > 0.0
 
 
 def test_radar_exposure_falls_to_zero_at_its_radius() -> None:
