@@ -7,7 +7,7 @@ import os
 from typing import Any
 
 import numpy as np
-from hypothesis import HealthCheck, example, given, settings
+from hypothesis import HealthCheck, event, example, given, settings
 from hypothesis import strategies as st
 
 from planner.errors import InfeasibleError
@@ -123,7 +123,7 @@ REGRESSION_UNEVEN_SAMPLES: dict[str, Any] = {
 
 
 @settings(
-    max_examples=int(os.environ.get("PLAN_EXAMPLES", "20")),
+    max_examples=int(os.environ.get("PLAN_EXAMPLES", "40")),
     deadline=None,
     suppress_health_check=[HealthCheck.too_slow],
 )
@@ -137,7 +137,9 @@ def test_plans_never_enter_forbidden_zones_nor_lose_clearance(
         result = plan(scenario, method, rng=np.random.default_rng(seed))  # type: ignore[arg-type]
     except InfeasibleError as err:
         assert str(err).startswith("vehicle V")
+        event(f"infeasible: {str(err).split(':')[1].split('(')[0].strip()}")
         return
+    event("planned")
     world = build_world(scenario)
     forbidden = [t for t in world.threats if t.forbidden]
     for route in result.routes:
