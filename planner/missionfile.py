@@ -6,11 +6,11 @@ upload code: in MAV_FRAME_MISSION (2) param5/param6 are x/y unscaled; in every o
 they are x/y x 1e-7. NaN in param5/param6 is MAVLink's "unset" and maps to INT32_MAX.
 
 Degrees are written with 8 decimals: the 7 that x holds exactly, then a 1 pointing away from
-zero (47.1234567 is written 47.12345671). Whoever reads the file gets x back whether it rounds
-(``round(lat * 1e7)``: QGC, this module) or truncates (``int(lat * 1e7)``: MAVProxy, ArduPilot,
-Mission Planner) the product, where a file with exactly 7 decimals would lose 1e-7 deg on about
-half of the points read by a truncating reader. Params and altitudes are written as Python's
-shortest repr, which reads back to the same double.
+zero (47.1234567 is written 47.12345671; whole degrees end in 0). Whoever reads the file gets x
+back whether it rounds (``round(lat * 1e7)``: this module) or truncates (``int(lat * 1e7)``:
+QGroundControl's and MAVProxy's uploads) the product, where a file with exactly 7 decimals
+would lose 1e-7 deg on about half of the points read by a truncating reader. Params and
+altitudes are written as Python's shortest repr, which reads back to the same double.
 
 Every error is a :class:`~planner.mission.MissionError` whose one line names the file, the
 line or item, and the field.
@@ -112,24 +112,16 @@ _WPL_FIELDS = (
 # --- x/y <-> param5/param6 ------------------------------------------------------------------
 
 
-def _xy_to_param(v: int, frame: int) -> float:
-    if v == INT32_UNSET:
-        return math.nan
-    if frame == MAV_FRAME_MISSION:
-        return float(v)
-    return v / 1e7
-
-
 def _xy_text(v: int, frame: int) -> str:
     """param5/param6 as text: 8 decimals; scaled values nudged away from zero (module doc)."""
     if v == INT32_UNSET:
         return "NaN"
     if frame == MAV_FRAME_MISSION:
         return f"{v:.8f}"
-    if v == 0:
-        return "0.00000000"
     sign = "-" if v < 0 else ""
     whole, frac = divmod(abs(v), 10**7)
+    if frac == 0:  # whole degrees are exact in binary: every reader gets them back
+        return f"{sign}{whole}.00000000"
     return f"{sign}{whole}.{frac:07d}1"
 
 
@@ -169,7 +161,7 @@ def _float_text(v: float, where: str, field: str) -> str:
     return repr(float(v))
 
 
-def _check_sequence(items: Sequence[MissionItem], fmt: str) -> None:
+def _check_items(items: Sequence[MissionItem], fmt: str) -> None:
     if not items:
         raise MissionError(f"{fmt}: no items; item 0 (home) is required")
     for k, it in enumerate(items):
@@ -180,6 +172,23 @@ def _check_sequence(items: Sequence[MissionItem], fmt: str) -> None:
                 f"item {k}: mission_type {it.mission_type} cannot be stored in a {fmt} file "
                 "(missions only)"
             )
+        for name, value, lo, hi in (
+            ("current", it.current, 0, 1),
+            ("autocontinue", it.autocontinue, 0, 1),
+            ("frame", it.frame, 0, 255),
+            ("command", it.command, 0, 65535),
+            ("x", it.x, _INT32_MIN, _INT32_MAX),
+            ("y", it.y, _INT32_MIN, _INT32_MAX),
+        ):
+            if not lo <= value <= hi:
+                raise MissionError(f"item {k}: {name} {value} is outside [{lo}, {hi}]")
+        if it.frame in GLOBAL_FRAMES:
+            for name, value, limit in (("x", it.x, 900_000_000), ("y", it.y, 1_800_000_000)):
+                if value != INT32_UNSET and not -limit <= value <= limit:
+                    raise MissionError(
+                        f"item {k}: {name} {value} is outside [{-limit}, {limit}] "
+                        f"(+-{limit // 10**7} deg)"
+                    )
     if items[0].command != MAV_CMD_NAV_WAYPOINT:
         raise MissionError(
             f"item 0: command {items[0].command} is not home (NAV_WAYPOINT {MAV_CMD_NAV_WAYPOINT})"
@@ -196,7 +205,7 @@ def to_wpl(items: Sequence[MissionItem]) -> str:
     (``wp save``) and Mission Planner write it; home keeps its own ``current`` flag (Mission
     Planner writes 1 there, ArduPilot reports 0).
     """
-    _check_sequence(items, "WPL")
+    _check_items(items, "WPL")
     lines = [WPL_HEADER]
     for it in items:
         where = f"item {it.seq}"
@@ -334,7 +343,7 @@ def to_qgc_plan(
     estimates only. QGC edits items in frames 3, 0 and 10 with its forms and others (such as
     the default 6, GLOBAL_RELATIVE_ALT_INT) as raw numbers; both upload unchanged.
     """
-    _check_sequence(items, "plan")
+    _check_items(items, "plan")
     home = items[0]
     if home.frame not in AMSL_FRAMES:
         raise MissionError(

@@ -16,6 +16,7 @@ the validated model.
 from __future__ import annotations
 
 import json
+import math
 from pathlib import Path
 from typing import Annotated, Any, Literal, Self
 
@@ -428,3 +429,8 @@ def json_schema() -> dict[str, Any]:
     schema["$schema"] = "https://json-schema.org/draft/2020-12/schema"
     schema["title"] = "Time-coordinated UAV team scenario"
     return schema
+
+
+def heading_between(a: tuple[float, float], b: tuple[float, float]) -> float:
+    """Compass heading in radians from local point ``a`` to ``b``."""
+    return math.atan2(b[0] - a[0], b[1] - a[1]) % (2.0 * math.pi)
