@@ -31,7 +31,10 @@ demo: $(STAMP)
 	mkdir -p $(OUT)
 	$(PY) -m planner plan scenarios/paper_three_uav.yaml --seed 1 --out $(OUT)/plan.json
 	$(PY) -m planner plot $(OUT)/plan.json --out $(OUT)/paths.png
-	@echo "demo: plan in $(OUT)/plan.json, plot in $(OUT)/paths.png"
+	$(PY) -m planner schedule scenarios/paper_three_uav.yaml --popup --seed 1 --out $(OUT)/schedule.json --plot $(OUT)/speeds.png
+	$(PY) -m planner export $(OUT)/schedule.json --vehicle UAV3 --format qgc --out $(OUT)/UAV3.plan
+	$(PY) -m planner export $(OUT)/schedule.json --vehicle UAV3 --format wpl --out $(OUT)/UAV3.waypoints
+	@echo "demo: plan in $(OUT)/plan.json, plot in $(OUT)/paths.png, schedule in $(OUT)/schedule.json, speeds in $(OUT)/speeds.png"
 
 bench: $(STAMP)
 	$(PY) bench/bench_planner.py

@@ -1,4 +1,4 @@
-"""Command line: ``python -m planner plan|plot|schema``."""
+"""Command line: ``python -m planner plan|plot|schedule|export|schema``."""
 
 from __future__ import annotations
 
@@ -49,6 +49,89 @@ def _cmd_plot(args: argparse.Namespace) -> int:
     return 0
 
 
+def _cmd_schedule(args: argparse.Namespace) -> int:
+    import numpy as np
+
+    from planner.deconflict import separation
+    from planner.plan import build_world, plan
+    from planner.scenario import load_scenario
+    from planner.schedule import build_schedule, replay_popups
+    from planner.schedulefile import schedule_json
+
+    t0 = time.perf_counter()
+    scenario = load_scenario(args.scenario)
+    rng = np.random.default_rng(args.seed)
+    planned = plan(scenario, args.method, rng=rng)
+    world = build_world(scenario)
+    schedule = build_schedule(scenario, planned, world=world)
+    if args.popup:
+        schedule = replay_popups(schedule, method=args.method, rng=rng)
+    sep = separation(schedule.vehicles, scenario.separation_m)
+    elapsed = time.perf_counter() - t0
+    doc = schedule_json(
+        schedule,
+        sep,
+        world.terrain,
+        scenario_file=str(Path(args.scenario)),
+        extra={"method": args.method, "seed": args.seed, "popup": bool(args.popup)},
+    )
+    out = Path(args.out)
+    try:
+        out.parent.mkdir(parents=True, exist_ok=True)
+        out.write_text(json.dumps(doc, indent=1) + "\n", encoding="utf-8")
+    except OSError as err:
+        raise PlannerError(f"{out}: cannot write schedule ({err.strerror})") from None
+    for e in doc["events"]:
+        print(f"{e['time_s']:8.1f} s  {e['kind']}: {e['text']}")
+    for a in doc["adjustments"]:
+        print(f"{a['time_s']:8.1f} s  {a['vehicle']} {a['strategy']} {a['value']:g}: {a['reason']}")
+    for vid, v in doc["vehicles"].items():
+        speeds = "/".join(f"{x['speed_m_s']:g}" for x in v["legs"])
+        turns = sum(lo["turns"] for lo in v["loiters"])
+        print(
+            f"{vid}: takeoff {v['takeoff_s']:.1f} s, arrival {v['arrival_s']:.1f} s, "
+            f"{v['length_m'] / 1000:.1f} km, speeds {speeds} m/s, loiter turns {turns}"
+        )
+    print(
+        f"arrival {doc['required_arrival_s']} s, min separation {doc['min_separation_m']} m "
+        f"(d_s {doc['separation_required_m']:g} m) in {elapsed:.2f} s -> {out}"
+    )
+    if args.plot:
+        from planner.speedplot import plot_speeds
+
+        plot_speeds(doc, Path(args.plot))
+        print(f"speed plot -> {args.plot}")
+    return 0
+
+
+def _cmd_export(args: argparse.Namespace) -> int:
+    from planner.missionfile import to_qgc_plan, to_wpl
+    from planner.schedulefile import mission_from_json
+
+    src = Path(args.schedule)
+    try:
+        doc = json.loads(src.read_text(encoding="utf-8"))
+    except OSError as err:
+        raise PlannerError(f"{src}: cannot read schedule ({err.strerror})") from None
+    except json.JSONDecodeError as err:
+        raise PlannerError(f"{src}: line {err.lineno}: invalid JSON: {err.msg}") from None
+    if not isinstance(doc, dict):
+        raise PlannerError(f"{src}: the top level must be an object")
+    items = mission_from_json(doc, args.vehicle)
+    if args.format == "wpl":
+        text = to_wpl(items)
+    else:
+        text = json.dumps(to_qgc_plan(items), indent=4, allow_nan=False) + "\n"
+    out = Path(args.out)
+    try:
+        out.parent.mkdir(parents=True, exist_ok=True)
+        out.write_text(text, encoding="utf-8", newline="\n")
+    except OSError as err:
+        raise PlannerError(f"{out}: cannot write mission ({err.strerror})") from None
+    print(f"{args.vehicle}: {len(items)} mission items ({args.format}) -> {out}")
+    return 0
+
+
 def _cmd_schema(args: argparse.Namespace) -> int:
     from planner.scenario import json_schema
 
@@ -73,6 +156,20 @@ def main(argv: list[str] | None = None) -> int:
     q.add_argument("plan", help="plan.json")
     q.add_argument("--out", required=True, help="PNG file to write")
     q.set_defaults(func=_cmd_plot)
+    sc = sub.add_parser("schedule", help="time a plan: takeoffs, speeds, loiters, separation")
+    sc.add_argument("scenario", help="scenario file (.yaml or .json)")
+    sc.add_argument("--popup", action="store_true", help="replay the pop-up threats")
+    sc.add_argument("--method", choices=("aco", "astar"), default="aco")
+    sc.add_argument("--seed", type=int, default=0, help="seed of the ACO's random generator")
+    sc.add_argument("--out", required=True, help="schedule.json to write")
+    sc.add_argument("--plot", help="PNG of the speed profiles to write")
+    sc.set_defaults(func=_cmd_schedule)
+    ex = sub.add_parser("export", help="write one vehicle's mission from a schedule.json")
+    ex.add_argument("schedule", help="schedule.json")
+    ex.add_argument("--vehicle", required=True, help="vehicle id")
+    ex.add_argument("--format", choices=("qgc", "wpl"), required=True)
+    ex.add_argument("--out", required=True, help="mission file to write")
+    ex.set_defaults(func=_cmd_export)
     r = sub.add_parser("schema", help="print the scenario JSON Schema")
     r.add_argument("--out", help="file to write instead of standard output")
     r.set_defaults(func=_cmd_schema)

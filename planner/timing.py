@@ -1,0 +1,437 @@
+"""Per-vehicle arrival windows, the team arrival time and discrete speed/loiter timing.
+
+The three time strategies of section 4, as pure one-dimensional arithmetic over the length
+still to fly (the geometry lives in :mod:`planner.schedule`):
+
+* takeoff delay (eq. 5): a vehicle on the ground takes off so that it would arrive on time at
+  its cruise speed, within its takeoff window;
+* discrete speed (eqs. 6-7): speeds are multiples of a step (0.5 m/s by default), held over
+  path pieces. An exact arrival comes from two speeds: the first part of the path at one, the
+  rest at another, the split point chosen so that the time comes out exact;
+* loiter (eqs. 8-9): ``n`` whole turns of radius ``r`` add ``D_add = 2 n pi r``; the fewest
+  turns after which the speed range can absorb the rest.
+
+A vehicle's feasible arrival window from a moment is ``[t_min, t_max]`` (eq. 1): speed range
+always, takeoff freedom only on the ground, ``t_max = inf`` where a loiter is possible.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+from typing import Literal
+
+from planner.errors import InfeasibleError
+
+SPEED_STEP_M_S = 0.5
+#: Speed pieces shorter than this are merged into their neighbour (waypoints that close are
+#: not worth a DO_CHANGE_SPEED; the timing error is below 0.03 s for 0.5 m/s steps).
+MIN_PIECE_M = 5.0
+#: Arrival times within this of the target count as exact, s.
+TIME_TOL_S = 1e-6
+
+_LOITER_RADIUS_FINE_MAX_M = 255.0
+
+
+def flyable_loiter_radius_m(min_radius_m: float) -> float:
+    """Smallest loiter radius (m) >= ``min_radius_m`` that ArduPlane stores exactly.
+
+    Whole metres up to 255 m, 10 m steps above (see
+    :func:`planner.mission.arduplane_loiter_radius_m`, which truncates).
+    """
+    if min_radius_m <= _LOITER_RADIUS_FINE_MAX_M:
+        return float(max(1, math.ceil(min_radius_m - 1e-9)))
+    return 10.0 * math.ceil(min_radius_m / 10.0 - 1e-9)
+
+
+def speed_grid(speed_min_m_s: float, speed_max_m_s: float, step_m_s: float) -> tuple[float, ...]:
+    """Allowed speeds (m/s): multiples of ``step_m_s`` inside the range, plus both ends."""
+    lo = math.ceil(speed_min_m_s / step_m_s - 1e-9)
+    hi = math.floor(speed_max_m_s / step_m_s + 1e-9)
+    grid = {speed_min_m_s, speed_max_m_s}
+    grid.update(k * step_m_s for k in range(lo, hi + 1))
+    return tuple(sorted(v for v in grid if speed_min_m_s - 1e-9 <= v <= speed_max_m_s + 1e-9))
+
+
+@dataclass(frozen=True, slots=True)
+class SpeedLimits:
+    """One vehicle's speed range and cruise speed (m/s), and the speed step."""
+
+    speed_min_m_s: float
+    speed_max_m_s: float
+    cruise_m_s: float
+    step_m_s: float = SPEED_STEP_M_S
+
+
+@dataclass(frozen=True, slots=True)
+class ArrivalWindow:
+    """Feasible arrival times ``[t_min_s, t_max_s]`` of one vehicle, and why."""
+
+    vehicle_id: str
+    t_min_s: float
+    t_max_s: float
+    min_reason: str
+    max_reason: str
+
+
+def vehicle_window(
+    vehicle_id: str,
+    *,
+    now_s: float,
+    remaining_m: float,
+    limits: SpeedLimits,
+    takeoff_window_s: tuple[float, float] | None = None,
+    can_loiter: bool = False,
+) -> ArrivalWindow:
+    """The arrival window of one vehicle from ``now_s``.
+
+    Parameters
+    ----------
+    vehicle_id
+        Named in the reasons.
+    now_s
+        The moment the window is computed at, mission s.
+    remaining_m
+        Length still to fly (the whole path on the ground), m.
+    limits
+        Speed range, m/s.
+    takeoff_window_s
+        ``(earliest, latest)`` takeoff, s, for a vehicle on the ground; None when airborne.
+    can_loiter
+        A buffer area on the remaining path allows holding turns: no latest arrival.
+    """
+    vmin, vmax = limits.speed_min_m_s, limits.speed_max_m_s
+    km = remaining_m / 1000.0
+    if takeoff_window_s is None:
+        depart_lo = depart_hi = now_s
+        where = f"airborne at {now_s:.1f} s"
+    else:
+        depart_lo = max(takeoff_window_s[0], now_s)
+        depart_hi = max(takeoff_window_s[1], depart_lo)
+        where = f"takeoff in [{depart_lo:.1f}, {depart_hi:.1f}] s"
+    t_min = depart_lo + remaining_m / vmax
+    min_reason = (
+        f"{vehicle_id} cannot arrive before {t_min:.1f} s ({where}, {km:.1f} km at {vmax:g} m/s)"
+    )
+    if can_loiter:
+        return ArrivalWindow(vehicle_id, t_min, math.inf, min_reason, f"{vehicle_id} can loiter")
+    t_max = depart_hi + remaining_m / vmin
+    max_reason = (
+        f"{vehicle_id} cannot arrive after {t_max:.1f} s ({where}, {km:.1f} km at {vmin:g} m/s, "
+        "no buffer area to loiter in)"
+    )
+    return ArrivalWindow(vehicle_id, t_min, t_max, min_reason, max_reason)
+
+
+def team_arrival(
+    windows: Sequence[ArrivalWindow],
+    requested_s: float | None,
+    *,
+    offsets_s: Mapping[str, float] | None = None,
+) -> tuple[float, str]:
+    """The team's reference arrival time (s) and the reason for it (eq. 1).
+
+    Vehicle ``i`` arrives at ``reference + offsets_s[i]`` (0 for simultaneous arrivals; the
+    slot offset for spaced ones). The requested time is kept when every shifted window holds
+    it; otherwise the earliest time of the windows' intersection, the reason naming the vehicle
+    that forced it.
+
+    Raises
+    ------
+    InfeasibleError
+        The windows do not intersect; names the vehicle that cannot wait long enough and the
+        shortfall in seconds.
+    """
+    if not windows:
+        raise ValueError("team_arrival needs at least one window")
+    off = offsets_s or {}
+    lo = max(windows, key=lambda w: w.t_min_s - off.get(w.vehicle_id, 0.0))
+    hi = min(windows, key=lambda w: w.t_max_s - off.get(w.vehicle_id, 0.0))
+    t_lo = lo.t_min_s - off.get(lo.vehicle_id, 0.0)
+    t_hi = hi.t_max_s - off.get(hi.vehicle_id, 0.0)
+    if t_lo > t_hi + TIME_TOL_S:
+        raise InfeasibleError(
+            f"vehicle {hi.vehicle_id}: {hi.max_reason}, but {lo.min_reason}: "
+            f"short by {t_lo - t_hi:.1f} s"
+        )
+    if requested_s is not None and t_lo - TIME_TOL_S <= requested_s <= t_hi + TIME_TOL_S:
+        return requested_s, "requested arrival time is feasible for every vehicle"
+    if requested_s is None:
+        return t_lo, f"earliest common arrival: {lo.min_reason}"
+    if requested_s < t_lo:
+        return t_lo, f"requested {requested_s:.1f} s is too early: {lo.min_reason}"
+    return t_lo, (
+        f"requested {requested_s:.1f} s is too late: {hi.max_reason}; earliest common arrival: "
+        f"{lo.min_reason}"
+    )
+
+
+@dataclass(frozen=True, slots=True)
+class Piece:
+    """A stretch flown at one speed: a path leg, or a loiter (and its detour)."""
+
+    kind: Literal["leg", "loiter"]
+    length_m: float
+    speed_m_s: float
+
+    @property
+    def duration_s(self) -> float:
+        return self.length_m / self.speed_m_s
+
+
+@dataclass(frozen=True, slots=True)
+class LoiterSite:
+    """Where a loiter can be flown: ``at_m`` ahead along the remaining path.
+
+    ``detour_m`` is the extra flying to and from the circle when it cannot touch the path.
+    """
+
+    at_m: float
+    radius_m: float
+    detour_m: float = 0.0
+
+
+@dataclass(frozen=True, slots=True)
+class Timing:
+    """How one vehicle flies its remaining path in a given time."""
+
+    pieces: tuple[Piece, ...]
+    turns: int
+    """Loiter turns (0: speed alone suffices)."""
+
+    @property
+    def duration_s(self) -> float:
+        return math.fsum(p.duration_s for p in self.pieces)
+
+    @property
+    def added_m(self) -> float:
+        return math.fsum(p.length_m for p in self.pieces if p.kind == "loiter")
+
+
+def _merge(pieces: list[Piece]) -> tuple[Piece, ...]:
+    """Drop empty pieces, join equal-speed neighbours, fold tiny legs into a neighbour leg."""
+    out: list[Piece] = []
+    for p in pieces:
+        if p.length_m <= 1e-9:
+            continue
+        if out and out[-1].kind == p.kind == "leg" and out[-1].speed_m_s == p.speed_m_s:
+            out[-1] = Piece("leg", out[-1].length_m + p.length_m, p.speed_m_s)
+        else:
+            out.append(p)
+    changed = True
+    while changed:
+        changed = False
+        for k, p in enumerate(out):
+            if p.kind != "leg" or p.length_m >= MIN_PIECE_M or len(out) == 1:
+                continue
+            # Fold into the neighbouring leg (the next one, else the previous one).
+            for j in (k + 1, k - 1):
+                if 0 <= j < len(out) and out[j].kind == "leg":
+                    q = out[j]
+                    out[j] = Piece("leg", q.length_m + p.length_m, q.speed_m_s)
+                    del out[k]
+                    changed = True
+                    break
+            if changed:
+                break
+    return tuple(out)
+
+
+def split_speeds(
+    length_m: float,
+    duration_s: float,
+    limits: SpeedLimits,
+    *,
+    current_m_s: float | None = None,
+) -> tuple[Piece, ...]:
+    """Two adjacent discrete speeds that fly ``length_m`` in exactly ``duration_s`` (eq. 6).
+
+    The first part is flown at the speed nearer ``current_m_s`` (fewer changes), the rest at
+    the other. Both speeds lie in the range (eq. 7); the caller checks that the mean speed
+    does.
+    """
+    if length_m <= 0.0:
+        return ()
+    grid = speed_grid(limits.speed_min_m_s, limits.speed_max_m_s, limits.step_m_s)
+    v_req = length_m / duration_s
+    v_req = min(max(v_req, grid[0]), grid[-1])
+    k = max(0, min(len(grid) - 2, _bisect(grid, v_req))) if len(grid) > 1 else 0
+    if len(grid) == 1 or abs(grid[k] - v_req) < 1e-12:
+        return _merge([Piece("leg", length_m, grid[k])])
+    if abs(grid[k + 1] - v_req) < 1e-12:
+        return _merge([Piece("leg", length_m, grid[k + 1])])
+    v_lo, v_hi = grid[k], grid[k + 1]
+    ref = limits.cruise_m_s if current_m_s is None else current_m_s
+    first, second = (v_lo, v_hi) if abs(v_lo - ref) <= abs(v_hi - ref) else (v_hi, v_lo)
+    # a / first + (L - a) / second = T
+    a = (duration_s - length_m / second) / (1.0 / first - 1.0 / second)
+    a = min(max(a, 0.0), length_m)
+    return _merge([Piece("leg", a, first), Piece("leg", length_m - a, second)])
+
+
+def _bisect(grid: Sequence[float], v: float) -> int:
+    """Index k with grid[k] <= v < grid[k + 1] (clamped)."""
+    k = 0
+    while k + 1 < len(grid) and grid[k + 1] <= v:
+        k += 1
+    return k
+
+
+def fewest_turns(
+    remaining_m: float, duration_s: float, limits: SpeedLimits, site: LoiterSite
+) -> int:
+    """Fewest loiter turns after which the speed range absorbs the rest (eq. 8); 0 if none.
+
+    Raises
+    ------
+    ValueError
+        No whole number of turns fits between the slowest and fastest flying times.
+    """
+    vmin, vmax = limits.speed_min_m_s, limits.speed_max_m_s
+    if duration_s * vmin <= remaining_m + 1e-9:
+        return 0
+    per_turn = 2.0 * math.pi * site.radius_m
+    n = max(1, math.ceil((duration_s * vmin - remaining_m - site.detour_m) / per_turn - 1e-12))
+    if remaining_m + site.detour_m + n * per_turn > duration_s * vmax + 1e-9:
+        raise ValueError("no whole number of loiter turns fits the speed range")
+    return n
+
+
+def time_path(
+    vehicle_id: str,
+    remaining_m: float,
+    duration_s: float,
+    limits: SpeedLimits,
+    *,
+    site: LoiterSite | None = None,
+    current_m_s: float | None = None,
+) -> Timing:
+    """Speeds, and loiter turns where needed, to fly ``remaining_m`` in exactly ``duration_s``.
+
+    Parameters
+    ----------
+    vehicle_id
+        Named in errors.
+    remaining_m
+        Path length still to fly, m.
+    duration_s
+        Time to fly it in, s.
+    limits
+        Speed range and step, m/s.
+    site
+        Where a loiter can be flown; None when no buffer area is on the remaining path.
+    current_m_s
+        Speed flown now; the first piece keeps the nearer of two speeds.
+
+    Returns
+    -------
+    Timing
+        Pieces in flying order. Without a loiter: at most two legs at adjacent grid speeds.
+        With one: the fewest turns (eq. 8); the loiter flown at the speed of the leg that leads
+        to it (ArduPlane keeps the airspeed through NAV_LOITER_TURNS).
+
+    Raises
+    ------
+    InfeasibleError
+        Too little time even at the top speed, or too much with no buffer to loiter in; the
+        message names the vehicle and the shortfall in seconds.
+    """
+    vmin, vmax = limits.speed_min_m_s, limits.speed_max_m_s
+    fastest = remaining_m / vmax
+    slowest = remaining_m / vmin
+    if duration_s < fastest - TIME_TOL_S:
+        raise InfeasibleError(
+            f"vehicle {vehicle_id}: {remaining_m / 1000:.1f} km need at least {fastest:.1f} s at "
+            f"{vmax:g} m/s but only {duration_s:.1f} s are left: short by "
+            f"{fastest - duration_s:.1f} s"
+        )
+    if duration_s <= slowest + TIME_TOL_S:
+        pieces = split_speeds(remaining_m, duration_s, limits, current_m_s=current_m_s)
+        return Timing(pieces, 0)
+    if site is None:
+        raise InfeasibleError(
+            f"vehicle {vehicle_id}: must lose {duration_s - slowest:.1f} s more than its minimum "
+            f"speed {vmin:g} m/s allows and no buffer area on its path allows a loiter: short by "
+            f"{duration_s - slowest:.1f} s"
+        )
+    try:
+        n = fewest_turns(remaining_m, duration_s, limits, site)
+    except ValueError:
+        raise InfeasibleError(
+            f"vehicle {vehicle_id}: loiter turns of {2 * math.pi * site.radius_m:.0f} m cannot "
+            f"be trimmed to {duration_s:.1f} s within [{vmin:g}, {vmax:g}] m/s"
+        ) from None
+    loiter_m = site.detour_m + 2.0 * math.pi * site.radius_m * n
+    split = _loiter_split(remaining_m, duration_s, limits, site.at_m, loiter_m, current_m_s)
+    if split is None:
+        raise InfeasibleError(
+            f"vehicle {vehicle_id}: no pair of discrete speeds flies {n} loiter turns "
+            f"and {remaining_m / 1000:.1f} km in {duration_s:.1f} s"
+        )
+    return Timing(split, n)
+
+
+def _loiter_split(
+    path_m: float,
+    duration_s: float,
+    limits: SpeedLimits,
+    at_m: float,
+    loiter_m: float,
+    current_m_s: float | None,
+) -> tuple[Piece, ...] | None:
+    """Two discrete speeds over path + loiter, the loiter inside one speed's stretch.
+
+    The loiter takes the speed of the path just before it, so the split point is either after
+    the loiter point (loiter at the first speed) or strictly before it (at the second).
+    Adjacent speeds bracketing the mean are tried first, then any pair.
+    """
+    grid = speed_grid(limits.speed_min_m_s, limits.speed_max_m_s, limits.step_m_s)
+    v_mean = (path_m + loiter_m) / duration_s
+    ref = limits.cruise_m_s if current_m_s is None else current_m_s
+    best: tuple[tuple[float, float, float], tuple[Piece, ...]] | None = None
+    for v1 in grid:
+        for v2 in grid:
+            for loiter_first in (True, False):
+                if v1 == v2:
+                    if abs((path_m + loiter_m) / v1 - duration_s) > TIME_TOL_S:
+                        continue
+                    a = path_m if loiter_first else 0.0
+                elif loiter_first:
+                    a = (duration_s - loiter_m / v1 - path_m / v2) / (1.0 / v1 - 1.0 / v2)
+                    if not at_m - 1e-9 <= a <= path_m + 1e-9:
+                        continue
+                else:
+                    a = (duration_s - (path_m + loiter_m) / v2) / (1.0 / v1 - 1.0 / v2)
+                    if not -1e-9 <= a <= at_m - MIN_PIECE_M:
+                        continue
+                a = min(max(a, 0.0), path_m)
+                if loiter_first:
+                    raw = [
+                        Piece("leg", at_m, v1),
+                        Piece("loiter", loiter_m, v1),
+                        Piece("leg", a - at_m, v1),
+                        Piece("leg", path_m - a, v2),
+                    ]
+                else:
+                    raw = [
+                        Piece("leg", a, v1),
+                        Piece("leg", at_m - a, v2),
+                        Piece("loiter", loiter_m, v2),
+                        Piece("leg", path_m - at_m, v2),
+                    ]
+                pieces = _merge(raw)
+                tiny = sum(1 for p in raw if 0.0 < p.length_m < MIN_PIECE_M)
+                spread = max(abs(v1 - v_mean), abs(v2 - v_mean))
+                score = (float(tiny), spread, abs(v1 - ref))
+                if best is None or score < best[0]:
+                    best = (score, pieces)
+    return None if best is None else best[1]
+
+
+def takeoff_time_s(
+    length_m: float, target_s: float, limits: SpeedLimits, window_s: tuple[float, float]
+) -> float:
+    """Takeoff time (s) by eq. 5: arrive at ``target_s`` at cruise speed, within the window."""
+    lo, hi = window_s
+    return min(max(target_s - length_m / limits.cruise_m_s, lo), hi)
