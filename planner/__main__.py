@@ -85,7 +85,8 @@ def _cmd_schedule(args: argparse.Namespace) -> int:
         print(f"{e['time_s']:8.1f} s  {e['kind']}: {e['text']}")
     for a in doc["adjustments"]:
         print(f"{a['time_s']:8.1f} s  {a['vehicle']} {a['strategy']} {a['value']:g}: {a['reason']}")
-    for vid, v in doc["vehicles"].items():
+    for v in doc["vehicles"]:
+        vid = v["id"]
         speeds = "/".join(f"{x['speed_m_s']:g}" for x in v["legs"])
         turns = sum(lo["turns"] for lo in v["loiters"])
         print(

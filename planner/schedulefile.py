@@ -110,9 +110,10 @@ def _item_json(it: MissionItem) -> dict[str, Any]:
 
 def mission_from_json(doc: Mapping[str, Any], vehicle_id: str) -> list[MissionItem]:
     """The mission items stored for one vehicle in a schedule.json document."""
-    vehicles = doc.get("vehicles")
-    if not isinstance(vehicles, Mapping):
-        raise PlannerError("schedule.json: 'vehicles' is missing or not a mapping")
+    listed = doc.get("vehicles")
+    if not isinstance(listed, list):
+        raise PlannerError("schedule.json: 'vehicles' is missing or not a list")
+    vehicles = {v.get("id"): v for v in listed if isinstance(v, Mapping)}
     entry = vehicles.get(vehicle_id)
     if not isinstance(entry, Mapping):
         known = ", ".join(sorted(str(k) for k in vehicles))
@@ -177,6 +178,7 @@ def schedule_json(
             )
         items = vehicle_mission(schedule, vs, terrain)
         vehicles[vs.vehicle_id] = {
+            "id": vs.vehicle_id,
             "takeoff_s": round(vs.takeoff_s, 3),
             "arrival_s": round(vs.arrival_s, 3),
             "length_m": round(vs.path.length_m, 2),
@@ -256,7 +258,7 @@ def schedule_json(
             }
             for st in schedule.stages
         ],
-        "vehicles": vehicles,
+        "vehicles": list(vehicles.values()),
     }
     if extra:
         doc.update(extra)

@@ -20,7 +20,7 @@ def plot_speeds(doc: Mapping[str, Any], out: Path) -> None:
     stages = doc.get("stages") or []
     if not stages:
         raise PlannerError("schedule has no stages to plot")
-    vehicles = doc["vehicles"]
+    vehicles = {v["id"]: v for v in doc["vehicles"]}
     fig, axes = plt.subplots(len(stages), 1, figsize=(9, 2.6 * len(stages)), sharex=True)
     axes_list = list(axes) if len(stages) > 1 else [axes]
     colours = plt.rcParams["axes.prop_cycle"].by_key()["color"]

@@ -34,7 +34,8 @@ def test_contract_fields(schedule_doc: tuple[Path, dict]) -> None:  # type: igno
     assert {a["strategy"] for a in doc["adjustments"]} == {"takeoff_delay", "speed", "loiter"}
     for a in doc["adjustments"]:
         assert {"time_s", "vehicle", "strategy", "value"} <= set(a)
-    for v in doc["vehicles"].values():
+    assert [v["id"] for v in doc["vehicles"]] == ["UAV1", "UAV2", "UAV3"]
+    for v in doc["vehicles"]:
         assert abs(v["arrival_s"] - doc["required_arrival_s"]) < 0.1
         for leg in v["legs"]:
             assert v["speed_min_m_s"] <= leg["speed_m_s"] <= v["speed_max_m_s"]
@@ -58,7 +59,9 @@ def test_export_round_trip(
     commands = [it.command for it in items]
     assert MAV_CMD_NAV_LOITER_TURNS in commands
     speeds = {it.param2 for it in items if it.command == MAV_CMD_DO_CHANGE_SPEED}
-    assert speeds == {leg["speed_m_s"] for leg in doc["vehicles"]["UAV3"]["legs"]}
+    assert speeds == {
+        leg["speed_m_s"] for leg in next(v for v in doc["vehicles"] if v["id"] == "UAV3")["legs"]
+    }
 
 
 def test_export_unknown_vehicle_is_one_line(
