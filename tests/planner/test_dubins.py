@@ -7,7 +7,7 @@ import math
 
 import numpy as np
 import pytest
-from hypothesis import given, settings
+from hypothesis import example, given, settings
 from hypothesis import strategies as st
 
 from planner.dubins import (
@@ -291,6 +291,11 @@ def test_shortest_is_minimum_matches_oracle_and_beats_chord(
 
 @settings(max_examples=100, deadline=None)
 @given(start=poses, end=poses, radius_m=radii)
+@example(
+    start=Pose(-1.192092896e-07, -1.192092896e-07, 0.0),
+    end=Pose(-1.192092896e-07, 0.0, 0.0),
+    radius_m=3.0,
+)
 def test_pose_at_is_continuous_and_never_turns_tighter_than_radius(
     start: Pose, end: Pose, radius_m: float
 ) -> None:
@@ -305,12 +310,14 @@ def test_pose_at_is_continuous_and_never_turns_tighter_than_radius(
     tol = 1e-9 * scale_of(start, end, radius_m)
     # Unit speed: never moves further than the arc length flown (continuity).
     assert np.all(moved <= steps + tol)
-    heading_rates = [
-        heading_diff(a.heading_rad, b.heading_rad) / h
+    # Headings carry round-off of order 1e-7 rad after a full loop (seen at r = 3 m with
+    # start ~ end), so allow 1e-6 rad per step on top of the 1/r turn rate.
+    excess = [
+        heading_diff(a.heading_rad, b.heading_rad) - h * (1 + 1e-6) / radius_m
         for (a, b), h in zip(itertools.pairwise(poses_), steps, strict=True)
         if h > 0
     ]
-    assert max(heading_rates, default=0.0) <= (1 + 1e-6) / radius_m
+    assert max(excess, default=0.0) <= 1e-6
     # Curvature from positions alone: turning of chord directions over the distance flown.
     chords = np.diff(xy, axis=0)
     keep = moved > 1e-6 * max(ds, 1e-12) + tol

@@ -1,0 +1,224 @@
+"""Python API for tests and rehearsals: a team of stub vehicles on one simulated clock.
+
+Example::
+
+    async with SimTeam.start(homes=[Home(-35.36, 149.16, 584.0)], tcp_base=0, speedup=50) as team:
+        port = team.ports[0]                       # tcp_base=0: free ports chosen by the OS
+        team.vehicles[0].link.faults(loss=0.3)     # runtime link faults
+        t = await team.watch_crossing(0, lat, lon, radius_m=50.0)   # exact simulated time
+        print(team.vehicles[0].true_state, team.sim_time_s, team.utc_s)
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import math
+from collections.abc import AsyncIterator, Sequence
+from dataclasses import dataclass
+
+import numpy as np
+
+from sitl_stub.autopilot import Autopilot
+from sitl_stub.clock import DEFAULT_EPOCH_UTC_S, ClockStats, SimClock
+from sitl_stub.link import FaultyLink
+from sitl_stub.model import AirframeParams, FlightState, Wind
+from sitl_stub.server import TeamServer
+from sitl_stub.vehicle import Vehicle
+
+DEFAULT_TCP_BASE = 5760
+PORT_STRIDE = 10
+
+
+@dataclass(frozen=True, slots=True)
+class Home:
+    """Where a vehicle starts: on the ground at home, nose to ``heading_deg``."""
+
+    lat_deg: float
+    lon_deg: float
+    alt_m: float
+    heading_deg: float = 0.0
+
+    def __post_init__(self) -> None:
+        if not (math.isfinite(self.lat_deg) and -90.0 <= self.lat_deg <= 90.0):
+            raise ValueError(f"home latitude {self.lat_deg!r} is outside [-90, 90]")
+        if not (math.isfinite(self.lon_deg) and -180.0 <= self.lon_deg <= 180.0):
+            raise ValueError(f"home longitude {self.lon_deg!r} is outside [-180, 180]")
+        if not math.isfinite(self.alt_m):
+            raise ValueError(f"home altitude {self.alt_m!r} is not a number")
+
+
+class SimTeam:
+    """Running vehicles, their TCP ports and the shared simulated clock."""
+
+    def __init__(self, server: TeamServer) -> None:
+        self.server = server
+        self.clock = server.clock
+        self.vehicles: list[Vehicle] = server.vehicles
+
+    @classmethod
+    @contextlib.asynccontextmanager
+    async def start(
+        cls,
+        *,
+        homes: Sequence[Home | tuple[float, float, float] | tuple[float, float, float, float]],
+        tcp_base: int = DEFAULT_TCP_BASE,
+        speedup: float = 1.0,
+        wind: Wind | None = None,
+        seed: int = 0,
+        step_s: float = 0.1,
+        params: AirframeParams | Sequence[AirframeParams] | None = None,
+        host: str = "127.0.0.1",
+        start_utc_s: float = DEFAULT_EPOCH_UTC_S,
+        mission_timeout_s: float = 1.5,
+        run: bool = True,
+    ) -> AsyncIterator[SimTeam]:
+        """Start the team; vehicle ``i`` has system id ``i + 1`` on ``tcp_base + 10*i``.
+
+        ``tcp_base=0`` lets the OS pick free ports (see :attr:`ports`). With ``run=False``
+        the clock does not run by itself; call :meth:`step` to advance it.
+        """
+        team = cls.create(
+            homes=homes,
+            speedup=speedup,
+            wind=wind,
+            seed=seed,
+            step_s=step_s,
+            params=params,
+            host=host,
+            start_utc_s=start_utc_s,
+            mission_timeout_s=mission_timeout_s,
+            tcp_base=tcp_base,
+        )
+        await team.server.open()
+        try:
+            async with asyncio.TaskGroup() as tg:
+                runner = tg.create_task(team.server.run()) if run else None
+                try:
+                    yield team
+                finally:
+                    if runner is not None:
+                        runner.cancel()
+        finally:
+            team._cancel_waiters()
+            await team.server.close()
+
+    @classmethod
+    def create(
+        cls,
+        *,
+        homes: Sequence[Home | tuple[float, float, float] | tuple[float, float, float, float]],
+        speedup: float = 1.0,
+        wind: Wind | None = None,
+        seed: int = 0,
+        step_s: float = 0.1,
+        params: AirframeParams | Sequence[AirframeParams] | None = None,
+        host: str = "127.0.0.1",
+        start_utc_s: float = DEFAULT_EPOCH_UTC_S,
+        mission_timeout_s: float = 1.5,
+        tcp_base: int = DEFAULT_TCP_BASE,
+    ) -> SimTeam:
+        """Build the team without opening sockets (``start`` is the usual entry)."""
+        if not homes:
+            raise ValueError("at least one home is needed")
+        if not 0 <= tcp_base <= 65535 - PORT_STRIDE * (len(homes) - 1):
+            raise ValueError(f"tcp_base {tcp_base} leaves no room for {len(homes)} vehicles")
+        clock = SimClock(speedup=speedup, step_s=step_s, start_utc_s=start_utc_s)
+        seeds = np.random.SeedSequence(seed).spawn(2 * len(homes))
+        vehicles: list[Vehicle] = []
+        for i, raw in enumerate(homes):
+            home = raw if isinstance(raw, Home) else Home(*raw)
+            p = params[i] if isinstance(params, Sequence) else (params or AirframeParams())
+            autopilot = Autopilot(
+                params=p,
+                home_lat_deg=home.lat_deg,
+                home_lon_deg=home.lon_deg,
+                home_alt_m=home.alt_m,
+                heading_deg=home.heading_deg,
+                wind=wind or Wind(),
+                rng=np.random.default_rng(seeds[2 * i]),
+                time_s=0.0,
+            )
+            link = FaultyLink(np.random.default_rng(seeds[2 * i + 1]), lambda: clock.sim_time_s)
+            vehicles.append(
+                Vehicle(
+                    system_id=i + 1,
+                    autopilot=autopilot,
+                    clock=clock,
+                    link=link,
+                    mission_timeout_s=mission_timeout_s,
+                )
+            )
+        ports = [0 if tcp_base == 0 else tcp_base + PORT_STRIDE * i for i in range(len(homes))]
+        return cls(TeamServer(vehicles, clock, host=host, ports=ports))
+
+    # -- queries -------------------------------------------------------------------------
+
+    @property
+    def ports(self) -> list[int]:
+        """The TCP port of each vehicle (actual ports when ``tcp_base=0``)."""
+        return [p.port for p in self.server.ports]
+
+    @property
+    def sim_time_s(self) -> float:
+        return self.clock.sim_time_s
+
+    @property
+    def utc_s(self) -> float:
+        """Simulated UTC (what SYSTEM_TIME reports), seconds since the Unix epoch."""
+        return self.clock.utc_s
+
+    def true_state(self, i: int) -> FlightState:
+        return self.vehicles[i].true_state
+
+    def stats(self) -> ClockStats:
+        return self.clock.stats(asyncio.get_running_loop().time())
+
+    def set_wind(self, wind: Wind) -> None:
+        for v in self.vehicles:
+            v.autopilot.set_wind(wind)
+
+    # -- waiting on the simulation -------------------------------------------------------
+
+    def watch_crossing(
+        self, i: int, lat_deg: float, lon_deg: float, radius_m: float = 0.0
+    ) -> asyncio.Future[float]:
+        """A future for the exact simulated time vehicle ``i`` first comes within radius.
+
+        The time is interpolated within the physics step from the true state, not from
+        telemetry. Every crossing is also recorded in ``vehicles[i].crossings``.
+        """
+        fut: asyncio.Future[float] = asyncio.get_running_loop().create_future()
+
+        def done(t: float) -> None:
+            if not fut.done():
+                fut.set_result(t)
+
+        watch = self.vehicles[i].watch_crossing(lat_deg, lon_deg, radius_m, done)
+        fut.add_done_callback(lambda _f: self.vehicles[i].unwatch(watch))
+        return fut
+
+    async def wait_sim_time(self, sim_time_s: float) -> None:
+        """Return once the simulated clock has reached ``sim_time_s``."""
+        if self.clock.sim_time_s >= sim_time_s:
+            return
+        fut: asyncio.Future[None] = asyncio.get_running_loop().create_future()
+
+        def check() -> None:
+            if self.clock.sim_time_s >= sim_time_s and not fut.done():
+                fut.set_result(None)
+
+        self.server.add_step_listener(check)
+        try:
+            await fut
+        finally:
+            self.server.remove_step_listener(check)
+
+    def step(self, n: int = 1) -> None:
+        """Advance the simulation by ``n`` physics steps now (for ``run=False`` teams)."""
+        for _ in range(n):
+            self.server.step_once()
+
+    def _cancel_waiters(self) -> None:
+        for v in self.vehicles:
+            v.clear_watches()
