@@ -364,15 +364,23 @@ class MissionServer:
             or up.gcs_component != msg.get_srcComponent()
         )
 
-    def _on_count(self, msg: Any, link: LinkId, now_s: float, r: Reaction) -> None:
+    def _admit_write(self, msg: Any, link: LinkId, r: Reaction) -> int | None:
+        """The mission type of a write request, or None after refusing it with an ACK."""
         mt = int(msg.mission_type)
         src, comp = msg.get_srcSystem(), msg.get_srcComponent()
         if mt not in self._stored:
             self._ack(r, link, src, comp, int(mavlink2.MAV_MISSION_UNSUPPORTED), mt)
-            return
+            return None
         if self._busy_with_other(msg, link):
             self._ack(r, link, src, comp, int(mavlink2.MAV_MISSION_DENIED), mt)
+            return None
+        return mt
+
+    def _on_count(self, msg: Any, link: LinkId, now_s: float, r: Reaction) -> None:
+        mt = self._admit_write(msg, link, r)
+        if mt is None:
             return
+        src, comp = msg.get_srcSystem(), msg.get_srcComponent()
         count = int(msg.count)
         up = self._upload
         if (
@@ -412,14 +420,10 @@ class MissionServer:
         self._request(r, self._upload)
 
     def _on_partial(self, msg: Any, link: LinkId, now_s: float, r: Reaction) -> None:
-        mt = int(msg.mission_type)
+        mt = self._admit_write(msg, link, r)
+        if mt is None:
+            return
         src, comp = msg.get_srcSystem(), msg.get_srcComponent()
-        if mt not in self._stored:
-            self._ack(r, link, src, comp, int(mavlink2.MAV_MISSION_UNSUPPORTED), mt)
-            return
-        if self._busy_with_other(msg, link):
-            self._ack(r, link, src, comp, int(mavlink2.MAV_MISSION_DENIED), mt)
-            return
         start, end = int(msg.start_index), int(msg.end_index)
         n = self.count(mt)
         if end == -1:
