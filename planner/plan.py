@@ -21,7 +21,7 @@ from numpy.typing import NDArray
 from scipy.ndimage import map_coordinates
 
 from planner.aco import AcoOptions, solve_aco
-from planner.coupling import TimingLimits, team_timing
+from planner.coupling import TimingLimits, pair_min_separation, team_timing
 from planner.errors import InfeasibleError
 from planner.flightpath import FlightPath, Violation, check_polyline, smooth_polyline
 from planner.geo import LocalFrame
@@ -628,6 +628,43 @@ def finish_route(
     return route
 
 
+def solve_and_finish(
+    world: World,
+    problem: Problem,
+    method: Method,
+    *,
+    threats: Sequence[ThreatZone],
+    rng: np.random.Generator | None = None,
+    options: AcoOptions | None = None,
+    airborne: Mapping[str, tuple[float, float]] | None = None,
+) -> tuple[SolveResult, list[PlannedRoute]]:
+    """Solve on the grid, refuse an infeasible result, and finish every route.
+
+    ``airborne`` gives, per vehicle id, the altitude (m AMSL) and compass heading (rad) of a
+    vehicle re-planned in flight; the others start from their scenario start.
+    """
+    result = solve(problem, method, rng=rng, options=options)
+    if result.status is Status.INFEASIBLE or not all(result.routes):
+        raise InfeasibleError(result.message)
+    routes = []
+    for i, r in enumerate(result.routes):
+        assert r is not None
+        alt, heading = (airborne or {}).get(r.vehicle_id, (None, None))
+        routes.append(
+            finish_route(
+                world,
+                problem,
+                i,
+                r.nodes,
+                r.cost,
+                threats=threats,
+                start_alt_m=alt,
+                start_heading_rad=heading,
+            )
+        )
+    return result, routes
+
+
 def plan(
     scenario: Scenario,
     method: Method = "aco",
@@ -646,13 +683,9 @@ def plan(
     world = build_world(scenario)
     threats = active(world.threats, None)
     problem = build_problem(world, threats=threats)
-    result = solve(problem, method, rng=rng, options=options)
-    if result.status is Status.INFEASIBLE or not all(result.routes):
-        raise InfeasibleError(result.message)
-    routes = []
-    for i, r in enumerate(result.routes):
-        assert r is not None
-        routes.append(finish_route(world, problem, i, r.nodes, r.cost, threats=threats))
+    result, routes = solve_and_finish(
+        world, problem, method, threats=threats, rng=rng, options=options
+    )
     limits = [t.timing for t in problem.tasks]
     timing = team_timing([r.length_m for r in routes], limits, problem.required_arrival_s)
     sep = _min_separation(routes, timing.takeoff_s, timing.speed_m_s, scenario.separation_m)
@@ -665,17 +698,16 @@ def _min_separation(
     speed_m_s: Sequence[float],
     d_s: float,
 ) -> float:
-    from planner.coupling import pair_min_separation
-
     vmax = max(speed_m_s) if speed_m_s else 1.0
+    tracks = [r.path.sample(PROFILE_STEP_M)[:, :2] for r in routes]
     best = math.inf
     for i in range(len(routes)):
         for j in range(i + 1, len(routes)):
             d, _ = pair_min_separation(
-                routes[i].path.sample(PROFILE_STEP_M)[:, :2],
+                tracks[i],
                 takeoff_s[i],
                 speed_m_s[i],
-                routes[j].path.sample(PROFILE_STEP_M)[:, :2],
+                tracks[j],
                 takeoff_s[j],
                 speed_m_s[j],
                 step_s=max(d_s / (8.0 * vmax), 0.25),

@@ -28,8 +28,7 @@ from numpy.typing import NDArray
 
 from planner.errors import InfeasibleError
 from planner.flightpath import FlightPath, Segment
-from planner.plan import Method, Plan, World, build_problem, build_world, finish_route, solve
-from planner.problem import Status
+from planner.plan import Method, Plan, World, build_problem, build_world, solve_and_finish
 from planner.scenario import Scenario, Simultaneous, Spaced, Vehicle, Windows
 from planner.threats import ThreatZone, active, build_threats
 from planner.timing import (
@@ -688,7 +687,7 @@ def _replan(
 ) -> dict[str, VehicleSchedule]:
     """New paths for the vehicles from where they are at ``now_s`` (prefix kept)."""
     starts: dict[str, tuple[float, float, float]] = {}
-    poses: dict[str, tuple[float, float, float, float]] = {}
+    poses: dict[str, tuple[float, float, float]] = {}
     for vid in vehicle_ids:
         vs = schedule.vehicle(vid)
         phase, s0, _ = vs.state_at(now_s)
@@ -697,30 +696,16 @@ def _replan(
         p = vs.path.pose_at(s0)
         alt = vs.alt_at(s0)
         starts[vid] = (p.east_m, p.north_m, alt)
-        poses[vid] = (s0, p.heading_rad, alt, 0.0)
+        poses[vid] = (s0, p.heading_rad, alt)
     problem = build_problem(world, threats=threats, starts=starts, vehicles=list(vehicle_ids))
-    result = solve(problem, method, rng=rng)
-    if result.status is Status.INFEASIBLE or not all(result.routes):
-        raise InfeasibleError(result.message)
+    airborne = {vid: (alt, heading) for vid, (_, heading, alt) in poses.items()}
+    _, routes = solve_and_finish(
+        world, problem, method, threats=threats, rng=rng, airborne=airborne
+    )
     out: dict[str, VehicleSchedule] = {}
-    for i, (vid, r) in enumerate(zip(vehicle_ids, result.routes, strict=True)):
-        assert r is not None
+    for vid, route in zip(vehicle_ids, routes, strict=True):
         vs = schedule.vehicle(vid)
-        if vid in poses:
-            s0, heading, alt, _ = poses[vid]
-            route = finish_route(
-                world,
-                problem,
-                i,
-                r.nodes,
-                r.cost,
-                threats=threats,
-                start_alt_m=alt,
-                start_heading_rad=heading,
-            )
-        else:
-            s0 = 0.0
-            route = finish_route(world, problem, i, r.nodes, r.cost, threats=threats)
+        s0 = poses[vid][0] if vid in poses else 0.0
         prefix = truncate_path(vs.path, s0)
         path = route.path if prefix is None else FlightPath(prefix.segments + route.path.segments)
         keep = vs.wp_s_m < s0 - 1e-6
