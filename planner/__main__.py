@@ -11,6 +11,16 @@ from pathlib import Path
 from planner.errors import PlannerError
 
 
+def _write_json(out: Path, doc: object, what: str) -> Path:
+    """Write a JSON document; an unwritable path is one PlannerError naming it."""
+    try:
+        out.parent.mkdir(parents=True, exist_ok=True)
+        out.write_text(json.dumps(doc, indent=1) + "\n", encoding="utf-8")
+    except OSError as err:
+        raise PlannerError(f"{out}: cannot write {what} ({err.strerror})") from None
+    return out
+
+
 def _cmd_plan(args: argparse.Namespace) -> int:
     import numpy as np
 
@@ -25,12 +35,7 @@ def _cmd_plan(args: argparse.Namespace) -> int:
     doc = plan_json(
         result, scenario_file=str(Path(args.scenario)), seed=args.seed, elapsed_s=elapsed
     )
-    out = Path(args.out)
-    try:
-        out.parent.mkdir(parents=True, exist_ok=True)
-        out.write_text(json.dumps(doc, indent=1) + "\n", encoding="utf-8")
-    except OSError as err:
-        raise PlannerError(f"{out}: cannot write plan ({err.strerror})") from None
+    out = _write_json(Path(args.out), doc, "plan")
     for v in doc["vehicles"]:
         print(
             f"{v['id']}: {v['length_m'] / 1000:.1f} km, cost {v['cost']:.0f} "
@@ -61,11 +66,11 @@ def _cmd_schedule(args: argparse.Namespace) -> int:
     t0 = time.perf_counter()
     scenario = load_scenario(args.scenario)
     rng = np.random.default_rng(args.seed)
-    planned = plan(scenario, args.method, rng=rng)
     world = build_world(scenario)
+    planned = plan(scenario, args.method, rng=rng, world=world)
     schedule = build_schedule(scenario, planned, world=world)
     if args.popup:
-        schedule = replay_popups(schedule, method=args.method, rng=rng)
+        schedule = replay_popups(schedule, method=args.method, rng=rng, world=world)
     sep = separation(schedule.vehicles, scenario.separation_m)
     elapsed = time.perf_counter() - t0
     doc = schedule_json(
@@ -75,12 +80,7 @@ def _cmd_schedule(args: argparse.Namespace) -> int:
         scenario_file=str(Path(args.scenario)),
         extra={"method": args.method, "seed": args.seed, "popup": bool(args.popup)},
     )
-    out = Path(args.out)
-    try:
-        out.parent.mkdir(parents=True, exist_ok=True)
-        out.write_text(json.dumps(doc, indent=1) + "\n", encoding="utf-8")
-    except OSError as err:
-        raise PlannerError(f"{out}: cannot write schedule ({err.strerror})") from None
+    out = _write_json(Path(args.out), doc, "schedule")
     for e in doc["events"]:
         print(f"{e['time_s']:8.1f} s  {e['kind']}: {e['text']}")
     for a in doc["adjustments"]:

@@ -671,6 +671,7 @@ def plan(
     *,
     rng: np.random.Generator | None = None,
     options: AcoOptions | None = None,
+    world: World | None = None,
 ) -> Plan:
     """Plan every vehicle's flyable route for the static threats of a scenario.
 
@@ -680,7 +681,7 @@ def plan(
         A start or goal inside a forbidden zone, an unreachable goal, or a route that cannot be
         made flyable; the message names the vehicle.
     """
-    world = build_world(scenario)
+    world = world if world is not None else build_world(scenario)
     threats = active(world.threats, None)
     problem = build_problem(world, threats=threats)
     result, routes = solve_and_finish(
