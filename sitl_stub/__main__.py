@@ -53,6 +53,11 @@ def parse_args(argv: Sequence[str] | None = None) -> argparse.Namespace:
     ap.add_argument("--loss", type=float, default=0.0, help="packet loss probability")
     ap.add_argument("--latency-ms", type=float, default=0.0, help="one-way latency, ms")
     ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument(
+        "--legacy-mission-requests",
+        action="store_true",
+        help="request upload items with MISSION_REQUEST (older ArduPilot), not _INT",
+    )
     ap.add_argument("--host", default="127.0.0.1")
     ap.add_argument("-v", "--verbose", action="store_true")
     return ap.parse_args(_join_negative_values(list(sys.argv[1:] if argv is None else argv)))
@@ -138,6 +143,7 @@ async def serve(args: argparse.Namespace, homes: list[Home]) -> None:
             seed=args.seed,
             host=args.host,
             start_utc_s=time.time(),
+            legacy_mission_requests=args.legacy_mission_requests,
         ) as team:
             if args.loss or args.latency_ms:
                 for v in team.vehicles:

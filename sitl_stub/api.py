@@ -71,12 +71,15 @@ class SimTeam:
         host: str = "127.0.0.1",
         start_utc_s: float = DEFAULT_EPOCH_UTC_S,
         mission_timeout_s: float = 1.5,
+        legacy_mission_requests: bool = False,
         run: bool = True,
     ) -> AsyncIterator[SimTeam]:
         """Start the team; vehicle ``i`` has system id ``i + 1`` on ``tcp_base + 10*i``.
 
         ``tcp_base=0`` lets the OS pick free ports (see :attr:`ports`). With ``run=False``
-        the clock does not run by itself; call :meth:`step` to advance it.
+        the clock does not run by itself; call :meth:`step` to advance it. With
+        ``legacy_mission_requests=True`` the vehicles request upload items with legacy
+        MISSION_REQUEST instead of MISSION_REQUEST_INT (as older ArduPilot does).
         """
         team = cls.create(
             homes=homes,
@@ -88,6 +91,7 @@ class SimTeam:
             host=host,
             start_utc_s=start_utc_s,
             mission_timeout_s=mission_timeout_s,
+            legacy_mission_requests=legacy_mission_requests,
             tcp_base=tcp_base,
         )
         await team.server.open()
@@ -116,6 +120,7 @@ class SimTeam:
         host: str = "127.0.0.1",
         start_utc_s: float = DEFAULT_EPOCH_UTC_S,
         mission_timeout_s: float = 1.5,
+        legacy_mission_requests: bool = False,
         tcp_base: int = DEFAULT_TCP_BASE,
     ) -> SimTeam:
         """Build the team without opening sockets (``start`` is the usual entry)."""
@@ -147,6 +152,7 @@ class SimTeam:
                     clock=clock,
                     link=link,
                     mission_timeout_s=mission_timeout_s,
+                    legacy_mission_requests=legacy_mission_requests,
                 )
             )
         ports = [0 if tcp_base == 0 else tcp_base + PORT_STRIDE * i for i in range(len(homes))]

@@ -11,7 +11,9 @@ large speed-up it re-requests far too eagerly.)
 
 Behaviour follows ArduPilot's ``MissionItemProtocol``:
 
-- Upload: MISSION_COUNT -> MISSION_REQUEST_INT(seq) ... -> MISSION_ACK. A missing item is
+- Upload: MISSION_COUNT -> MISSION_REQUEST_INT(seq) ... -> MISSION_ACK (with
+  ``legacy_requests=True`` the requests are MISSION_REQUEST, as older ArduPilot sends them;
+  either way MISSION_ITEM_INT and MISSION_ITEM are accepted). A missing item is
   re-requested after ``timeout_s``; after ``max_retries`` re-requests without progress the
   upload is cancelled (MISSION_ACK MAV_MISSION_OPERATION_CANCELLED). Legacy MISSION_ITEM is
   accepted in place of MISSION_ITEM_INT. Duplicate or out-of-order items are ignored. An
@@ -255,8 +257,10 @@ class MissionServer:
         timeout_s: float = 1.5,
         max_retries: int = 10,
         capacity: dict[int, int] | None = None,
+        legacy_requests: bool = False,
     ) -> None:
         self.system_id = system_id
+        self.legacy_requests = legacy_requests
         self.component_id = component_id
         self.timeout_s = timeout_s
         self.max_retries = max_retries
@@ -516,13 +520,13 @@ class MissionServer:
         r.events.append(MissionStored(mission_type, self.items(mission_type)))
 
     def _request(self, r: Reaction, up: _Upload) -> None:
+        make = (
+            mavlink2.MAVLink_mission_request_message
+            if self.legacy_requests
+            else mavlink2.MAVLink_mission_request_int_message
+        )
         r.sends.append(
-            Send(
-                up.link,
-                mavlink2.MAVLink_mission_request_int_message(
-                    up.gcs_system, up.gcs_component, up.next_seq, up.mission_type
-                ),
-            )
+            Send(up.link, make(up.gcs_system, up.gcs_component, up.next_seq, up.mission_type))
         )
 
     # -- download, clear, ack ------------------------------------------------------------

@@ -171,6 +171,7 @@ class Vehicle:
         link: FaultyLink,
         send: SendBytes | None = None,
         mission_timeout_s: float = 1.5,
+        legacy_mission_requests: bool = False,
     ) -> None:
         self.system_id = system_id
         self.component_id = COMPONENT_ID
@@ -181,7 +182,10 @@ class Vehicle:
         # One sequence counter for everything this vehicle sends (see docs/sitl_stub.md).
         self._packer = Packer(system_id, COMPONENT_ID)
         self.mission = MissionServer(
-            system_id=system_id, component_id=COMPONENT_ID, timeout_s=mission_timeout_s
+            system_id=system_id,
+            component_id=COMPONENT_ID,
+            timeout_s=mission_timeout_s,
+            legacy_requests=legacy_mission_requests,
         )
         self._home_src: tuple[float, float, float] | None = None
         self._sync_home()

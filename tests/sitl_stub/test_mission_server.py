@@ -341,3 +341,32 @@ def test_gcs_cancel_ends_upload(server: MissionServer) -> None:
     server.handle(ack, LINK, 0.1)
     assert server.step is Step.IDLE
     assert server.tick(10.0).sends == []
+
+
+def test_legacy_requests_option_asks_with_mission_request_and_takes_item_int() -> None:
+    server = MissionServer(system_id=1, legacy_requests=True, timeout_s=1.5)
+    r = server.handle(count(2), LINK, 0.0)
+    assert types(r) == ["MISSION_REQUEST"] and r.sends[0].msg.seq == 0
+    r = server.handle(item_int(0), LINK, 0.1)
+    assert types(r) == ["MISSION_REQUEST"] and r.sends[0].msg.seq == 1
+    assert types(server.tick(1.7)) == ["MISSION_REQUEST"]  # re-requests are legacy too
+    r = server.handle(item_int(1, lat=-35.5), LINK, 1.8)
+    assert types(r) == ["MISSION_ACK"] and r.sends[0].msg.type == mavlink2.MAV_MISSION_ACCEPTED
+    assert server.items()[1].x == -355000000
+
+
+def test_legacy_requests_option_reaches_every_vehicle_of_a_team() -> None:
+    from sitl_stub.api import SimTeam
+
+    homes = [(-35.36, 149.16, 584.0), (-35.37, 149.16, 584.0)]
+    team = SimTeam.create(homes=homes, tcp_base=0, legacy_mission_requests=True)
+    assert [v.mission.legacy_requests for v in team.vehicles] == [True, True]
+    assert not SimTeam.create(homes=homes, tcp_base=0).vehicles[0].mission.legacy_requests
+
+
+def test_cli_has_the_legacy_mission_requests_flag() -> None:
+    from sitl_stub.__main__ import parse_args
+
+    home = ["--home", "-35.36,149.16,584"]
+    assert parse_args([*home, "--legacy-mission-requests"]).legacy_mission_requests is True
+    assert parse_args(home).legacy_mission_requests is False

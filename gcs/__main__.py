@@ -1,0 +1,251 @@
+"""Operator command line: missions, commands and live status over MAVLink.
+
+    python -m gcs mission upload CONN FILE [--type mission|fence|rally] [--verify]
+    python -m gcs mission download CONN --out FILE [--type ...]
+    python -m gcs mission clear CONN [--type ...]
+    python -m gcs status CONN [CONN ...] [--period S] [--count N]
+    python -m gcs command CONN arm|disarm|start|mode NAME|speed M_S
+
+Common options: ``--vehicle SYSID`` (default: the first vehicle heard), ``--wait S`` (how long
+to wait for it), ``--timeout S`` and ``--retries N`` per protocol exchange, ``--signing-key HEX``
+or ``--signing-passphrase TEXT``. ``.plan`` files are QGroundControl JSON, ``.waypoints`` /
+``.wpl`` / ``.txt`` are WPL 110. Exit 0 on success, 1 when the vehicle or link fails the
+operation (timeout, denied, rejected item: the message says which and why), 2 for bad input.
+"""
+
+from __future__ import annotations
+
+import argparse
+import asyncio
+import contextlib
+import signal
+import sys
+import time
+from collections.abc import Sequence
+from dataclasses import replace
+
+from gcs.errors import GcsError
+from gcs.link import Link
+from gcs.signing import SigningConfig, key_from_passphrase
+from gcs.status import status_line
+from gcs.vehicle import Vehicle
+from planner.errors import PlannerError
+from planner.missionfile import read_mission_file, write_mission_file
+
+MISSION_TYPES = {"mission": 0, "fence": 1, "rally": 2}
+
+
+class UsageError(Exception):
+    """Bad input from the command line (exit 2)."""
+
+
+def _signing(args: argparse.Namespace) -> SigningConfig | None:
+    if args.signing_key and args.signing_passphrase:
+        raise UsageError("give --signing-key or --signing-passphrase, not both")
+    if args.signing_passphrase:
+        return SigningConfig(secret_key=key_from_passphrase(args.signing_passphrase))
+    if args.signing_key:
+        try:
+            key = bytes.fromhex(args.signing_key)
+        except ValueError:
+            raise UsageError("--signing-key: not a hex string") from None
+        try:
+            return SigningConfig(secret_key=key)
+        except ValueError as err:
+            raise UsageError(f"--signing-key: {err}") from None
+    return None
+
+
+def _open(args: argparse.Namespace, conn: str) -> contextlib.AbstractAsyncContextManager[Link]:
+    signing = _signing(args)
+    try:
+        Link(conn, system_id=args.system_id, signing=signing)  # validate before connecting
+    except ValueError as err:
+        raise UsageError(str(err)) from None
+    return Link.open(conn, system_id=args.system_id, signing=signing)
+
+
+async def _vehicle(link: Link, args: argparse.Namespace) -> Vehicle:
+    peer = await link.wait_vehicle(args.vehicle, timeout_s=args.wait)
+    return Vehicle(link, peer.system_id, peer.component_id)
+
+
+def _transfer_options(args: argparse.Namespace) -> dict[str, float | int]:
+    return {"timeout_s": args.timeout, "retries": args.retries}
+
+
+async def mission_upload(args: argparse.Namespace) -> str:
+    mission_type = MISSION_TYPES[args.type]
+    items = [replace(it, mission_type=mission_type) for it in read_mission_file(args.file)]
+    async with _open(args, args.conn) as link:
+        vehicle = await _vehicle(link, args)
+        t0 = time.monotonic()
+        await vehicle.upload_mission(
+            items, mission_type=mission_type, verify=args.verify, **_transfer_options(args)
+        )
+        checked = ", verified by download" if args.verify else ""
+        return (
+            f"uploaded {len(items)} {args.type} items to vehicle {vehicle.system_id} "
+            f"in {time.monotonic() - t0:.2f} s{checked}"
+        )
+
+
+async def mission_download(args: argparse.Namespace) -> str:
+    mission_type = MISSION_TYPES[args.type]
+    async with _open(args, args.conn) as link:
+        vehicle = await _vehicle(link, args)
+        items = await vehicle.download_mission(mission_type=mission_type, **_transfer_options(args))
+    write_mission_file(args.out, items)
+    return (
+        f"downloaded {len(items)} {args.type} items from vehicle {vehicle.system_id} to {args.out}"
+    )
+
+
+async def mission_clear(args: argparse.Namespace) -> str:
+    async with _open(args, args.conn) as link:
+        vehicle = await _vehicle(link, args)
+        await vehicle.clear_mission(
+            mission_type=MISSION_TYPES[args.type], **_transfer_options(args)
+        )
+    return f"cleared the {args.type} items of vehicle {vehicle.system_id}"
+
+
+async def command(args: argparse.Namespace) -> str:
+    action, rest = args.action, args.value
+    needs = {"mode": "a mode name", "speed": "a speed in m/s"}
+    if action in needs and rest is None:
+        raise UsageError(f"command {action} needs {needs[action]}")
+    if action not in needs and rest is not None:
+        raise UsageError(f"command {action} takes no value (got {rest!r})")
+    speed_m_s = 0.0
+    if action == "speed":
+        try:
+            speed_m_s = float(rest)
+        except ValueError:
+            raise UsageError(f"command speed: {rest!r} is not a number") from None
+    async with _open(args, args.conn) as link:
+        v = await _vehicle(link, args)
+        if action == "arm":
+            await v.arm(force=args.force)
+        elif action == "disarm":
+            await v.disarm(force=args.force)
+        elif action == "start":
+            await v.start_mission()
+        elif action == "mode":
+            await v.set_mode(rest)
+        else:
+            await v.change_speed(speed_m_s)
+    what = action if rest is None else f"{action} {rest}"
+    return f"vehicle {v.system_id}: {what} accepted"
+
+
+async def status(args: argparse.Namespace) -> str:
+    """One line of live telemetry per vehicle, every ``--period`` s, until interrupted."""
+    vehicles: dict[tuple[int, int], Vehicle] = {}
+    stop = asyncio.Event()
+    loop = asyncio.get_running_loop()
+    with contextlib.suppress(NotImplementedError):
+        loop.add_signal_handler(signal.SIGINT, stop.set)
+        loop.add_signal_handler(signal.SIGTERM, stop.set)
+    async with contextlib.AsyncExitStack() as stack:
+        links = [await stack.enter_async_context(_open(args, conn)) for conn in args.conn]
+        deadline = time.monotonic() + args.wait
+        printed = 0
+        while not stop.is_set():
+            for i, link in enumerate(links):
+                for sysid, peer in link.vehicles.items():
+                    if args.vehicle is None or sysid == args.vehicle:
+                        key = (i, sysid)
+                        if key not in vehicles:
+                            vehicles[key] = Vehicle(link, sysid, peer.component_id)
+            if not vehicles and time.monotonic() > deadline:
+                who = "no vehicle" if args.vehicle is None else f"no vehicle {args.vehicle}"
+                raise GcsError(f"{who} heard on {', '.join(args.conn)} within {args.wait:g} s")
+            # Wait first: a vehicle just discovered has had no time to report anything.
+            with contextlib.suppress(TimeoutError):
+                async with asyncio.timeout(args.period):
+                    await stop.wait()
+            if not vehicles:
+                continue
+            now = time.monotonic()
+            for (i, _), v in sorted(vehicles.items()):
+                counters, name = links[i].counters, str(links[i].endpoint)
+                print(status_line(v.state, counters, now, link_name=name))
+            sys.stdout.flush()
+            printed += 1
+            if args.count is not None and printed >= args.count:
+                break
+    return ""
+
+
+def _common(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--vehicle", type=int, help="system id (default: the first vehicle heard)")
+    p.add_argument("--wait", type=float, default=10.0, help="seconds to wait for the vehicle")
+    p.add_argument("--timeout", type=float, default=1.5, help="seconds per protocol exchange")
+    p.add_argument("--retries", type=int, default=5, help="resends per exchange")
+    p.add_argument("--system-id", type=int, default=255, help="our MAVLink system id")
+    p.add_argument("--signing-key", help="MAVLink 2 signing key, 64 hex digits")
+    p.add_argument("--signing-passphrase", help="signing key as MAVProxy derives it")
+
+
+def parser() -> argparse.ArgumentParser:
+    ap = argparse.ArgumentParser(prog="python -m gcs", description=__doc__.split("\n\n")[0])
+    sub = ap.add_subparsers(dest="cmd", required=True)
+
+    mission = sub.add_parser("mission", help="upload, download or clear a mission")
+    msub = mission.add_subparsers(dest="op", required=True)
+    up = msub.add_parser("upload", help="upload a .plan or .waypoints file")
+    up.add_argument("conn")
+    up.add_argument("file")
+    up.add_argument("--verify", action="store_true", help="download again and compare")
+    down = msub.add_parser("download", help="download to a .plan or .waypoints file")
+    down.add_argument("conn")
+    down.add_argument("--out", required=True)
+    clear = msub.add_parser("clear", help="delete the vehicle's items")
+    clear.add_argument("conn")
+    for p, fn in ((up, mission_upload), (down, mission_download), (clear, mission_clear)):
+        p.add_argument("--type", choices=sorted(MISSION_TYPES), default="mission")
+        _common(p)
+        p.set_defaults(fn=fn)
+
+    st = sub.add_parser("status", help="one line of live telemetry per vehicle")
+    st.add_argument("conn", nargs="+")
+    st.add_argument("--period", type=float, default=1.0, help="seconds between updates")
+    st.add_argument("--count", type=int, help="stop after this many updates")
+    _common(st)
+    st.set_defaults(fn=status)
+
+    cmd = sub.add_parser("command", help="arm, disarm, start, mode NAME, speed M_S")
+    cmd.add_argument("conn")
+    cmd.add_argument("action", choices=["arm", "disarm", "start", "mode", "speed"])
+    cmd.add_argument("value", nargs="?")
+    cmd.add_argument("--force", action="store_true", help="arm/disarm without checks")
+    _common(cmd)
+    cmd.set_defaults(fn=command)
+    return ap
+
+
+async def _run(args: argparse.Namespace) -> str:
+    result: str = await args.fn(args)
+    return result
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    args = parser().parse_args(argv)
+    try:
+        out = asyncio.run(_run(args))
+    except (UsageError, PlannerError, ValueError) as err:
+        print(f"gcs: error: {err}", file=sys.stderr)
+        return 2
+    except GcsError as err:
+        print(f"gcs: error: {err}", file=sys.stderr)
+        return 1
+    except KeyboardInterrupt:
+        return 130
+    if out:
+        print(f"gcs: {out}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
