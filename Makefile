@@ -39,6 +39,8 @@ demo: $(STAMP)
 bench: $(STAMP)
 	$(PY) bench/bench_planner.py
 	$(PY) bench/bench_sitl_stub.py
+	$(PY) bench/bench_gcs_mission.py
+	$(PY) bench/bench_gcs_ingest.py
 
 clean:
 	rm -rf $(VENV) $(OUT) .mypy_cache .ruff_cache .pytest_cache .hypothesis

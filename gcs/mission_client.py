@@ -18,6 +18,7 @@ expect a download to give the vehicle's home there.
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import weakref
 from collections.abc import Callable, Sequence
 from dataclasses import replace
@@ -28,7 +29,7 @@ from gcs.mission_protocol import Clear, Download, SetCurrent, Transfer, Upload
 from planner.mission import MissionItem, command_name, items_equal
 
 if TYPE_CHECKING:
-    from gcs.link import Link, Subscription
+    from gcs.link import Link
 
 __all__ = [
     "DEFAULT_RETRIES",
@@ -64,54 +65,85 @@ def _watchdog_s(transfer: Transfer) -> float:
     return 4.0 * (transfer.retries + 1) * transfer.timeout_s + 2.0 * transfer.timeout_s
 
 
+class _Driver:
+    """Feeds one transfer from the link's reader callback and keeps its timers."""
+
+    def __init__(self, link: Link, transfer: Transfer, progress: Progress | None) -> None:
+        self.link = link
+        self.transfer = transfer
+        self.progress = progress
+        self.loop = asyncio.get_running_loop()
+        self.finished = asyncio.Event()
+        self.state = (transfer.step, transfer.progress)
+        self.moved_s = self.loop.time()
+
+    def _send(self, outgoing: list[Any], now: float) -> None:
+        for out in outgoing:
+            self.link.send(out)
+        new_state = (self.transfer.step, self.transfer.progress)
+        if new_state != self.state:
+            if self.progress is not None and new_state[1] != self.state[1]:
+                self.progress(*new_state[1])
+            self.state, self.moved_s = new_state, now
+        if self.transfer.done:
+            self.finished.set()
+
+    def on_message(self, msg: Any, _rx_s: float) -> None:
+        t = self.transfer
+        if (
+            t.done
+            or msg.get_srcSystem() != t.target_system
+            or msg.get_type() not in t.message_types
+        ):
+            return
+        now = self.loop.time()
+        self._send(t.handle(msg, now), now)
+
+    async def run(self) -> None:
+        t, loop = self.transfer, self.loop
+        self._send(t.start(loop.time()), loop.time())
+        watchdog_s = _watchdog_s(t)
+        while not t.done:
+            now = loop.time()
+            deadline = t.next_deadline()
+            wake_s = self.moved_s + watchdog_s if deadline is None else deadline
+            wake_s = min(wake_s, self.moved_s + watchdog_s)
+            if wake_s > now:
+                # Replies are handled in on_message; wake only for a timer or the end.
+                with contextlib.suppress(TimeoutError):
+                    async with asyncio.timeout(wake_s - now):
+                        await self.finished.wait()
+                continue
+            self._send(t.tick(now), now)
+            await asyncio.sleep(0)  # never spin: a tick that left its deadline due yields
+            if not t.done and now - self.moved_s >= watchdog_s:
+                raise MissionTimeout(
+                    f"{t.describe()} timed out: no progress for {watchdog_s:.3g} s",
+                    vehicle=t.target_system,
+                    mission_type=t.mission_type,
+                    operation=t.operation,
+                )
+
+
 async def run_transfer(link: Link, transfer: Transfer, *, progress: Progress | None = None) -> None:
-    """Run ``transfer`` over ``link`` to its end; raises its typed error if it failed."""
-    loop = asyncio.get_running_loop()
+    """Run ``transfer`` over ``link`` to its end; raises its typed error if it failed.
+
+    Replies are handled in the link's reader callback, as they are parsed, and the answers go
+    out at once: an exchange costs no task switch. The task here only keeps the timers.
+    """
     async with _lock(link, transfer.target_system):
-        with link.subscribe(types=transfer.message_types, system_id=transfer.target_system) as sub:
-            try:
-                await _drive(link, transfer, sub, progress)
-            finally:
-                # Cancelled from outside, or the watchdog fired: tell the vehicle.
-                for out in transfer.cancel(loop.time()):
-                    link.send(out)
+        driver = _Driver(link, transfer, progress)
+        remove = link.add_listener(driver.on_message)
+        try:
+            await driver.run()
+        finally:
+            remove()
+            # Cancelled from outside, or the watchdog fired: tell the vehicle.
+            for out in transfer.cancel(driver.loop.time()):
+                link.send(out)
     err = transfer.error()
     if err is not None:
         raise err
-
-
-async def _drive(
-    link: Link, transfer: Transfer, sub: Subscription, progress: Progress | None
-) -> None:
-    loop = asyncio.get_running_loop()
-    for out in transfer.start(loop.time()):
-        link.send(out)
-    watchdog_s = _watchdog_s(transfer)
-    moved_s = loop.time()
-    state = (transfer.step, transfer.progress)
-    while not transfer.done:
-        now = loop.time()
-        deadline = transfer.next_deadline()
-        wait_s = watchdog_s if deadline is None else max(0.0, deadline - now)
-        wait_s = min(wait_s, max(0.0, moved_s + watchdog_s - now))
-        msg = await sub.get(timeout_s=wait_s)
-        now = loop.time()
-        outgoing = transfer.handle(msg, now) if msg is not None else []
-        outgoing += transfer.tick(now)
-        for out in outgoing:
-            link.send(out)
-        new_state = (transfer.step, transfer.progress)
-        if new_state != state:
-            if progress is not None and new_state[1] != state[1]:
-                progress(*new_state[1])
-            state, moved_s = new_state, now
-        elif not transfer.done and now - moved_s >= watchdog_s:
-            raise MissionTimeout(
-                f"{transfer.describe()} timed out: no progress for {watchdog_s:.3g} s",
-                vehicle=transfer.target_system,
-                mission_type=transfer.mission_type,
-                operation=transfer.operation,
-            )
 
 
 def _own_system(link: Link) -> int | None:

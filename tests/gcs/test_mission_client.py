@@ -115,6 +115,7 @@ class MemoryLink:
     def __init__(self, server: MissionServer) -> None:
         self.server = server
         self.subs: list[_Sub] = []
+        self.listeners: list[Any] = []
         self.sent: list[Any] = []
         self.alter_download: Any = None
         self.deaf = False  # drop everything the GCS sends
@@ -132,6 +133,21 @@ class MemoryLink:
         finally:
             self.subs.remove(sub)
 
+    def add_listener(self, callback: Any) -> Any:
+        self.listeners.append(callback)
+        return lambda: self.listeners.remove(callback)
+
+    def _deliver(self, reply: Any) -> None:
+        # Like a socket: replies arrive on a later pass of the event loop, never inside send().
+        now = asyncio.get_running_loop().time()
+        for listener in list(self.listeners):
+            listener(reply, now)
+        for sub in self.subs:
+            if (sub.types is None or reply.get_type() in sub.types) and (
+                sub.system_id in (None, reply.get_srcSystem())
+            ):
+                sub.queue.put_nowait(reply)
+
     def send(self, msg: Any) -> bool:
         self.sent.append(msg)
         if self.deaf:
@@ -143,11 +159,7 @@ class MemoryLink:
             if out.get_type() == "MISSION_ITEM_INT" and self.alter_download is not None:
                 out = self.alter_download(out)
             (reply,) = mavlink2.MAVLink(None).parse_buffer(out.pack(self._vehicle))
-            for sub in self.subs:
-                if (sub.types is None or reply.get_type() in sub.types) and (
-                    sub.system_id in (None, reply.get_srcSystem())
-                ):
-                    sub.queue.put_nowait(reply)
+            asyncio.get_running_loop().call_soon(self._deliver, reply)
         return True
 
 
