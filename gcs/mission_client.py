@@ -146,12 +146,18 @@ async def run_transfer(link: Link, transfer: Transfer, *, progress: Progress | N
         raise err
 
 
-def _own_system(link: Link) -> int | None:
-    return getattr(link, "system_id", None)
-
-
-def _own_component(link: Link) -> int | None:
-    return getattr(link, "component_id", None)
+def _options(
+    link: Link, target_system: int, target_component: int, timeout_s: float, retries: int
+) -> dict[str, Any]:
+    """The keyword arguments every transfer takes: its target, timers and our own ids."""
+    return {
+        "target_system": target_system,
+        "target_component": target_component,
+        "timeout_s": timeout_s,
+        "retries": retries,
+        "own_system": getattr(link, "system_id", None),
+        "own_component": getattr(link, "component_id", None),
+    }
 
 
 async def upload_mission(
@@ -182,16 +188,8 @@ async def upload_mission(
         A subclass per MAV_MISSION_RESULT the vehicle answered (e.g. MissionInvalidItem naming
         the item), MissionTimeout, MissionProtocolError or MissionMismatch.
     """
-    upload = Upload(
-        items,
-        target_system=target_system,
-        target_component=target_component,
-        mission_type=mission_type,
-        timeout_s=timeout_s,
-        retries=retries,
-        own_system=_own_system(link),
-        own_component=_own_component(link),
-    )
+    opts = _options(link, target_system, target_component, timeout_s, retries)
+    upload = Upload(items, mission_type=mission_type, **opts)
     await run_transfer(link, upload, progress=progress)
     if not verify:
         return
@@ -262,15 +260,8 @@ async def download_mission(
     progress: Progress | None = None,
 ) -> list[MissionItem]:
     """The vehicle's items of ``mission_type``, as received (type 0: item 0 is its home)."""
-    download = Download(
-        target_system=target_system,
-        target_component=target_component,
-        mission_type=mission_type,
-        timeout_s=timeout_s,
-        retries=retries,
-        own_system=_own_system(link),
-        own_component=_own_component(link),
-    )
+    opts = _options(link, target_system, target_component, timeout_s, retries)
+    download = Download(mission_type=mission_type, **opts)
     await run_transfer(link, download, progress=progress)
     return list(download.items)
 
@@ -285,15 +276,8 @@ async def clear_mission(
     retries: int = DEFAULT_RETRIES,
 ) -> None:
     """Delete the vehicle's items of ``mission_type`` (255: every type) with CLEAR_ALL."""
-    clear = Clear(
-        target_system=target_system,
-        target_component=target_component,
-        mission_type=mission_type,
-        timeout_s=timeout_s,
-        retries=retries,
-        own_system=_own_system(link),
-        own_component=_own_component(link),
-    )
+    opts = _options(link, target_system, target_component, timeout_s, retries)
+    clear = Clear(mission_type=mission_type, **opts)
     await run_transfer(link, clear)
 
 
@@ -308,13 +292,6 @@ async def set_current_item(
 ) -> None:
     """Make ``seq`` the current mission item (MISSION_SET_CURRENT, confirmed by
     MISSION_CURRENT); a vehicle that refuses times out naming the item it still reports."""
-    set_current = SetCurrent(
-        seq,
-        target_system=target_system,
-        target_component=target_component,
-        timeout_s=timeout_s,
-        retries=retries,
-        own_system=_own_system(link),
-        own_component=_own_component(link),
-    )
+    opts = _options(link, target_system, target_component, timeout_s, retries)
+    set_current = SetCurrent(seq, **opts)
     await run_transfer(link, set_current)

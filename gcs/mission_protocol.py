@@ -221,6 +221,7 @@ class Transfer:
         self.mav_result: int | None = None
         """The MAV_MISSION_RESULT of the MISSION_ACK that ended the transfer, if any."""
         self.retries_done = 0
+        self._last_nack: int | None = None
         self.counters: dict[str, int] = {"handled": 0, "ignored": 0, "resent": 0}
         self._deadline_s: float | None = None
         self._error: MissionError | None = None
@@ -322,7 +323,9 @@ class Transfer:
 
     def _note(self) -> str:
         """What the vehicle last said, if it helps explain a timeout (`` (...)``)."""
-        return ""
+        if self._last_nack is None:
+            return ""
+        return f" (the vehicle last answered {result_name(self._last_nack)})"
 
     def _timeout_seq(self) -> int | None:
         return None
@@ -444,7 +447,6 @@ class Upload(Transfer):
         """Highest seq the vehicle asked for: it holds every item below."""
         self.counters.update(legacy_requests=0, bad_requests=0, stale_acks=0, tolerated_nacks=0)
         self._last_progress_s = 0.0
-        self._last_nack: int | None = None
 
     @property
     def stall_limit_s(self) -> float:
@@ -547,11 +549,6 @@ class Upload(Transfer):
             what = f"the final MISSION_ACK (item {n - 1} sent)"
         return what
 
-    def _note(self) -> str:
-        if self._last_nack is None:
-            return ""
-        return f" (the vehicle last answered {result_name(self._last_nack)})"
-
     def _timeout_seq(self) -> int | None:
         n = len(self.items)
         if self.step is Step.SEND_COUNT:
@@ -570,7 +567,6 @@ class Download(Transfer):
         self.count: int | None = None
         self.items: list[MissionItem] = []
         self.counters.update(legacy_items=0, stale_acks=0, tolerated_nacks=0)
-        self._last_nack: int | None = None
 
     @property
     def progress(self) -> tuple[int, int]:
@@ -655,11 +651,6 @@ class Download(Transfer):
         else:
             what = f"item {len(self.items)} of {self.count}"
         return what
-
-    def _note(self) -> str:
-        if self._last_nack is None:
-            return ""
-        return f" (the vehicle last answered {result_name(self._last_nack)})"
 
     def _timeout_seq(self) -> int | None:
         return len(self.items) if self.step is Step.REQUEST_ITEMS else None
