@@ -3,7 +3,7 @@
     python -m gcs mission upload CONN FILE [--type mission|fence|rally] [--verify]
     python -m gcs mission download CONN --out FILE [--type ...]
     python -m gcs mission clear CONN [--type ...]
-    python -m gcs status CONN [CONN ...] [--period S] [--count N]
+    python -m gcs status CONN [CONN ...] [--period S] [--count N] [--stream-rate HZ]
     python -m gcs command CONN arm|disarm|start|mode NAME|speed M_S
 
 Common options: ``--vehicle SYSID`` (default: the first vehicle heard), ``--wait S`` (how long
@@ -62,7 +62,9 @@ def _open(args: argparse.Namespace, conn: str) -> contextlib.AbstractAsyncContex
         Link(conn, system_id=args.system_id, signing=signing)  # validate before connecting
     except ValueError as err:
         raise UsageError(str(err)) from None
-    return Link.open(conn, system_id=args.system_id, signing=signing)
+    # Like MAVProxy, ask for telemetry: ArduPilot streams nothing on a port nobody asked.
+    rate_hz = getattr(args, "stream_rate", None)
+    return Link.open(conn, system_id=args.system_id, signing=signing, stream_rate_hz=rate_hz)
 
 
 async def _vehicle(link: Link, args: argparse.Namespace) -> Vehicle:
@@ -212,6 +214,7 @@ def parser() -> argparse.ArgumentParser:
     st.add_argument("conn", nargs="+")
     st.add_argument("--period", type=float, default=1.0, help="seconds between updates")
     st.add_argument("--count", type=int, help="stop after this many updates")
+    st.add_argument("--stream-rate", type=float, default=4.0, help="telemetry rate to request (Hz)")
     _common(st)
     st.set_defaults(fn=status)
 
