@@ -56,15 +56,16 @@ def _signing(args: argparse.Namespace) -> SigningConfig | None:
     return None
 
 
-def _open(args: argparse.Namespace, conn: str) -> contextlib.AbstractAsyncContextManager[Link]:
-    signing = _signing(args)
-    try:
-        Link(conn, system_id=args.system_id, signing=signing)  # validate before connecting
-    except ValueError as err:
-        raise UsageError(str(err)) from None
+def _open(args: argparse.Namespace, conn: str) -> Link:
+    """The link for ``conn`` (start it with ``async with``); bad options are a UsageError."""
     # Like MAVProxy, ask for telemetry: ArduPilot streams nothing on a port nobody asked.
     rate_hz = getattr(args, "stream_rate", None)
-    return Link.open(conn, system_id=args.system_id, signing=signing, stream_rate_hz=rate_hz)
+    try:
+        return Link.open(
+            conn, system_id=args.system_id, signing=_signing(args), stream_rate_hz=rate_hz
+        )
+    except ValueError as err:
+        raise UsageError(str(err)) from None
 
 
 async def _vehicle(link: Link, args: argparse.Namespace) -> Vehicle:

@@ -490,6 +490,26 @@ async def command_int(
 # -- helpers -------------------------------------------------------------------------------
 
 
+async def _arm_disarm(
+    link: Link,
+    sysid: int,
+    arm: bool,
+    force: bool,
+    target_component: int,
+    timeout_s: float,
+    retries: int,
+) -> CommandAck:
+    return await command_long(
+        link,
+        sysid,
+        int(mavlink2.MAV_CMD_COMPONENT_ARM_DISARM),
+        (1.0 if arm else 0.0, FORCE_ARM_MAGIC if force else 0.0),
+        target_component=target_component,
+        timeout_s=timeout_s,
+        retries=retries,
+    )
+
+
 async def arm(
     link: Link,
     sysid: int,
@@ -500,15 +520,7 @@ async def arm(
     retries: int = DEFAULT_RETRIES,
 ) -> CommandAck:
     """MAV_CMD_COMPONENT_ARM_DISARM arm (``force`` skips pre-arm checks)."""
-    return await command_long(
-        link,
-        sysid,
-        int(mavlink2.MAV_CMD_COMPONENT_ARM_DISARM),
-        (1.0, FORCE_ARM_MAGIC if force else 0.0),
-        target_component=target_component,
-        timeout_s=timeout_s,
-        retries=retries,
-    )
+    return await _arm_disarm(link, sysid, True, force, target_component, timeout_s, retries)
 
 
 async def disarm(
@@ -521,15 +533,7 @@ async def disarm(
     retries: int = DEFAULT_RETRIES,
 ) -> CommandAck:
     """MAV_CMD_COMPONENT_ARM_DISARM disarm (``force`` disarms in flight: the aircraft falls)."""
-    return await command_long(
-        link,
-        sysid,
-        int(mavlink2.MAV_CMD_COMPONENT_ARM_DISARM),
-        (0.0, FORCE_ARM_MAGIC if force else 0.0),
-        target_component=target_component,
-        timeout_s=timeout_s,
-        retries=retries,
-    )
+    return await _arm_disarm(link, sysid, False, force, target_component, timeout_s, retries)
 
 
 def set_mode_params(mode: str, autopilot: int) -> tuple[float, float, float]:

@@ -27,7 +27,7 @@ import asyncio
 import contextlib
 import logging
 import time
-from collections.abc import AsyncIterator, Callable, Collection, Mapping
+from collections.abc import Callable, Collection, Mapping
 from dataclasses import asdict, dataclass
 from typing import Any
 
@@ -221,15 +221,17 @@ class Link:
     # -- lifecycle -----------------------------------------------------------------------
 
     @classmethod
-    @contextlib.asynccontextmanager
-    async def open(cls, connection: str | Endpoint, **kwargs: Any) -> AsyncIterator[Link]:
-        """Start a link (it connects in the background) and close it on exit."""
-        link = cls(connection, **kwargs)
-        await link.start()
-        try:
-            yield link
-        finally:
-            await link.close()
+    def open(cls, connection: str | Endpoint, **kwargs: Any) -> Link:
+        """A link to use as ``async with``: started on entry (it connects in the background),
+        closed on exit. Bad arguments raise here, before anything is opened."""
+        return cls(connection, **kwargs)
+
+    async def __aenter__(self) -> Link:
+        await self.start()
+        return self
+
+    async def __aexit__(self, *exc: object) -> None:
+        await self.close()
 
     async def start(self) -> None:
         if self._tasks:

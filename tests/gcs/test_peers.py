@@ -28,6 +28,7 @@ from planner.mission import (
 )
 from sitl_stub.api import Home, SimTeam
 from tests.gcs.conftest import HOME, free_udp_port
+from tests.sitl_stub.conftest import mavproxy_wp_list, stop_process
 
 DO_CHANGE_SPEED = mavlink2.MAV_CMD_DO_CHANGE_SPEED
 NAV_LOITER_TURNS = mavlink2.MAV_CMD_NAV_LOITER_TURNS
@@ -111,14 +112,7 @@ async def mavproxy_router(master: str, out: str, workdir: Path) -> AsyncIterator
     try:
         yield
     finally:
-        if proc.returncode is None:
-            proc.terminate()
-        with contextlib.suppress(TimeoutError):
-            async with asyncio.timeout(10):
-                await proc.wait()
-        if proc.returncode is None:
-            proc.kill()
-            await proc.wait()
+        await stop_process(proc)
 
 
 async def test_udpin_link_through_mavproxy_discovers_and_commands_the_vehicle(
@@ -259,42 +253,6 @@ async def wait_for_sample(
                 if abs(sample.lat_deg - lat_deg) <= 1e-5 and abs(sample.lon_deg - lon_deg) <= 1e-5:
                     return sample
             await asyncio.sleep(0.02)
-
-
-async def mavproxy_wp_list(master: str, workdir: Path, count: int) -> str:
-    """MAVProxy's output for "wp list" typed once the vehicle is online, up to "Saved N"."""
-    mavproxy = Path(sys.executable).with_name("mavproxy.py")
-    proc = await asyncio.create_subprocess_exec(
-        sys.executable, str(mavproxy), "--master", master, "--state-basedir", str(workdir),
-        stdin=asyncio.subprocess.PIPE,
-        stdout=asyncio.subprocess.PIPE,
-        stderr=asyncio.subprocess.STDOUT,
-        cwd=workdir,
-    )  # fmt: skip
-    out: list[str] = []
-    try:
-        assert proc.stdout is not None and proc.stdin is not None
-        async with asyncio.timeout(30):
-            while line := (await proc.stdout.readline()).decode(errors="replace"):
-                out.append(line)
-                if "online system" in line:
-                    # --cmd runs before the vehicle is seen; type the command instead.
-                    proc.stdin.write(b"wp list\n")
-                    await proc.stdin.drain()
-                if f"Saved {count} waypoints" in line:
-                    break
-    finally:
-        if proc.stdin is not None:
-            proc.stdin.close()
-        if proc.returncode is None:
-            proc.terminate()
-        with contextlib.suppress(TimeoutError):
-            async with asyncio.timeout(10):
-                await proc.wait()
-        if proc.returncode is None:
-            proc.kill()
-            await proc.wait()
-    return "".join(out)
 
 
 # MAVProxy's "wp list" line per item: command frame x y z p1..p4 current autocontinue.

@@ -3,8 +3,11 @@
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import socket
+import sys
 from collections.abc import Callable
+from pathlib import Path
 from typing import Any
 
 from pymavlink.dialects.v20 import ardupilotmega as mavlink2
@@ -177,3 +180,44 @@ def wp(
         sysid, 1, seq, frame, command, 0, 1, p1, p2, p3, 0.0,
         round(lat * 1e7), round(lon * 1e7), alt, 0,
     )  # fmt: skip
+
+
+async def stop_process(proc: asyncio.subprocess.Process) -> None:
+    """Terminate a peer process, kill it if it has not gone after 10 s, and reap it."""
+    if proc.returncode is None:
+        proc.terminate()
+    with contextlib.suppress(TimeoutError):
+        async with asyncio.timeout(10):
+            await proc.wait()
+    if proc.returncode is None:
+        proc.kill()
+        await proc.wait()
+
+
+async def mavproxy_wp_list(master: str, workdir: Path, count: int, timeout_s: float = 30.0) -> str:
+    """MAVProxy's output for "wp list" typed once the vehicle is online, up to "Saved N"."""
+    mavproxy = Path(sys.executable).with_name("mavproxy.py")
+    proc = await asyncio.create_subprocess_exec(
+        sys.executable, str(mavproxy), "--master", master, "--state-basedir", str(workdir),
+        stdin=asyncio.subprocess.PIPE,
+        stdout=asyncio.subprocess.PIPE,
+        stderr=asyncio.subprocess.STDOUT,
+        cwd=workdir,
+    )  # fmt: skip
+    out: list[str] = []
+    try:
+        assert proc.stdout is not None and proc.stdin is not None
+        async with asyncio.timeout(timeout_s):
+            while line := (await proc.stdout.readline()).decode(errors="replace"):
+                out.append(line)
+                if "online system" in line:
+                    # --cmd runs before the vehicle is seen; type the command instead.
+                    proc.stdin.write(b"wp list\n")
+                    await proc.stdin.drain()
+                if f"Saved {count} waypoints" in line:
+                    break
+    finally:
+        if proc.stdin is not None:
+            proc.stdin.close()
+        await stop_process(proc)
+    return "".join(out)

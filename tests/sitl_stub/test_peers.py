@@ -4,8 +4,6 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
-import re
-import sys
 from pathlib import Path
 
 import pytest
@@ -13,7 +11,7 @@ from pymavlink.dialects.v20 import ardupilotmega as mavlink2
 
 from sitl_stub.api import Home, SimTeam
 from sitl_stub.model import displace_deg
-from tests.sitl_stub.conftest import Client, wp
+from tests.sitl_stub.conftest import Client, mavproxy_wp_list, wp
 
 HOME = Home(-35.363261, 149.165230, 584.0, 0.0)
 
@@ -94,43 +92,9 @@ async def test_mavproxy_lists_waypoints_uploaded_by_another_client(tmp_path: Pat
             assert await c.upload(items) == mavlink2.MAV_MISSION_ACCEPTED
         finally:
             await c.close()
-        mavproxy = Path(sys.executable).with_name("mavproxy.py")
-        proc = await asyncio.create_subprocess_exec(
-            sys.executable, str(mavproxy),
-            "--master", f"tcp:127.0.0.1:{team.ports[0]}",
-            "--state-basedir", str(tmp_path),
-            stdin=asyncio.subprocess.PIPE,
-            stdout=asyncio.subprocess.PIPE,
-            stderr=asyncio.subprocess.STDOUT,
-            cwd=tmp_path,
-        )  # fmt: skip
-        out: list[str] = []
-        try:
-            assert proc.stdout is not None
-            async with asyncio.timeout(40):
-                while True:
-                    line = (await proc.stdout.readline()).decode(errors="replace")
-                    if not line:
-                        break
-                    out.append(line)
-                    if "online system" in line and proc.stdin is not None:
-                        # --cmd runs before the vehicle is seen; type the command instead.
-                        proc.stdin.write(b"wp list\n")
-                        await proc.stdin.drain()
-                    if re.search(r"Saved 4 waypoints", line):
-                        break
-        finally:
-            if proc.stdin is not None:
-                proc.stdin.close()
-            if proc.returncode is None:
-                proc.terminate()
-            with contextlib.suppress(TimeoutError):
-                async with asyncio.timeout(10):
-                    await proc.wait()
-            if proc.returncode is None:
-                proc.kill()
-                await proc.wait()
-        text = "".join(out)
+        text = await mavproxy_wp_list(
+            f"tcp:127.0.0.1:{team.ports[0]}", tmp_path, len(items), timeout_s=40.0
+        )
         assert "Saved 4 waypoints" in text, text
         saved = (tmp_path / "way.txt").read_text() if (tmp_path / "way.txt").exists() else text
         for it in items[1:]:
