@@ -34,7 +34,9 @@ demo: $(STAMP)
 	$(PY) -m planner schedule scenarios/paper_three_uav.yaml --popup --seed 1 --out $(OUT)/schedule.json --plot $(OUT)/speeds.png
 	$(PY) -m planner export $(OUT)/schedule.json --vehicle UAV3 --format qgc --out $(OUT)/UAV3.plan
 	$(PY) -m planner export $(OUT)/schedule.json --vehicle UAV3 --format wpl --out $(OUT)/UAV3.waypoints
+	$(PY) -m gcs rehearse scenarios/paper_three_uav.yaml --speedup 200 --wind 5,270 --loss 0.1 --seed 1 --json $(OUT)/rehearsal.json --report $(OUT)/rehearsal
 	@echo "demo: plan in $(OUT)/plan.json, plot in $(OUT)/paths.png, schedule in $(OUT)/schedule.json, speeds in $(OUT)/speeds.png"
+	@echo "demo: rehearsal (paper scenario flown against stub vehicles) in $(OUT)/rehearsal.json; report: $(OUT)/rehearsal/index.html"
 
 bench: $(STAMP)
 	$(PY) bench/bench_planner.py

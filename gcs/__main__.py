@@ -5,6 +5,9 @@
     python -m gcs mission clear CONN [--type ...]
     python -m gcs status CONN [CONN ...] [--period S] [--count N] [--stream-rate HZ]
     python -m gcs command CONN arm|disarm|start|mode NAME|speed M_S
+    python -m gcs rehearse SCENARIO [--speedup S] [--wind SPEED_M_S,FROM_DEG] [--loss P]
+        [--seed N] [--connect CONN ...] [--json OUT] [--report DIR] [--arrival-s T]
+        [--blackout VEHICLE,START_S,DURATION_S] [--threats-from FILE]
 
 Common options: ``--vehicle SYSID`` (default: the first vehicle heard), ``--wait S`` (how long
 to wait for it), ``--timeout S`` and ``--retries N`` per protocol exchange, ``--signing-key HEX``
@@ -226,7 +229,104 @@ def parser() -> argparse.ArgumentParser:
     cmd.add_argument("--force", action="store_true", help="arm/disarm without checks")
     _common(cmd)
     cmd.set_defaults(fn=command)
+
+    rh = sub.add_parser("rehearse", help="fly a scenario's mission to its arrival time")
+    rh.add_argument("scenario", help="scenario file (.yaml or .json)")
+    rh.add_argument("--speedup", type=float, default=200.0, help="stub time / wall time")
+    rh.add_argument("--wind", help="SPEED_M_S,FROM_DEG mean wind for the stub")
+    rh.add_argument("--loss", type=float, default=0.0, help="stub packet loss probability")
+    rh.add_argument("--seed", type=int, default=0, help="planner and stub seed")
+    rh.add_argument("--connect", nargs="+", default=[], help="fly these vehicles instead")
+    rh.add_argument("--json", dest="json_out", help="write the flight record here")
+    rh.add_argument("--report", help="write the report (figures, tables) into this directory")
+    rh.add_argument("--arrival-s", type=float, help="required arrival (mission s) to request")
+    rh.add_argument(
+        "--blackout",
+        action="append",
+        default=[],
+        help="VEHICLE,START_S,DURATION_S: that vehicle's link goes dark (mission time)",
+    )
+    rh.add_argument("--threats-from", help="file to watch for pop-up threats (JSON lines)")
+    rh.add_argument("--tolerance", type=float, default=1.0, help="pass mark for arrivals (s)")
+    rh.add_argument("--quiet", action="store_true", help="no progress lines")
+    rh.set_defaults(fn=rehearse_cmd)
     return ap
+
+
+def _rehearsal_options(args: argparse.Namespace) -> object:
+    from pathlib import Path
+
+    from gcs.coordinator import CoordinatorConfig
+    from gcs.rehearse import Blackout, RehearsalOptions
+    from planner.scenario import load_scenario
+
+    path = Path(args.scenario)
+    scenario = load_scenario(path)
+    if not (args.speedup > 0 and args.speedup < 10_000):
+        raise UsageError(f"--speedup must be in (0, 10000), got {args.speedup}")
+    if not 0.0 <= args.loss < 1.0:
+        raise UsageError(f"--loss must be in [0, 1), got {args.loss}")
+    wind = None
+    if args.wind:
+        try:
+            speed, from_deg = (float(x) for x in args.wind.split(","))
+        except ValueError:
+            raise UsageError(f"--wind: expected SPEED_M_S,FROM_DEG, got {args.wind!r}") from None
+        if not 0.0 <= speed < 50.0:
+            raise UsageError(f"--wind: speed {speed:g} m/s is outside [0, 50)")
+        wind = (speed, from_deg % 360.0)
+    ids = [v.id for v in scenario.vehicles]
+    blackouts = []
+    for text in args.blackout:
+        parts = text.split(",")
+        try:
+            vid, start, dur = parts[0], float(parts[1]), float(parts[2])
+        except (IndexError, ValueError):
+            raise UsageError(
+                f"--blackout: expected VEHICLE,START_S,DURATION_S, got {text!r}"
+            ) from None
+        if vid not in ids:
+            raise UsageError(f"--blackout: no vehicle {vid!r} in the scenario ({', '.join(ids)})")
+        if start < 0 or dur <= 0:
+            raise UsageError(f"--blackout {text}: start must be >= 0 and duration > 0")
+        blackouts.append(Blackout(vid, start, dur))
+    if args.connect and (blackouts or args.wind or args.loss):
+        raise UsageError("--blackout, --wind and --loss apply to the stub, not to --connect")
+    return RehearsalOptions(
+        scenario_path=path,
+        scenario=scenario,
+        speedup=args.speedup,
+        wind=wind,
+        loss=args.loss,
+        seed=args.seed,
+        connect=args.connect,
+        json_out=Path(args.json_out) if args.json_out else None,
+        report_dir=Path(args.report) if args.report else None,
+        required_arrival_s=args.arrival_s,
+        blackouts=blackouts,
+        threats_from=Path(args.threats_from) if args.threats_from else None,
+        quiet=args.quiet,
+        config=CoordinatorConfig(seed=args.seed),
+    )
+
+
+async def rehearse_cmd(args: argparse.Namespace) -> str:
+    from gcs.rehearse import RehearsalOptions, passed, rehearse
+    from gcs.report import arrival_table, write_report
+
+    opts = _rehearsal_options(args)
+    assert isinstance(opts, RehearsalOptions)
+    record = await rehearse(opts)
+    print(arrival_table(record), flush=True)
+    if opts.report_dir is not None:
+        written = write_report(record, opts.report_dir, scenario_path=opts.scenario_path)
+        print(f"gcs: report in {opts.report_dir} ({', '.join(p.name for p in written)})")
+    if not passed(record, args.tolerance):
+        raise GcsError(
+            f"rehearsal missed: arrivals outside +/-{args.tolerance:g} s or separation below "
+            f"{record['separation_m']:g} m (see the table)"
+        )
+    return f"rehearsal passed: every arrival within +/-{args.tolerance:g} s"
 
 
 async def _run(args: argparse.Namespace) -> str:

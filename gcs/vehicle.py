@@ -70,10 +70,15 @@ class Vehicle:
     def _lock(self, command: int) -> asyncio.Lock:
         return self._command_locks.setdefault(command, asyncio.Lock())
 
-    async def arm(self, *, force: bool = False) -> None:
+    async def arm(self, *, force: bool = False, **options: Any) -> None:
+        """Arm; ``options``: ``timeout_s``, ``retries`` per :func:`gcs.commands.command_long`."""
         async with self._lock(mavlink2.MAV_CMD_COMPONENT_ARM_DISARM):
             await commands.arm(
-                self.link, self.system_id, force=force, target_component=self.component_id
+                self.link,
+                self.system_id,
+                force=force,
+                target_component=self.component_id,
+                **options,
             )
 
     async def disarm(self, *, force: bool = False) -> None:
@@ -82,7 +87,7 @@ class Vehicle:
                 self.link, self.system_id, force=force, target_component=self.component_id
             )
 
-    async def set_mode(self, mode: str) -> None:
+    async def set_mode(self, mode: str, **options: Any) -> None:
         async with self._lock(mavlink2.MAV_CMD_DO_SET_MODE):
             await commands.set_mode(
                 self.link,
@@ -90,6 +95,7 @@ class Vehicle:
                 mode,
                 autopilot=self.autopilot,
                 target_component=self.component_id,
+                **options,
             )
 
     async def start_mission(self, first: int = 0, last: int = 0) -> None:
@@ -98,7 +104,9 @@ class Vehicle:
                 self.link, self.system_id, first, last, target_component=self.component_id
             )
 
-    async def change_speed(self, speed_m_s: float, *, airspeed: bool = True) -> None:
+    async def change_speed(
+        self, speed_m_s: float, *, airspeed: bool = True, **options: Any
+    ) -> None:
         async with self._lock(mavlink2.MAV_CMD_DO_CHANGE_SPEED):
             await commands.change_speed(
                 self.link,
@@ -106,4 +114,5 @@ class Vehicle:
                 speed_m_s,
                 airspeed=airspeed,
                 target_component=self.component_id,
+                **options,
             )

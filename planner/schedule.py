@@ -383,18 +383,32 @@ def _retime(
     target_s: float,
     step_m_s: float,
     threats: Sequence[ThreatZone],
+    at: tuple[float, float] | None = None,
+    loiter_margin_m_s: float = 0.0,
 ) -> _Retimed:
-    """Re-time one vehicle from ``now_s`` to arrive at ``target_s`` on its current path."""
+    """Re-time one vehicle from ``now_s`` to arrive at ``target_s`` on its current path.
+
+    ``at`` = (s_m, speed_m_s) anchors the vehicle where it really is (airborne, on a leg)
+    instead of where the schedule has it at ``now_s``.
+    """
     limits = _limits(v, step_m_s)
-    phase, s0, speed_now = vs.state_at(now_s)
-    kept_legs = [leg for leg in vs.legs if leg.t_end_s <= now_s + TIME_TOL_S]
-    kept_loiters = [lo for lo in vs.loiters if lo.t_end_s <= now_s + TIME_TOL_S]
+    if at is None:
+        phase, s0, speed_now = vs.state_at(now_s)
+        kept_legs = [leg for leg in vs.legs if leg.t_end_s <= now_s + TIME_TOL_S]
+        kept_loiters = [lo for lo in vs.loiters if lo.t_end_s <= now_s + TIME_TOL_S]
+    else:
+        phase, (s0, speed_now) = "leg", at
+        kept_legs = [leg for leg in vs.legs if leg.s_end_m <= s0 + 1e-6]
+        kept_loiters = [lo for lo in vs.loiters if lo.s_m < s0]
+        cut = [leg for leg in vs.legs if leg.s_start_m < s0 < leg.s_end_m]
+        if cut:
+            kept_legs.append(replace(cut[0], s_end_m=s0, t_end_s=now_s))
     start_t = now_s
     if phase == "loiter":
         current = next(lo for lo in vs.loiters if lo.t_start_s <= now_s < lo.t_end_s)
         kept_loiters.append(current)
         start_t = current.t_end_s
-    elif phase == "leg":
+    elif phase == "leg" and at is None:
         cur = [leg for leg in vs.legs if leg.t_start_s < now_s < leg.t_end_s]
         if cur:
             kept_legs.append(replace(cur[0], s_end_m=s0, t_end_s=now_s))
@@ -429,6 +443,7 @@ def _retime(
         limits,
         site=loiter_site,
         current_m_s=speed_now if phase in ("leg", "loiter") and speed_now > 0.0 else None,
+        loiter_margin_m_s=loiter_margin_m_s,
     )
     legs, loiters, arrival = _timeline(
         timing.pieces, s0_m=s0, t0_s=start_t, site=site, radius_m=radius, turns=timing.turns
@@ -483,6 +498,18 @@ def _retime(
     return _Retimed(new, adjustments)
 
 
+Anchors = Mapping[str, tuple[float, float]]
+"""Where airborne vehicles really are: vehicle id -> (s_m along its path, speed_m_s)."""
+
+
+def _where(
+    vs: VehicleSchedule, t_s: float, anchor: tuple[float, float] | None
+) -> tuple[str, float, float]:
+    if anchor is None:
+        return vs.state_at(t_s)
+    return "leg", anchor[0], anchor[1]
+
+
 def _window(
     scenario: Scenario,
     v: Vehicle,
@@ -490,8 +517,9 @@ def _window(
     now_s: float,
     step_m_s: float,
     threats: Sequence[ThreatZone],
+    anchor: tuple[float, float] | None = None,
 ) -> ArrivalWindow:
-    phase, s0, _ = vs.state_at(now_s)
+    phase, s0, _ = _where(vs, now_s, anchor)
     start = now_s
     if phase == "loiter":
         start = next(lo.t_end_s for lo in vs.loiters if lo.t_start_s <= now_s < lo.t_end_s)
@@ -684,13 +712,14 @@ def _replan(
     now_s: float,
     method: Method,
     rng: np.random.Generator,
+    anchors: Anchors,
 ) -> dict[str, VehicleSchedule]:
     """New paths for the vehicles from where they are at ``now_s`` (prefix kept)."""
     starts: dict[str, tuple[float, float, float]] = {}
     poses: dict[str, tuple[float, float, float]] = {}
     for vid in vehicle_ids:
         vs = schedule.vehicle(vid)
-        phase, s0, _ = vs.state_at(now_s)
+        phase, s0, _ = _where(vs, now_s, anchors.get(vid))
         if phase == "ground":
             continue
         p = vs.path.pose_at(s0)
@@ -721,6 +750,136 @@ def _replan(
     return out
 
 
+@dataclass(frozen=True)
+class PopupOutcome:
+    """The team after one pop-up threat: re-planned, re-timed, and what was decided."""
+
+    schedule: Schedule
+    affected: tuple[str, ...]
+    adjustments: tuple[Adjustment, ...]
+    events: tuple[Event, ...]
+
+
+def apply_popup(
+    current: Schedule,
+    zone: ThreatZone,
+    *,
+    at_s: float,
+    world: World,
+    threats: Sequence[ThreatZone],
+    method: Method = "aco",
+    rng: np.random.Generator,
+    anchors: Anchors | None = None,
+    loiter_margin_m_s: float = 0.0,
+) -> PopupOutcome:
+    """Re-plan around one new threat from where the team is at ``at_s`` and re-time it.
+
+    Parameters
+    ----------
+    current
+        The team's schedule before the threat.
+    zone
+        The new threat.
+    at_s
+        Mission time (s) from which the new routes start (the threat's appearance offline; a
+        little ahead of the vehicles in flight, so that they reach the splice point after the
+        new missions are uploaded).
+    world, threats
+        The world and every threat in force from ``at_s`` (``zone`` included).
+    anchors
+        Where airborne vehicles really are at ``at_s`` (s_m along their path, speed m/s);
+        the others are where the schedule has them.
+    loiter_margin_m_s
+        Loiter turns leave the speed this far above the minimum when they can.
+
+    Raises
+    ------
+    InfeasibleError
+        A re-plan fails, or no common arrival time remains; names the vehicle.
+    """
+    scenario = current.scenario
+    anchors = anchors or {}
+    adjustments: list[Adjustment] = []
+    events = [Event(at_s, "popup", f"threat {zone.id} appears")]
+    stages = list(current.stages)
+    affected: list[str] = []
+    for v in scenario.vehicles:
+        vs = current.vehicle(v.id)
+        phase, s0, _ = _where(vs, at_s, anchors.get(v.id))
+        if phase != "arrived" and _touches(vs, s0, zone, v.min_turn_radius_m):
+            affected.append(v.id)
+    if not affected:
+        events.append(Event(at_s, "popup", f"{zone.id} touches no remaining route"))
+        return PopupOutcome(
+            replace(current, events=(*current.events, *events)), (), (), tuple(events)
+        )
+    events.append(Event(at_s, "replan", f"re-planning {', '.join(affected)} around {zone.id}"))
+    new_paths = _replan(world, threats, scenario, current, affected, at_s, method, rng, anchors)
+    vehicles = [new_paths.get(vs.vehicle_id, vs) for vs in current.vehicles]
+    staged = replace(current, vehicles=tuple(vehicles))
+    where = {v.id: _where(staged.vehicle(v.id), at_s, anchors.get(v.id)) for v in scenario.vehicles}
+    windows = [
+        _window(
+            scenario, v, staged.vehicle(v.id), at_s, current.step_m_s, threats, anchors.get(v.id)
+        )
+        for v in scenario.vehicles
+        if where[v.id][0] != "arrived"
+    ]
+    natural = {vs.vehicle_id: vs.arrival_s for vs in current.vehicles}
+    targets, ref, reason = _targets(scenario, windows, current.required_arrival_s, natural)
+    events.append(Event(at_s, "arrival", f"team arrival {_fmt(ref)}: {reason}"))
+    # Fig. 9: the constant speed each vehicle would now need, in range or not.
+    need: dict[str, tuple[SpeedSpan, ...]] = {}
+    for v in scenario.vehicles:
+        vs = staged.vehicle(v.id)
+        phase, s0, _ = where[v.id]
+        past = tuple(sp for sp in _spans(vs) if sp.t_end_s <= at_s + TIME_TOL_S)
+        if phase == "arrived" or v.id not in targets:
+            need[v.id] = _spans(vs)
+            continue
+        dep = max(at_s, vs.takeoff_s) if phase == "ground" else at_s
+        cut = tuple(
+            SpeedSpan(sp.t_start_s, at_s, sp.speed_m_s, sp.kind)
+            for sp in _spans(vs)
+            if sp.t_start_s < at_s < sp.t_end_s
+        )
+        v_need = (vs.path.length_m - s0) / max(targets[v.id] - dep, 1e-9)
+        need[v.id] = (*past, *cut, SpeedSpan(dep, targets[v.id], v_need, "required"))
+    stages.append(Stage(f"{zone.id} at {at_s:.0f} s: re-planned, required speed", at_s, need))
+    retimed: list[VehicleSchedule] = []
+    for v in scenario.vehicles:
+        vs = staged.vehicle(v.id)
+        same_time = abs(targets.get(v.id, vs.arrival_s) - vs.arrival_s) < 0.05
+        if v.id not in targets or (v.id not in affected and same_time):
+            retimed.append(vs)
+            continue
+        anchor = anchors.get(v.id)
+        r = _retime(
+            scenario,
+            v,
+            vs,
+            now_s=at_s,
+            target_s=targets[v.id],
+            step_m_s=current.step_m_s,
+            threats=threats,
+            at=anchor if where[v.id][0] == "leg" and anchor is not None else None,
+            loiter_margin_m_s=loiter_margin_m_s,
+        )
+        retimed.append(r.schedule)
+        adjustments.extend(r.adjustments)
+    stages.append(_stage(f"after {zone.id}: final", at_s, retimed))
+    out = replace(
+        current,
+        vehicles=tuple(retimed),
+        required_arrival_s=ref,
+        arrival_reason=reason,
+        adjustments=(*current.adjustments, *adjustments),
+        stages=tuple(stages),
+        events=(*current.events, *events),
+    )
+    return PopupOutcome(out, tuple(affected), tuple(adjustments), tuple(events))
+
+
 def replay_popups(
     schedule: Schedule,
     *,
@@ -748,82 +907,59 @@ def replay_popups(
     all_threats = build_threats(scenario, takeoffs)
     world = world or build_world(scenario, takeoffs)
     world = replace(world, threats=tuple(all_threats))
-    popups = sorted(
-        (t for t in all_threats if t.appears_at_s is not None and math.isfinite(t.appears_at_s)),
+    current = schedule
+    for zone in popup_zones(all_threats):
+        t_p = float(zone.appears_at_s or 0.0)
+        current = apply_popup(
+            current,
+            zone,
+            at_s=t_p,
+            world=world,
+            threats=active(all_threats, t_p),
+            rng=rng,
+            method=method,
+        ).schedule
+    return current
+
+
+def popup_zones(threats: Sequence[ThreatZone]) -> list[ThreatZone]:
+    """The threats that appear during the mission, in order of appearance."""
+    return sorted(
+        (t for t in threats if t.appears_at_s is not None and math.isfinite(t.appears_at_s)),
         key=lambda t: (t.appears_at_s or 0.0, t.id),
     )
-    adjustments = list(schedule.adjustments)
-    stages = list(schedule.stages)
-    events = list(schedule.events)
-    current = schedule
-    for zone in popups:
-        t_p = float(zone.appears_at_s or 0.0)
-        in_force = active(all_threats, t_p)
-        events.append(Event(t_p, "popup", f"threat {zone.id} appears"))
-        affected = []
-        for v in scenario.vehicles:
-            vs = current.vehicle(v.id)
-            phase, s0, _ = vs.state_at(t_p)
-            if phase != "arrived" and _touches(vs, s0, zone, v.min_turn_radius_m):
-                affected.append(v.id)
-        if not affected:
-            events.append(Event(t_p, "popup", f"{zone.id} touches no remaining route"))
-            continue
-        events.append(Event(t_p, "replan", f"re-planning {', '.join(affected)} around {zone.id}"))
-        new_paths = _replan(world, in_force, scenario, current, affected, t_p, method, rng)
-        vehicles = [new_paths.get(vs.vehicle_id, vs) for vs in current.vehicles]
-        staged = replace(current, vehicles=tuple(vehicles))
-        windows = [
-            _window(scenario, v, staged.vehicle(v.id), t_p, current.step_m_s, in_force)
-            for v in scenario.vehicles
-            if staged.vehicle(v.id).state_at(t_p)[0] != "arrived"
-        ]
-        natural = {vs.vehicle_id: vs.arrival_s for vs in current.vehicles}
-        targets, ref, reason = _targets(scenario, windows, current.required_arrival_s, natural)
-        events.append(Event(t_p, "arrival", f"team arrival {_fmt(ref)}: {reason}"))
-        # Fig. 9: the constant speed each vehicle would now need, in range or not.
-        need: dict[str, tuple[SpeedSpan, ...]] = {}
-        for v in scenario.vehicles:
-            vs = staged.vehicle(v.id)
-            phase, s0, _ = vs.state_at(t_p)
-            past = tuple(sp for sp in _spans(vs) if sp.t_end_s <= t_p + TIME_TOL_S)
-            if phase == "arrived" or v.id not in targets:
-                need[v.id] = _spans(vs)
-                continue
-            dep = max(t_p, vs.takeoff_s) if phase == "ground" else t_p
-            cut = tuple(
-                SpeedSpan(sp.t_start_s, t_p, sp.speed_m_s, sp.kind)
-                for sp in _spans(vs)
-                if sp.t_start_s < t_p < sp.t_end_s
-            )
-            v_need = (vs.path.length_m - s0) / max(targets[v.id] - dep, 1e-9)
-            need[v.id] = (*past, *cut, SpeedSpan(dep, targets[v.id], v_need, "required"))
-        stages.append(Stage(f"{zone.id} at {t_p:.0f} s: re-planned, required speed", t_p, need))
-        retimed: list[VehicleSchedule] = []
-        for v in scenario.vehicles:
-            vs = staged.vehicle(v.id)
-            same_time = abs(targets.get(v.id, vs.arrival_s) - vs.arrival_s) < 0.05
-            if v.id not in targets or (v.id not in affected and same_time):
-                retimed.append(vs)
-                continue
-            r = _retime(
-                scenario,
-                v,
-                vs,
-                now_s=t_p,
-                target_s=targets[v.id],
-                step_m_s=current.step_m_s,
-                threats=in_force,
-            )
-            retimed.append(r.schedule)
-            adjustments.extend(r.adjustments)
-        current = replace(
-            current,
-            vehicles=tuple(retimed),
-            required_arrival_s=ref,
-            arrival_reason=reason,
-        )
-        stages.append(_stage(f"after {zone.id}: final", t_p, retimed))
-    return replace(
-        current, adjustments=tuple(adjustments), stages=tuple(stages), events=tuple(events)
+
+
+def retime_vehicle(
+    schedule: Schedule,
+    vehicle_id: str,
+    *,
+    now_s: float,
+    s_m: float,
+    speed_m_s: float,
+    target_s: float,
+    threats: Sequence[ThreatZone],
+    loiter_margin_m_s: float = 0.0,
+) -> tuple[VehicleSchedule, tuple[Adjustment, ...]]:
+    """Re-time one airborne vehicle from where it really is (``s_m`` along its path, flying
+    ``speed_m_s``) at ``now_s`` to arrive at ``target_s``: speeds, and loiter turns in a buffer
+    ahead when the speed range cannot absorb the surplus (eqs. 6-9).
+
+    Raises
+    ------
+    InfeasibleError
+        Too late even at top speed, or too early with no buffer ahead; names the vehicle.
+    """
+    v = schedule.scenario.vehicle(vehicle_id)
+    r = _retime(
+        schedule.scenario,
+        v,
+        schedule.vehicle(vehicle_id),
+        now_s=now_s,
+        target_s=target_s,
+        step_m_s=schedule.step_m_s,
+        threats=threats,
+        at=(s_m, speed_m_s),
+        loiter_margin_m_s=loiter_margin_m_s,
     )
+    return r.schedule, tuple(r.adjustments)

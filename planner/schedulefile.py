@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Mapping
+from dataclasses import dataclass, replace
 from typing import Any
 
 import numpy as np
@@ -19,6 +20,8 @@ import numpy as np
 from planner.deconflict import Separation
 from planner.errors import PlannerError
 from planner.mission import (
+    MAV_CMD_DO_CHANGE_SPEED,
+    MAV_CMD_NAV_WAYPOINT,
     Loiter,
     MissionItem,
     SpeedChange,
@@ -36,8 +39,33 @@ def _num(x: float, digits: int = 3) -> float | None:
     return round(float(x), digits) if math.isfinite(x) else None
 
 
+@dataclass(frozen=True)
+class PathMission:
+    """Mission items and where each sits along the vehicle's path.
+
+    ``item_s_m[k]``: a waypoint's or loiter's path distance (m); for DO_CHANGE_SPEED the start
+    of the leg it governs (it runs when the previous waypoint is reached); None for home and
+    the takeoff.
+    """
+
+    items: tuple[MissionItem, ...]
+    item_s_m: tuple[float | None, ...]
+
+
 def vehicle_mission(schedule: Schedule, vs: VehicleSchedule, terrain: Terrain) -> list[MissionItem]:
     """The vehicle's mission items (home = its start on the ground, relative altitudes)."""
+    return list(path_mission(schedule, vs, terrain).items)
+
+
+def path_mission(
+    schedule: Schedule, vs: VehicleSchedule, terrain: Terrain, *, runout_m: float = 0.0
+) -> PathMission:
+    """:func:`vehicle_mission` with each item's path distance.
+
+    ``runout_m`` > 0 adds a last waypoint that far beyond the goal on the final heading, so
+    that the aircraft flies through the goal rather than turning away once within its
+    waypoint radius of it (ArduPlane's "reached" test).
+    """
     frame = schedule.scenario.frame()
     v = schedule.scenario.vehicle(vs.vehicle_id)
     path = vs.path
@@ -60,6 +88,13 @@ def vehicle_mission(schedule: Schedule, vs: VehicleSchedule, terrain: Terrain) -
         p = path.pose_at(s)
         lat, lon = frame.to_geodetic(p.east_m, p.north_m)
         waypoints.append(Waypoint(float(lat), float(lon), vs.alt_at(s)))
+    if runout_m > 0.0:
+        end = path.end
+        e = end.east_m + runout_m * math.sin(end.heading_rad)
+        n = end.north_m + runout_m * math.cos(end.heading_rad)
+        lat, lon = frame.to_geodetic(e, n)
+        waypoints.append(Waypoint(float(lat), float(lon), vs.alt_at(path.length_m)))
+        s_sorted.append(path.length_m + runout_m)
     speeds: list[SpeedChange] = []
     last = math.nan
     prev_s = 0.0
@@ -83,13 +118,64 @@ def vehicle_mission(schedule: Schedule, vs: VehicleSchedule, terrain: Terrain) -
     ground = float(terrain.elevation_m(np.array([se]), np.array([sn]))[0])
     home_lat, home_lon = frame.to_geodetic(se, sn)
     home = Waypoint(float(home_lat), float(home_lon), ground)
-    return compile_mission(
+    items = compile_mission(
         home=home,
         waypoints=waypoints,
         takeoff_alt_m=max(v.start.alt_m - ground, 1.0),
         speeds=speeds,
         loiters=loiters,
         airspeed_limits_m_s=(v.speed_min_m_s, v.speed_max_m_s),
+    )
+    item_s: list[float | None] = [None, None]
+    k = -1
+    for it in items[2:]:
+        if it.command == MAV_CMD_NAV_WAYPOINT:
+            k += 1
+            item_s.append(s_sorted[k])
+        elif it.command == MAV_CMD_DO_CHANGE_SPEED:
+            item_s.append(s_sorted[k] if k >= 0 else 0.0)
+        else:
+            item_s.append(s_sorted[k])
+    return PathMission(tuple(items), tuple(item_s))
+
+
+def splice_mission(old: PathMission, keep_through_seq: int, new: PathMission) -> PathMission:
+    """Old items up to a kept waypoint, then the new mission beyond that waypoint.
+
+    The vehicle keeps flying the leg it is on (the items it has, up to ``keep_through_seq``,
+    are unchanged, so an autopilot in AUTO carries on at its current index); from the kept
+    waypoint it flies the new speeds, loiters and route. The new mission must pass through the
+    kept waypoint (re-plans start there; re-timings keep the path).
+
+    Raises
+    ------
+    PlannerError
+        ``keep_through_seq`` is not a waypoint of the old mission.
+    """
+    if not 2 <= keep_through_seq < len(old.items):
+        raise PlannerError(
+            f"splice: item {keep_through_seq} is outside the old mission (2..{len(old.items) - 1})"
+        )
+    kept = old.items[keep_through_seq]
+    s_k = old.item_s_m[keep_through_seq]
+    if kept.command != MAV_CMD_NAV_WAYPOINT or s_k is None:
+        raise PlannerError(f"splice: item {keep_through_seq} is not a route waypoint")
+    items = list(old.items[: keep_through_seq + 1])
+    item_s: list[float | None] = list(old.item_s_m[: keep_through_seq + 1])
+    speed: MissionItem | None = None
+    for it, s in zip(new.items, new.item_s_m, strict=True):
+        if it.command == MAV_CMD_DO_CHANGE_SPEED and s is not None and s <= s_k + _MERGE_M:
+            speed = it
+    if speed is not None:
+        items.append(speed)
+        item_s.append(s_k)
+    for it, s in zip(new.items, new.item_s_m, strict=True):
+        if s is not None and s > s_k + _MERGE_M:
+            items.append(it)
+            item_s.append(s)
+    return PathMission(
+        tuple(replace(it, seq=i) for i, it in enumerate(items)),
+        tuple(item_s),
     )
 
 

@@ -279,9 +279,17 @@ def _bisect(grid: Sequence[float], v: float) -> int:
 
 
 def fewest_turns(
-    remaining_m: float, duration_s: float, limits: SpeedLimits, site: LoiterSite
+    remaining_m: float,
+    duration_s: float,
+    limits: SpeedLimits,
+    site: LoiterSite,
+    margin_m_s: float = 0.0,
 ) -> int:
     """Fewest loiter turns after which the speed range absorbs the rest (eq. 8); 0 if none.
+
+    With ``margin_m_s`` > 0 the turns are the fewest that leave the mean speed at least that
+    far above the minimum (a closed loop keeps room to slow down after the loiter); when no
+    such count fits the range, the fewest without the margin.
 
     Raises
     ------
@@ -292,6 +300,11 @@ def fewest_turns(
     if duration_s * vmin <= remaining_m + 1e-9:
         return 0
     per_turn = 2.0 * math.pi * site.radius_m
+    if margin_m_s > 0.0:
+        slow = min(vmin + margin_m_s, vmax)
+        n = max(1, math.ceil((duration_s * slow - remaining_m - site.detour_m) / per_turn - 1e-12))
+        if remaining_m + site.detour_m + n * per_turn <= duration_s * vmax + 1e-9:
+            return n
     n = max(1, math.ceil((duration_s * vmin - remaining_m - site.detour_m) / per_turn - 1e-12))
     if remaining_m + site.detour_m + n * per_turn > duration_s * vmax + 1e-9:
         raise ValueError("no whole number of loiter turns fits the speed range")
@@ -306,6 +319,7 @@ def time_path(
     *,
     site: LoiterSite | None = None,
     current_m_s: float | None = None,
+    loiter_margin_m_s: float = 0.0,
 ) -> Timing:
     """Speeds, and loiter turns where needed, to fly ``remaining_m`` in exactly ``duration_s``.
 
@@ -323,6 +337,9 @@ def time_path(
         Where a loiter can be flown; None when no buffer area is on the remaining path.
     current_m_s
         Speed flown now; the first piece keeps the nearer of two speeds.
+    loiter_margin_m_s
+        Turns leave the mean speed at least this far above the minimum when they can
+        (see :func:`fewest_turns`).
 
     Returns
     -------
@@ -356,7 +373,7 @@ def time_path(
             f"{duration_s - slowest:.1f} s"
         )
     try:
-        n = fewest_turns(remaining_m, duration_s, limits, site)
+        n = fewest_turns(remaining_m, duration_s, limits, site, loiter_margin_m_s)
     except ValueError:
         raise InfeasibleError(
             f"vehicle {vehicle_id}: loiter turns of {2 * math.pi * site.radius_m:.0f} m cannot "

@@ -1,6 +1,6 @@
 """CLI: ``python -m sitl_stub --vehicles N --tcp-base PORT --speedup S --home LAT,LON,ALT[,HDG]``.
 
-Runs until SIGINT/SIGTERM, then closes every socket and exits 0.
+Runs until SIGINT/SIGTERM, then closes every socket (and the truth file) and exits 0.
 """
 
 from __future__ import annotations
@@ -14,8 +14,12 @@ import signal
 import sys
 import time
 from collections.abc import Sequence
+from dataclasses import dataclass, replace
+from pathlib import Path
 
 from sitl_stub.api import DEFAULT_TCP_BASE, Home, SimTeam
+from sitl_stub.model import AirframeParams
+from sitl_stub.truth import DEFAULT_TRUTH_PERIOD_S
 
 log = logging.getLogger("sitl_stub")
 
@@ -24,10 +28,20 @@ class UsageError(ValueError):
     """A command-line value that cannot be used."""
 
 
+@dataclass(frozen=True, slots=True)
+class BlackoutSpec:
+    """``--blackout I,START_S,DURATION_S`` (vehicle index, simulated seconds)."""
+
+    vehicle_index: int
+    start_sim_s: float
+    duration_s: float
+
+
 def _floats(text: str, name: str, n_min: int, n_max: int) -> list[float]:
     parts = text.split(",")
     if not n_min <= len(parts) <= n_max:
-        raise UsageError(f"{name} needs {n_min} to {n_max} comma-separated numbers, got {text!r}")
+        count = str(n_min) if n_min == n_max else f"{n_min} to {n_max}"
+        raise UsageError(f"{name} needs {count} comma-separated numbers, got {text!r}")
     try:
         values = [float(p) for p in parts]
     except ValueError:
@@ -46,8 +60,62 @@ def parse_args(argv: Sequence[str] | None = None) -> argparse.Namespace:
     ap.add_argument("--tcp-base", type=int, default=DEFAULT_TCP_BASE, help="port of vehicle 0")
     ap.add_argument("--speedup", type=float, default=1.0, help="simulated/wall time ratio")
     where = ap.add_mutually_exclusive_group(required=True)
-    where.add_argument("--home", help="LAT,LON,ALT_M[,HDG_DEG] shared start (vehicles spaced)")
-    where.add_argument("--scenario", help="scenario file: each vehicle at its start")
+    where.add_argument(
+        "--home",
+        action="append",
+        metavar="LAT,LON,ALT_M[,HDG_DEG]",
+        help="start on the ground (ALT_M AMSL); once: shared by all vehicles (spaced 30 m "
+        "across the heading); repeated once per vehicle: vehicle i at the i-th --home",
+    )
+    where.add_argument(
+        "--scenario",
+        metavar="FILE",
+        help="scenario file: each vehicle on the ground (terrain elevation) at its start",
+    )
+    ap.add_argument(
+        "--airspeed",
+        action="append",
+        metavar="MIN,CRUISE,MAX",
+        help="airspeeds, m/s (0 < MIN <= CRUISE <= MAX; default 15,22,30); once: every "
+        "vehicle; repeated once per vehicle: vehicle i gets the i-th",
+    )
+    ap.add_argument(
+        "--blackout",
+        action="append",
+        metavar="I,START_S,DURATION_S",
+        help="vehicle I's (0-based) link dark, both ways, from START_S simulated seconds after "
+        "the clock starts, for DURATION_S simulated seconds (repeatable)",
+    )
+    ap.add_argument(
+        "--truth",
+        metavar="FILE",
+        help="write every vehicle's true state as JSON lines (format tcgcs-truth/1)",
+    )
+    ap.add_argument(
+        "--mission-timeout",
+        type=float,
+        default=1.5,
+        metavar="S",
+        help="wall seconds before a lost mission item is re-requested (default 1.5)",
+    )
+    ap.add_argument(
+        "--control-stdin",
+        action="store_true",
+        help="read control lines from stdin: 'blackout INDEX START_SIM_S DURATION_S'",
+    )
+    ap.add_argument(
+        "--truth-period",
+        type=float,
+        default=DEFAULT_TRUTH_PERIOD_S,
+        metavar="S",
+        help=f"truth sample period, simulated s (default {DEFAULT_TRUTH_PERIOD_S:g})",
+    )
+    ap.add_argument(
+        "--start-utc",
+        type=float,
+        metavar="UTC_S",
+        help="simulated UTC (Unix seconds) when the clock starts (default: wall time now)",
+    )
     ap.add_argument("--wind", help="SPEED_M_S,FROM_DEG mean wind")
     ap.add_argument("--gust", type=float, default=0.0, help="gust standard deviation, m/s")
     ap.add_argument("--loss", type=float, default=0.0, help="packet loss probability")
@@ -63,12 +131,15 @@ def parse_args(argv: Sequence[str] | None = None) -> argparse.Namespace:
     return ap.parse_args(_join_negative_values(list(sys.argv[1:] if argv is None else argv)))
 
 
+_VALUE_OPTIONS = ("--home", "--wind", "--airspeed", "--blackout")
+
+
 def _join_negative_values(argv: list[str]) -> list[str]:
     # "--home -35.36,149.16,584" would read the value as an option (southern latitudes).
     out: list[str] = []
     it = iter(argv)
     for arg in it:
-        if arg in ("--home", "--wind"):
+        if arg in _VALUE_OPTIONS:
             value = next(it, None)
             out.append(arg if value is None else f"{arg}={value}")
         else:
@@ -81,19 +152,80 @@ def homes_from_args(args: argparse.Namespace) -> list[Home]:
         raise UsageError(f"--vehicles must be at least 1, got {args.vehicles}")
     if args.scenario:
         return homes_from_scenario(args.scenario, args.vehicles)
-    lat, lon, alt, *rest = _floats(args.home, "--home", 3, 4)
-    hdg = rest[0] if rest else 0.0
+    texts: list[str] = args.home
+    _check_count(texts, "--home", args.vehicles)
+    if len(texts) == args.vehicles:
+        return [_home(text) for text in texts]
+    first = _home(texts[0])
+    lat, lon, alt, hdg = first.lat_deg, first.lon_deg, first.alt_m, first.heading_deg
     # Vehicles share the home point but are spaced 30 m apart across the heading, as
     # aircraft lined up on an apron, so their true positions never coincide.
     from sitl_stub.model import displace_deg
 
-    homes = []
+    homes: list[Home] = []
     for i in range(args.vehicles):
         off = 30.0 * i
         right = math.radians(hdg + 90.0)
         la, lo = displace_deg(lat, lon, alt, off * math.cos(right), off * math.sin(right))
         homes.append(Home(la, lo, alt, hdg))
     return homes
+
+
+def _home(text: str) -> Home:
+    lat, lon, alt, *rest = _floats(text, "--home", 3, 4)
+    try:
+        return Home(lat, lon, alt, rest[0] if rest else 0.0)
+    except ValueError as err:
+        raise UsageError(f"--home {text!r}: {err}") from None
+
+
+def _check_count(texts: Sequence[str], name: str, n_vehicles: int) -> None:
+    """A per-vehicle option is given once (all vehicles) or once per vehicle."""
+    if len(texts) not in (1, n_vehicles):
+        raise UsageError(
+            f"{name} given {len(texts)} times for --vehicles {n_vehicles}: give it once "
+            f"(every vehicle) or {n_vehicles} times (one per vehicle)"
+        )
+
+
+def params_from_args(args: argparse.Namespace) -> list[AirframeParams] | None:
+    """Per-vehicle airframe parameters from ``--airspeed`` (None: the defaults)."""
+    texts: list[str] | None = args.airspeed
+    if not texts:
+        return None
+    _check_count(texts, "--airspeed", args.vehicles)
+    params = []
+    for text in texts:
+        lo, cruise, hi = _floats(text, "--airspeed", 3, 3)
+        if not 0.0 < lo <= cruise <= hi:
+            raise UsageError(f"--airspeed needs 0 < MIN <= CRUISE <= MAX (m/s), got {text!r}")
+        params.append(
+            replace(
+                AirframeParams(),
+                airspeed_min_m_s=lo,
+                airspeed_cruise_m_s=cruise,
+                airspeed_max_m_s=hi,
+            )
+        )
+    return params * args.vehicles if len(params) == 1 else params
+
+
+def blackouts_from_args(args: argparse.Namespace) -> list[BlackoutSpec]:
+    """``--blackout`` values, checked against the number of vehicles."""
+    out = []
+    for text in args.blackout or ():
+        index, start, duration = _floats(text, "--blackout", 3, 3)
+        if not (index.is_integer() and 0 <= index < args.vehicles):
+            raise UsageError(
+                f"--blackout {text!r}: I (the vehicle) must be a whole number in "
+                f"0..{args.vehicles - 1} (0-based; --vehicles {args.vehicles})"
+            )
+        if start < 0:
+            raise UsageError(f"--blackout {text!r}: START_S must be >= 0")
+        if duration <= 0:
+            raise UsageError(f"--blackout {text!r}: DURATION_S must be > 0")
+        out.append(BlackoutSpec(int(index), start, duration))
+    return out
 
 
 def initial_bearing_deg(lat1: float, lon1: float, lat2: float, lon2: float) -> float:
@@ -106,7 +238,14 @@ def initial_bearing_deg(lat1: float, lon1: float, lat2: float, lon2: float) -> f
 
 
 def homes_from_scenario(path: str, n: int) -> list[Home]:
-    """Vehicle i at scenario vehicle i's start, nose toward its goal."""
+    """Vehicle i on the ground at scenario vehicle i's start, nose toward its goal.
+
+    The home altitude is the scenario terrain's elevation there (not the start's ``alt_m``,
+    which is a flight altitude): the vehicle starts on the ground.
+    """
+    import numpy as np
+
+    from planner.plan import build_terrain
     from planner.scenario import load_scenario
 
     scenario = load_scenario(path)
@@ -114,16 +253,52 @@ def homes_from_scenario(path: str, n: int) -> list[Home]:
     vehicles = scenario.vehicles
     if n > len(vehicles):
         raise UsageError(f"--vehicles {n} but {path} defines only {len(vehicles)} vehicles")
+    terrain = build_terrain(scenario)
     homes = []
     for v in vehicles[:n]:
-        lat, lon = frame.to_geodetic(*v.start.local(frame))
+        east, north = v.start.local(frame)
+        lat, lon = frame.to_geodetic(east, north)
+        ground = terrain.elevation_m(np.array([east]), np.array([north]))
         goal_lat, goal_lon = frame.to_geodetic(*v.goal.local(frame))
         hdg = initial_bearing_deg(lat, lon, goal_lat, goal_lon)
-        homes.append(Home(float(lat), float(lon), v.start.alt_m, hdg))
+        homes.append(Home(float(lat), float(lon), float(ground[0]), hdg))
     return homes
 
 
-async def serve(args: argparse.Namespace, homes: list[Home]) -> None:
+async def _control(team: SimTeam, stop: asyncio.Event) -> None:
+    """Control lines on stdin (a rehearsal driving its simulator); EOF stops the team."""
+    loop = asyncio.get_running_loop()
+    reader = asyncio.StreamReader()
+    await loop.connect_read_pipe(lambda: asyncio.StreamReaderProtocol(reader), sys.stdin)
+    while True:
+        line = await reader.readline()
+        if not line:
+            return
+        words = line.decode(errors="replace").split()
+        try:
+            if words and words[0] == "blackout" and len(words) == 4:
+                i, start, duration = int(words[1]), float(words[2]), float(words[3])
+                if not 0 <= i < len(team.vehicles) or start < 0 or duration <= 0:
+                    raise ValueError("index, start or duration out of range")
+                team.schedule_blackout(i, start, duration)
+                print(
+                    f"sitl_stub: blackout vehicle {i} at {start:g} s for {duration:g} s", flush=True
+                )
+            elif words:
+                raise ValueError("expected 'blackout INDEX START_SIM_S DURATION_S'")
+        except ValueError as err:
+            print(
+                f"sitl_stub: control: {line.decode(errors='replace').strip()!r}: {err}",
+                file=sys.stderr,
+            )
+
+
+async def serve(
+    args: argparse.Namespace,
+    homes: list[Home],
+    params: list[AirframeParams] | None = None,
+    blackouts: Sequence[BlackoutSpec] = (),
+) -> None:
     from sitl_stub.model import Wind
 
     wind = None
@@ -142,16 +317,27 @@ async def serve(args: argparse.Namespace, homes: list[Home]) -> None:
             wind=wind,
             seed=args.seed,
             host=args.host,
-            start_utc_s=time.time(),
+            params=params,
+            start_utc_s=time.time() if args.start_utc is None else args.start_utc,
             legacy_mission_requests=args.legacy_mission_requests,
+            mission_timeout_s=args.mission_timeout,
+            truth_out=args.truth,
+            truth_period_s=args.truth_period,
         ) as team:
             if args.loss or args.latency_ms:
                 for v in team.vehicles:
                     v.link.faults(loss=args.loss, latency_ms=args.latency_ms)
+            for b in blackouts:
+                team.schedule_blackout(b.vehicle_index, b.start_sim_s, b.duration_s)
             for i, port in enumerate(team.ports):
                 log.info("vehicle %d: sysid %d on tcp:%s:%d", i, i + 1, args.host, port)
             print(f"sitl_stub: {len(homes)} vehicle(s) ready, ports {team.ports}", flush=True)
+            control = None
+            if args.control_stdin:
+                control = asyncio.get_running_loop().create_task(_control(team, stop))
             await stop.wait()
+            if control is not None:
+                control.cancel()
             stats = team.stats()
             print(
                 f"sitl_stub: stopping; simulated {stats.sim_elapsed_s:.1f} s in "
@@ -171,11 +357,23 @@ def main(argv: Sequence[str] | None = None) -> int:
             raise UsageError(f"--speedup must be a positive number, got {args.speedup}")
         if not 0.0 <= args.loss <= 1.0:
             raise UsageError(f"--loss must be in [0, 1], got {args.loss}")
+        if not (math.isfinite(args.mission_timeout) and args.mission_timeout > 0):
+            raise UsageError(f"--mission-timeout must be > 0, got {args.mission_timeout}")
         if args.latency_ms < 0:
             raise UsageError(f"--latency-ms must be >= 0, got {args.latency_ms}")
+        if args.start_utc is not None and not (
+            math.isfinite(args.start_utc) and args.start_utc >= 0
+        ):
+            raise UsageError(f"--start-utc must be Unix seconds >= 0, got {args.start_utc}")
+        if args.truth and not Path(args.truth).resolve().parent.is_dir():
+            raise UsageError(f"--truth {args.truth}: directory does not exist")
+        if not (math.isfinite(args.truth_period) and args.truth_period > 0):
+            raise UsageError(f"--truth-period must be a positive number, got {args.truth_period}")
         homes = homes_from_args(args)
+        params = params_from_args(args)
+        blackouts = blackouts_from_args(args)
         with contextlib.suppress(KeyboardInterrupt):
-            asyncio.run(serve(args, homes))
+            asyncio.run(serve(args, homes, params, blackouts))
     except (UsageError, ValueError, OSError) as err:
         print(f"sitl_stub: error: {err}", file=sys.stderr)
         return 2

@@ -7,6 +7,10 @@ Example::
         team.vehicles[0].link.faults(loss=0.3)     # runtime link faults
         t = await team.watch_crossing(0, lat, lon, radius_m=50.0)   # exact simulated time
         print(team.vehicles[0].true_state, team.sim_time_s, team.utc_s)
+
+``SimTeam.start(..., truth_out="truth.jsonl")`` records every vehicle's true state as JSON
+lines (:mod:`sitl_stub.truth`); ``team.schedule_blackout(i, start_sim_s, duration_s)`` cuts a
+vehicle's link at a simulated time.
 """
 
 from __future__ import annotations
@@ -16,6 +20,7 @@ import contextlib
 import math
 from collections.abc import AsyncIterator, Sequence
 from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
 
@@ -24,6 +29,7 @@ from sitl_stub.clock import DEFAULT_EPOCH_UTC_S, ClockStats, SimClock
 from sitl_stub.link import FaultyLink
 from sitl_stub.model import AirframeParams, FlightState, Wind
 from sitl_stub.server import TeamServer
+from sitl_stub.truth import DEFAULT_TRUTH_PERIOD_S, TruthRecorder
 from sitl_stub.vehicle import Vehicle
 
 DEFAULT_TCP_BASE = 5760
@@ -55,6 +61,7 @@ class SimTeam:
         self.server = server
         self.clock = server.clock
         self.vehicles: list[Vehicle] = server.vehicles
+        self.truth: TruthRecorder | None = None  # set by start(truth_out=...)
 
     @classmethod
     @contextlib.asynccontextmanager
@@ -73,13 +80,18 @@ class SimTeam:
         mission_timeout_s: float = 1.5,
         legacy_mission_requests: bool = False,
         run: bool = True,
+        truth_out: str | Path | None = None,
+        truth_period_s: float = DEFAULT_TRUTH_PERIOD_S,
     ) -> AsyncIterator[SimTeam]:
         """Start the team; vehicle ``i`` has system id ``i + 1`` on ``tcp_base + 10*i``.
 
         ``tcp_base=0`` lets the OS pick free ports (see :attr:`ports`). With ``run=False``
         the clock does not run by itself; call :meth:`step` to advance it. With
         ``legacy_mission_requests=True`` the vehicles request upload items with legacy
-        MISSION_REQUEST instead of MISSION_REQUEST_INT (as older ArduPilot does).
+        MISSION_REQUEST instead of MISSION_REQUEST_INT (as older ArduPilot does). With
+        ``truth_out`` the true state of every vehicle is written to that file every
+        ``truth_period_s`` simulated seconds (:class:`~sitl_stub.truth.TruthRecorder`,
+        available as :attr:`truth`; flushed and closed when the team stops).
         """
         team = cls.create(
             homes=homes,
@@ -94,7 +106,17 @@ class SimTeam:
             legacy_mission_requests=legacy_mission_requests,
             tcp_base=tcp_base,
         )
-        await team.server.open()
+        if truth_out is not None:
+            team.truth = TruthRecorder.open(
+                truth_out, team.vehicles, team.clock, period_s=truth_period_s
+            )
+            team.truth.start()
+            team.server.add_step_listener(team.truth.on_step)
+        try:
+            await team.server.open()
+        except BaseException:
+            team._close_truth()
+            raise
         try:
             async with asyncio.TaskGroup() as tg:
                 runner = tg.create_task(team.server.run()) if run else None
@@ -105,6 +127,7 @@ class SimTeam:
                         runner.cancel()
         finally:
             team._cancel_waiters()
+            team._close_truth()
             await team.server.close()
 
     @classmethod
@@ -220,6 +243,37 @@ class SimTeam:
         finally:
             self.server.remove_step_listener(check)
 
+    def schedule_blackout(self, i: int, start_sim_s: float, duration_s: float) -> None:
+        """Cut vehicle ``i``'s link (both ways) from ``start_sim_s`` for ``duration_s``.
+
+        Times are simulated seconds since the clock started. The blackout begins at the first
+        physics step at or after ``start_sim_s`` (at once if that time has passed) and ends at
+        ``start_sim_s + duration_s``; a blackout already running that ends later is kept.
+        """
+        if not 0 <= i < len(self.vehicles):
+            raise ValueError(f"no vehicle {i}: the team has {len(self.vehicles)} (0-based)")
+        if not (math.isfinite(start_sim_s) and start_sim_s >= 0):
+            raise ValueError(f"blackout start must be >= 0 simulated s, got {start_sim_s!r}")
+        if not (math.isfinite(duration_s) and duration_s > 0):
+            raise ValueError(f"blackout duration must be > 0 simulated s, got {duration_s!r}")
+        link = self.vehicles[i].link
+        end_sim_s = start_sim_s + duration_s
+
+        def begin() -> bool:
+            now = self.clock.sim_time_s
+            if now + 1e-9 < start_sim_s:
+                return False
+            if end_sim_s > max(now, link.blackout_until_sim_s):
+                link.blackout(end_sim_s - now)
+            return True
+
+        def listener() -> None:
+            if begin():
+                self.server.remove_step_listener(listener)
+
+        if not begin():
+            self.server.add_step_listener(listener)
+
     def step(self, n: int = 1) -> None:
         """Advance the simulation by ``n`` physics steps now (for ``run=False`` teams)."""
         for _ in range(n):
@@ -228,3 +282,8 @@ class SimTeam:
     def _cancel_waiters(self) -> None:
         for v in self.vehicles:
             v.clear_watches()
+
+    def _close_truth(self) -> None:
+        if self.truth is not None:
+            self.server.remove_step_listener(self.truth.on_step)
+            self.truth.close()

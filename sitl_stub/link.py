@@ -99,6 +99,11 @@ class FaultyLink:
         self._blackout_until_sim_s = self._sim_time_s() + duration_s
 
     @property
+    def blackout_until_sim_s(self) -> float:
+        """When the current (or last) blackout ends, simulated seconds (-inf: none)."""
+        return self._blackout_until_sim_s
+
+    @property
     def in_blackout(self) -> bool:
         until = self._blackout_until_sim_s
         return until != -math.inf and self._sim_time_s() < until

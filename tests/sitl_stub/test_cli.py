@@ -3,12 +3,27 @@
 from __future__ import annotations
 
 import asyncio
+import itertools
+import json
 import math
 import re
 import signal
 import sys
 from pathlib import Path
 
+import numpy as np
+import pytest
+from pymavlink.dialects.v20 import ardupilotmega as mavlink2
+
+from sitl_stub.__main__ import (
+    BlackoutSpec,
+    blackouts_from_args,
+    homes_from_args,
+    main,
+    params_from_args,
+    parse_args,
+)
+from sitl_stub.api import Home
 from tests.sitl_stub.conftest import Client, free_port_base
 
 
@@ -55,11 +70,13 @@ async def test_cli_rejects_bad_home_with_clear_message() -> None:
 
 async def test_cli_scenario_places_each_vehicle_at_its_start() -> None:
     from planner.geo import geodesic_distance_m
+    from planner.plan import build_terrain
     from planner.scenario import load_scenario
 
     path = Path(__file__).resolve().parents[2] / "scenarios" / "paper_three_uav.yaml"
     scenario = load_scenario(path)
     frame = scenario.frame()
+    terrain = build_terrain(scenario)
     starts = []
     for v in scenario.vehicles[:3]:
         lat, lon = frame.to_geodetic(*v.start.local(frame))
@@ -67,7 +84,10 @@ async def test_cli_scenario_places_each_vehicle_at_its_start() -> None:
         start = v.start.local(frame)
         # Grid bearing to the goal; true north differs by the meridian convergence (< 1 deg).
         grid_hdg = math.degrees(math.atan2(goal[0] - start[0], goal[1] - start[1])) % 360.0
-        starts.append((lat, lon, v.start.alt_m, grid_hdg))
+        # On the ground: the terrain elevation at the start, not the start's flight altitude.
+        ground_m = float(terrain.elevation_m(np.array([start[0]]), np.array([start[1]]))[0])
+        assert ground_m < v.start.alt_m - 100.0
+        starts.append((lat, lon, ground_m, grid_hdg))
 
     proc = await asyncio.create_subprocess_exec(
         sys.executable, "-m", "sitl_stub", "--scenario", str(path), "--vehicles", "3",
@@ -100,3 +120,127 @@ async def test_cli_scenario_places_each_vehicle_at_its_start() -> None:
         if proc.returncode is None:
             proc.kill()
             await proc.wait()
+
+
+def test_home_once_per_vehicle_puts_each_vehicle_at_its_own_home() -> None:
+    args = parse_args([
+        "--vehicles", "3", "--home", "-35.36,149.16,584,90", "--home", "-35.0,149.0,600",
+        "--home", "10,20,30,180",
+    ])  # fmt: skip
+    assert homes_from_args(args) == [
+        Home(-35.36, 149.16, 584.0, 90.0),
+        Home(-35.0, 149.0, 600.0, 0.0),
+        Home(10.0, 20.0, 30.0, 180.0),
+    ]
+
+
+def test_one_home_is_shared_with_vehicles_spaced_30_m() -> None:
+    from planner.geo import geodesic_distance_m
+
+    homes = homes_from_args(parse_args(["--vehicles", "3", "--home", "-35.36,149.16,584,90"]))
+    assert (homes[0].lat_deg, homes[0].lon_deg) == pytest.approx((-35.36, 149.16), abs=1e-12)
+    assert all((h.alt_m, h.heading_deg) == (584.0, 90.0) for h in homes)
+    gaps = [
+        geodesic_distance_m(a.lat_deg, a.lon_deg, b.lat_deg, b.lon_deg)
+        for a, b in itertools.pairwise(homes)
+    ]
+    assert gaps == [pytest.approx(30.0, abs=0.01)] * 2
+
+
+def test_airspeed_once_or_per_vehicle_and_blackouts_parse() -> None:
+    args = parse_args(["--vehicles", "2", "--home", "0,0,0", "--airspeed", "16,20,26"])
+    p = params_from_args(args)
+    assert p is not None and len(p) == 2
+    low, cruise, high = p[1].airspeed_min_m_s, p[1].airspeed_cruise_m_s, p[1].airspeed_max_m_s
+    assert (low, cruise, high) == (16, 20, 26)
+    args = parse_args([
+        "--vehicles", "2", "--home", "0,0,0", "--airspeed", "16,16,16", "--airspeed", "9,12,20",
+        "--blackout", "1,30,60", "--blackout", "0,0,5.5",
+    ])  # fmt: skip
+    p = params_from_args(args)
+    assert p is not None and [q.airspeed_max_m_s for q in p] == [16, 20]
+    assert params_from_args(parse_args(["--home", "0,0,0"])) is None
+    assert blackouts_from_args(args) == [BlackoutSpec(1, 30.0, 60.0), BlackoutSpec(0, 0.0, 5.5)]
+
+
+@pytest.mark.parametrize(
+    ("argv", "message"),
+    [
+        (["--vehicles", "3", "--home", "0,0,0", "--home", "1,1,1"], "--home given 2 times"),
+        (["--vehicles", "2", "--home", "0,0,0", "--home", "95,1,1"], "--home '95,1,1'"),
+        (["--home", "0,0,0", "--airspeed", "20,15,30"], "--airspeed needs 0 < MIN"),
+        (["--home", "0,0,0", "--airspeed", "0,15,30"], "--airspeed needs 0 < MIN"),
+        (["--home", "0,0,0", "--airspeed", "15,22,20"], "--airspeed needs 0 < MIN"),
+        (["--home", "0,0,0", "--airspeed", "15,22"], "--airspeed needs 3"),
+        (["--home", "0,0,0", "--airspeed", "a,b,c"], "--airspeed"),
+        (
+            ["--vehicles", "2", "--home", "0,0,0"] + ["--airspeed", "15,22,30"] * 3,
+            "--airspeed given 3 times for --vehicles 2",
+        ),
+        (["--home", "0,0,0", "--blackout", "1,0,5"], "--blackout '1,0,5': I"),
+        (["--home", "0,0,0", "--blackout", "0.5,0,5"], "--blackout '0.5,0,5': I"),
+        (["--home", "0,0,0", "--blackout", "0,-1,5"], "START_S"),
+        (["--home", "0,0,0", "--blackout", "0,1,0"], "DURATION_S"),
+        (["--home", "0,0,0", "--truth-period", "0"], "--truth-period"),
+        (["--home", "0,0,0", "--start-utc", "-5"], "--start-utc"),
+        (["--home", "0,0,0", "--truth", "/no/such/dir/t.jsonl"], "--truth"),
+    ],
+)
+def test_cli_rejects_bad_values_naming_the_option(
+    argv: list[str], message: str, capsys: pytest.CaptureFixture[str]
+) -> None:
+    assert main(argv) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("sitl_stub: error: ") and message in err, err
+    assert err.count("\n") == 1
+
+
+async def test_cli_homes_airspeed_blackout_and_truth_end_to_end(tmp_path: Path) -> None:
+    truth = tmp_path / "truth.jsonl"
+    homes = [(-35.36, 149.16, 584.0), (-35.40, 149.20, 610.0)]
+    proc = await asyncio.create_subprocess_exec(
+        sys.executable, "-m", "sitl_stub", "--vehicles", "2", "--tcp-base", "0",
+        "--speedup", "20", "--home", "-35.36,149.16,584", "--home", "-35.40,149.20,610",
+        "--airspeed", "18,21,27", "--blackout", "1,0,100000", "--truth", str(truth),
+        "--truth-period", "1", "--start-utc", "1704067200",
+        stdout=asyncio.subprocess.PIPE, stderr=asyncio.subprocess.PIPE,
+    )  # fmt: skip
+    try:
+        assert proc.stdout is not None
+        async with asyncio.timeout(20):
+            line = (await proc.stdout.readline()).decode()
+        found = re.search(r"ready, ports \[([\d, ]+)\]", line)
+        assert found, line
+        ports = [int(p) for p in found.group(1).split(",")]
+        c0, c1 = await Client.connect(ports[0]), await Client.connect(ports[1])
+        try:
+            c0.send(mavlink2.MAVLink_param_request_read_message(1, 1, b"AIRSPEED_MIN", -1))
+            param = await c0.recv("PARAM_VALUE")
+            assert param.param_value == pytest.approx(18.0)
+            # Vehicle 1 is blacked out from the start: its client hears nothing.
+            assert await c1.try_recv(lambda _m: True, 1.0) is None
+        finally:
+            await c0.close()
+            await c1.close()
+        proc.send_signal(signal.SIGINT)
+        async with asyncio.timeout(20):
+            _, err = await proc.communicate()
+        assert proc.returncode == 0, err
+    finally:
+        if proc.returncode is None:
+            proc.kill()
+            await proc.wait()
+    lines = [json.loads(x) for x in truth.read_text().splitlines()]
+    assert lines[0]["format"] == "tcgcs-truth/1" and lines[0]["vehicles"] == 2
+    assert lines[0]["speedup"] == 20.0 and lines[0]["period_s"] == 1.0
+    assert lines[0]["start_utc_s"] == 1704067200.0
+    rows = lines[1:]
+    assert len(rows) >= 20 and len(rows) % 2 == 0  # >= 1 s wall at 20x, whole rows
+    for row in rows:
+        lat, lon, alt = homes[row["i"]]
+        assert row["sysid"] == row["i"] + 1
+        assert (row["lat_deg"], row["lon_deg"], row["alt_m"]) == pytest.approx((lat, lon, alt))
+        assert row["armed"] is False and row["groundspeed_m_s"] == 0.0
+    utcs = [r["utc_s"] for r in rows[::2]]
+    assert utcs[0] == pytest.approx(lines[0]["start_utc_s"])
+    assert all(b - a == pytest.approx(1.0) for a, b in itertools.pairwise(utcs))

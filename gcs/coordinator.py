@@ -1,0 +1,956 @@
+"""The arrival-time coordinator: one mission in execution, closed loop on live telemetry.
+
+Plan -> schedule -> compile -> upload -> scheduled launches (the takeoff strategy) -> closed-loop
+speed control (eqs. 6-7 on the remaining route, wind from telemetry, quantised airspeed) ->
+loiter insertion when a vehicle would be early even at its minimum speed (eqs. 8-9, by
+replacing the rest of its mission ahead of the leg it flies) -> a later team arrival when one
+would be late even at its maximum speed. Pop-up threats re-plan the affected vehicles from a
+waypoint ahead of them and re-time the team.
+
+Mission time is the vehicles' UTC (SYSTEM_TIME) through :class:`~gcs.missionclock.MissionClock`;
+nothing here reads the wall clock or knows whether the vehicles are simulated, and every wait
+and timeout scales with the clock's rate, so a rehearsal at 200x runs the same logic as a live
+flight. Planning runs in a worker thread so the links keep being served.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import logging
+import math
+import time
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass, field, replace
+from typing import Any, Literal
+
+import numpy as np
+
+from gcs.arrival import ArrivalController, Decision, LoiterSpec, RouteTrack, SpeedLimits, Wind
+from gcs.errors import GcsError
+from gcs.missionclock import MissionClock
+from gcs.truth import TruthSample, closest_approach
+from gcs.vehicle import Vehicle
+from planner.errors import InfeasibleError, PlannerError
+from planner.mission import (
+    MAV_CMD_DO_CHANGE_SPEED,
+    MAV_CMD_NAV_LOITER_TURNS,
+    MAV_CMD_NAV_WAYPOINT,
+)
+from planner.plan import Method, World, build_world, plan
+from planner.scenario import Scenario, Threat
+from planner.schedule import (
+    Adjustment,
+    Schedule,
+    VehicleSchedule,
+    apply_popup,
+    build_schedule,
+    popup_zones,
+    retime_vehicle,
+)
+from planner.schedulefile import PathMission, path_mission, splice_mission
+from planner.threats import ThreatZone, active, build_threats
+from planner.timing import SpeedLimits as PlannerLimits
+from planner.timing import takeoff_time_s
+
+log = logging.getLogger(__name__)
+
+Phase = Literal["ground", "takeoff", "route", "arrived"]
+FIRST_ROUTE_SEQ = 2
+"""Item 0 is home, item 1 the takeoff; the route starts at item 2."""
+
+
+class InfeasibleRequest(GcsError):
+    """The required arrival cannot be met; refused before launch."""
+
+
+@dataclass(frozen=True)
+class CoordinatorConfig:
+    """Knobs of the closed loop (mission seconds unless named otherwise)."""
+
+    tolerance_s: float = 0.5
+    """An ETA within this of the target needs no loiter and no new team time."""
+    loiter_margin_m_s: float = 1.0
+    """Loiter turns leave the speed this far above the minimum (room to slow down after)."""
+    late_margin_s: float = 2.0
+    """A late vehicle moves the team time to its earliest arrival plus this."""
+    min_lead_s: float = 60.0
+    """Mission changes start at a waypoint at least this far ahead (more at high clock rates:
+    the planning and upload wall time scaled by the rate)."""
+    loiter_min_time_left_s: float = 300.0
+    """No loiter is inserted closer than this to the arrival (the speed trims the rest)."""
+    arrival_radius_m: float = 1000.0
+    """Goal passages are looked for within this distance of the goal."""
+    link_silence_s: float = 3.0
+    """A vehicle silent this long (mission s) is reported; its mission keeps it flying."""
+    runout_m: float = 300.0
+    """A last waypoint this far past the goal, so the aircraft flies through the goal."""
+    final_m: float = 150.0
+    """No speed decisions closer than this to the goal (the autopilot could not act)."""
+    method: Method = "aco"
+    seed: int = 0
+    command_retries: int = 8
+    upload_retries: int = 20
+    overrun_s: float = 900.0
+    """Give up this long after the latest target if a vehicle has not arrived."""
+
+
+@dataclass(frozen=True)
+class CoordEvent:
+    """One decision or observation: mission time, vehicle, kind, strategy, value, reason."""
+
+    utc_s: float
+    t_s: float
+    vehicle: str | None
+    kind: str
+    reason: str
+    strategy: str | None = None
+    value: float | None = None
+
+
+@dataclass
+class Member:
+    """One vehicle of the team in flight."""
+
+    vehicle_id: str
+    vehicle: Vehicle
+    limits: SpeedLimits
+    offset_s: float
+    schedule: VehicleSchedule
+    mission: PathMission
+    track: RouteTrack
+    controller: ArrivalController
+    target_s: float
+    takeoff_s: float
+    phase: Phase = "ground"
+    launched_utc_s: float | None = None
+    level_m_s: float | None = None
+    s_m: float | None = None
+    last_seq: int | None = None
+    next_decision_s: float = -math.inf
+    busy_command: bool = False
+    busy_mission: bool = False
+    last_loiter_s: float = -math.inf
+    arrival_utc_s: float | None = None
+    near_goal: list[TruthSample] = field(default_factory=list)
+    goal_en_m: tuple[float, float] = (0.0, 0.0)
+    last_fix_utc_s: float | None = None
+    last_decision: Decision | None = None
+    track_log: list[list[float]] = field(default_factory=list)
+    commanded: list[list[Any]] = field(default_factory=list)
+    planned_paths: list[dict[str, Any]] = field(default_factory=list)
+    loiter_log: list[dict[str, Any]] = field(default_factory=list)
+
+
+def route_track(vs: VehicleSchedule) -> RouteTrack:
+    loiters = [
+        LoiterSpec(
+            lo.s_m,
+            lo.centre_east_m,
+            lo.centre_north_m,
+            lo.radius_m,
+            lo.turns,
+            lo.clockwise,
+            lo.detour_m,
+        )
+        for lo in sorted(vs.loiters, key=lambda x: x.s_m)
+    ]
+    return RouteTrack(vs.path, loiters)
+
+
+def _path_en(vs: VehicleSchedule, step_m: float = 500.0) -> list[list[float]]:
+    n = max(2, int(vs.path.length_m / step_m) + 1)
+    out = []
+    for s in np.linspace(0.0, vs.path.length_m, n):
+        p = vs.path.pose_at(float(s))
+        out.append([round(p.east_m, 1), round(p.north_m, 1)])
+    return out
+
+
+class Coordinator:
+    """Flies a scenario's team to its required arrival time.
+
+    Use: :meth:`prepare` (plan, schedule, refuse an infeasible request), :meth:`bind` (each
+    scenario vehicle's :class:`~gcs.vehicle.Vehicle`), :meth:`upload_all`, :meth:`run`.
+    """
+
+    def __init__(
+        self,
+        scenario: Scenario,
+        clock: MissionClock,
+        *,
+        config: CoordinatorConfig | None = None,
+        on_event: Callable[[CoordEvent], None] | None = None,
+        required_arrival_s: float | None = None,
+    ) -> None:
+        self.scenario = scenario
+        self.vehicles: dict[str, Vehicle] = {}
+        self.clock = clock
+        self.config = config or CoordinatorConfig()
+        self.on_event = on_event
+        self.requested_arrival_s = required_arrival_s
+        self.rng = np.random.default_rng(self.config.seed)
+        self.frame = scenario.frame()
+        self.events: list[CoordEvent] = []
+        self.adjustments: list[CoordEvent] = []
+        self.members: dict[str, Member] = {}
+        self.schedule: Schedule | None = None
+        self.world: World | None = None
+        self.start_utc_s: float | None = None
+        self.team_ref_s: float | None = None
+        self.plan_wall_s = 1.0
+        self.threats_appeared: list[dict[str, Any]] = []
+        self._extra_threats: list[Threat] = []
+        self._pending_threats: asyncio.Queue[ThreatZone] = asyncio.Queue()
+        self._detach: list[Callable[[], None]] = []
+        self._tasks: set[asyncio.Task[None]] = set()
+        self._popups_done: set[str] = set()
+
+    # -- time ------------------------------------------------------------------------------
+
+    def bind(self, vehicles: Mapping[str, Vehicle]) -> None:
+        """The vehicle flying each scenario vehicle; feeds their SYSTEM_TIME to the clock."""
+        missing = [v.id for v in self.scenario.vehicles if v.id not in vehicles]
+        if missing:
+            raise GcsError(f"no link for vehicle(s) {', '.join(missing)}")
+        self.vehicles = {v.id: vehicles[v.id] for v in self.scenario.vehicles}
+        self.attach_clock()
+
+    def attach_clock(self) -> None:
+        """Feed every vehicle's SYSTEM_TIME into the mission clock."""
+        for vehicle in self.vehicles.values():
+            sysid = vehicle.system_id
+
+            def on_msg(msg: Any, rx_s: float, sysid: int = sysid) -> None:
+                if (
+                    msg.get_type() == "SYSTEM_TIME"
+                    and msg.get_srcSystem() == sysid
+                    and msg.time_unix_usec
+                ):
+                    self.clock.observe(
+                        sysid, msg.time_unix_usec * 1e-6, msg.time_boot_ms * 1e-3, rx_s
+                    )
+
+            self._detach.append(vehicle.link.add_listener(on_msg))
+
+    def now_s(self) -> float:
+        """Mission time now (s since the mission start)."""
+        assert self.start_utc_s is not None
+        return self.clock.now_utc_s() - self.start_utc_s
+
+    def _wall_timeout_s(self, vehicle: Vehicle) -> float:
+        """A reply timeout from the link's round trip, not tuned to any vehicle."""
+        rtt = vehicle.link.counters.rtt_s
+        return float(min(1.5, max(0.05, 5.0 * rtt))) if rtt else 0.25
+
+    def _emit(
+        self,
+        kind: str,
+        reason: str,
+        vehicle: str | None = None,
+        strategy: str | None = None,
+        value: float | None = None,
+        t_s: float | None = None,
+    ) -> CoordEvent:
+        utc = self.clock.now_utc_s() if self.clock.synced else math.nan
+        t = t_s if t_s is not None else (utc - self.start_utc_s if self.start_utc_s else 0.0)
+        ev = CoordEvent(utc, t, vehicle, kind, reason, strategy, value)
+        self.events.append(ev)
+        if strategy is not None:
+            self.adjustments.append(ev)
+        if self.on_event is not None:
+            self.on_event(ev)
+        return ev
+
+    # -- preparation -----------------------------------------------------------------------
+
+    async def prepare(self) -> Schedule:
+        """Plan, schedule and check the request; refuse an infeasible one before launch.
+
+        Raises
+        ------
+        InfeasibleRequest
+            The required arrival cannot be met: names the earliest feasible time and the
+            vehicle that forces it.
+        """
+        t0 = time.perf_counter()
+        schedule = await asyncio.to_thread(self._plan)
+        self.plan_wall_s = time.perf_counter() - t0
+        self.schedule = schedule
+        self.team_ref_s = schedule.required_arrival_s
+        for a in schedule.adjustments:
+            self._emit("plan", a.reason, a.vehicle, a.strategy, a.value, t_s=a.time_s)
+        return schedule
+
+    def _plan(self) -> Schedule:
+        scenario = self.scenario
+        if self.requested_arrival_s is not None:
+            arrival = scenario.arrival
+            if arrival.kind == "simultaneous":
+                arrival = arrival.model_copy(update={"required_s": self.requested_arrival_s})
+            elif arrival.kind == "spaced":
+                arrival = arrival.model_copy(update={"first_s": self.requested_arrival_s})
+            else:
+                raise InfeasibleRequest("a required arrival time needs a team arrival kind")
+            scenario = scenario.model_copy(update={"arrival": arrival})
+            self.scenario = scenario
+        world = build_world(scenario)
+        self.world = world
+        try:
+            p = plan(scenario, method=self.config.method, rng=self.rng, world=world)
+            schedule = build_schedule(scenario, p, world=world)
+        except InfeasibleError as err:
+            raise InfeasibleRequest(f"refused before launch: {err}") from None
+        requested = schedule.requested_arrival_s
+        ref = schedule.required_arrival_s
+        if requested is not None and ref is not None and abs(ref - requested) > 1e-3:
+            raise InfeasibleRequest(
+                f"refused before launch: required arrival {requested:.1f} s cannot be met; "
+                f"earliest feasible {ref:.1f} s ({schedule.arrival_reason})"
+            )
+        return schedule
+
+    async def upload_all(self) -> None:
+        """Compile each vehicle's mission and upload it (verified by download)."""
+        assert self.schedule is not None and self.world is not None
+        schedule = self.schedule
+        for vs in schedule.vehicles:
+            v = self.scenario.vehicle(vs.vehicle_id)
+            pm = path_mission(schedule, vs, self.world.terrain, runout_m=self.config.runout_m)
+            goal = vs.path.end
+            step = schedule.step_m_s
+            limits = SpeedLimits(v.speed_min_m_s, v.speed_max_m_s, step)
+            offset = schedule.offsets_s.get(v.id, 0.0)
+            target = (self.team_ref_s or vs.arrival_s) + offset
+            m = Member(
+                v.id,
+                self.vehicles[v.id],
+                limits,
+                offset,
+                vs,
+                pm,
+                route_track(vs),
+                ArrivalController(limits, tolerance_s=self.config.tolerance_s),
+                target if self.team_ref_s is not None else vs.arrival_s,
+                vs.takeoff_s,
+                goal_en_m=(goal.east_m, goal.north_m),
+            )
+            m.planned_paths.append({"label": "initial", "t_s": 0.0, "en_m": _path_en(vs)})
+            self.members[v.id] = m
+        await asyncio.gather(
+            *(self._upload(m, m.mission, "initial mission") for m in self.members.values())
+        )
+
+    async def _upload(self, m: Member, pm: PathMission, what: str) -> None:
+        """Upload, restarting the whole transfer (a vehicle may drop a stalled one) twice."""
+        v = m.vehicle
+        for attempt in range(3):
+            try:
+                await v.upload_mission(
+                    list(pm.items),
+                    timeout_s=self._wall_timeout_s(v),
+                    retries=self.config.upload_retries,
+                    verify=m.phase == "ground",
+                )
+                break
+            except GcsError as err:
+                if attempt == 2:
+                    raise
+                log.info("%s: %s upload failed (%s); starting it again", m.vehicle_id, what, err)
+        if self.start_utc_s is not None:
+            self._emit("upload", f"{what}: {len(pm.items)} items", m.vehicle_id)
+
+    # -- the flight ------------------------------------------------------------------------
+
+    def add_threat(self, threat: Threat, at_s: float | None = None) -> None:
+        """A threat that appears now (or at mission time ``at_s``): re-plan around it."""
+        scenario = self.scenario.model_copy(update={"threats": [*self.scenario.threats, threat]})
+        zone = build_threats(scenario, {})[-1]
+        appears = self.now_s() if at_s is None else at_s
+        zone = replace(zone, appears_at_s=appears)
+        self._extra_threats.append(threat)
+        self._pending_threats.put_nowait(zone)
+
+    async def run(self, start_utc_s: float | None = None) -> None:
+        """Launch on schedule and hold the arrival times until every vehicle has arrived."""
+        if not self.members:
+            await self.upload_all()
+        if start_utc_s is None:
+            start_utc_s = self.clock.now_utc_s() + max(5.0, 2.0 * self.clock.rate)
+        self.start_utc_s = start_utc_s
+        self._emit(
+            "start",
+            f"mission start at UTC {start_utc_s:.1f}; team arrival "
+            f"{self.fmt_ref()} ({self.schedule.arrival_reason if self.schedule else ''})",
+            t_s=0.0,
+        )
+        async with asyncio.TaskGroup() as tg:
+            for m in self.members.values():
+                tg.create_task(self._fly(m))
+            tg.create_task(self._timeline())
+
+    def fmt_ref(self) -> str:
+        return "per-vehicle" if self.team_ref_s is None else f"{self.team_ref_s:.1f} s"
+
+    def _all_arrived(self) -> bool:
+        return all(m.phase == "arrived" for m in self.members.values())
+
+    def _deadline_s(self) -> float:
+        return max(m.target_s for m in self.members.values()) + self.config.overrun_s
+
+    async def _timeline(self) -> None:
+        """Launches at their takeoff times, scenario pop-ups, operator threats."""
+        while not self._all_arrived():
+            now = self.now_s()
+            if now > self._deadline_s():
+                self._emit("abort", "mission overran its last target; stopping the loop")
+                for m in self.members.values():
+                    m.phase = "arrived"
+                return
+            for m in self.members.values():
+                if m.phase == "ground" and now >= m.takeoff_s:
+                    m.phase = "takeoff"
+                    self._spawn(self._launch(m))
+            for zone in self._due_popups(now):
+                await self._popup(zone)
+            while not self._pending_threats.empty():
+                await self._popup(self._pending_threats.get_nowait())
+            await self.clock.sleep(1.0)
+
+    def _due_popups(self, now: float) -> list[ThreatZone]:
+        takeoffs = {
+            m.vehicle_id: m.launched_utc_s - (self.start_utc_s or 0.0)
+            for m in self.members.values()
+            if m.launched_utc_s is not None
+        }
+        out = []
+        for z in popup_zones(build_threats(self.scenario, takeoffs)):
+            if z.id not in self._popups_done and (z.appears_at_s or math.inf) <= now:
+                self._popups_done.add(z.id)
+                out.append(z)
+        return out
+
+    def _spawn(self, coro: Any) -> None:
+        task = asyncio.get_running_loop().create_task(coro)
+        self._tasks.add(task)
+        task.add_done_callback(self._tasks.discard)
+
+    async def _launch(self, m: Member) -> None:
+        v = m.vehicle
+        timeout = self._wall_timeout_s(v)
+        retries = self.config.command_retries
+        try:
+            await v.arm(timeout_s=timeout, retries=retries)
+            await v.set_mode("AUTO", timeout_s=timeout, retries=retries)
+        except GcsError as err:
+            self._emit("launch", f"launch failed: {err}; retrying", m.vehicle_id)
+            m.phase = "ground"
+            return
+        m.launched_utc_s = self.clock.now_utc_s()
+        t = m.launched_utc_s - (self.start_utc_s or 0.0)
+        self._emit(
+            "launch",
+            f"armed and AUTO at {t:.1f} s (scheduled takeoff {m.takeoff_s:.1f} s)",
+            m.vehicle_id,
+        )
+
+    # -- per-vehicle loop --------------------------------------------------------------------
+
+    async def _fly(self, m: Member) -> None:
+        sub = m.vehicle.link.subscribe({"GLOBAL_POSITION_INT"}, m.vehicle.system_id, maxsize=64)
+        try:
+            silent = False
+            while m.phase != "arrived":
+                msg = await sub.get(timeout_s=0.05)
+                if msg is None:
+                    silent = self._check_link(m, silent)
+                    continue
+                if silent:
+                    silent = False
+                    gap = self.now_s() - (m.last_fix_utc_s or 0.0) + (self.start_utc_s or 0.0)
+                    self._emit(
+                        "link", f"telemetry back after {gap:.1f} s; re-deciding", m.vehicle_id
+                    )
+                    m.next_decision_s = -math.inf
+                self._on_fix(m)
+        finally:
+            sub.close()
+
+    def _check_link(self, m: Member, silent: bool) -> bool:
+        """Say when a flying vehicle's position reports stop (the mission carries on)."""
+        if silent or m.last_fix_utc_s is None or self.start_utc_s is None:
+            return silent
+        age = self.clock.now_utc_s() - m.last_fix_utc_s
+        if m.phase in ("takeoff", "route") and age > self.config.link_silence_s:
+            self._emit(
+                "link",
+                f"no position for {age:.1f} s: the vehicle flies its uploaded mission and "
+                "last speed meanwhile",
+                m.vehicle_id,
+            )
+            return True
+        return False
+
+    def _on_fix(self, m: Member) -> None:
+        st = m.vehicle.state
+        if st.lat_deg is None or st.lon_deg is None or st.position_time_boot_s is None:
+            return
+        utc = self.clock.utc_of_boot(m.vehicle.system_id, st.position_time_boot_s)
+        if utc is None or self.start_utc_s is None:
+            return
+        if m.last_fix_utc_s is not None and utc <= m.last_fix_utc_s:
+            return
+        m.last_fix_utc_s = utc
+        t = utc - self.start_utc_s
+        e, n = self.frame.to_local(st.lat_deg, st.lon_deg)
+        e, n = float(e), float(n)
+        if not m.track_log or utc - m.track_log[-1][0] >= 2.0:
+            m.track_log.append(
+                [
+                    round(utc, 3),
+                    round(e, 1),
+                    round(n, 1),
+                    round(st.alt_amsl_m or 0.0, 1),
+                    round(st.airspeed_m_s or 0.0, 2),
+                    round(st.groundspeed_m_s or 0.0, 2),
+                ]
+            )
+        seq = st.mission_current_seq
+        if m.phase == "takeoff":
+            if m.launched_utc_s is not None and seq is not None and seq >= FIRST_ROUTE_SEQ:
+                m.phase = "route"
+                self._emit("route", f"climb-out done at {t:.1f} s, on the route", m.vehicle_id)
+            else:
+                return
+        if m.phase != "route":
+            return
+        seq_changed = seq != m.last_seq
+        if seq_changed and seq is not None:
+            self._passed_items(m, m.last_seq, seq)
+            m.last_seq = seq
+        self._watch_goal(m, utc, e, n, st)
+        if m.phase != "route":
+            return
+        s, _xt = m.track.locate(e, n, m.s_m)
+        m.s_m = s
+        in_loiter = (
+            seq is not None
+            and m.mission.items[min(seq, len(m.mission.items) - 1)].command
+            == MAV_CMD_NAV_LOITER_TURNS
+        )
+        if in_loiter or m.busy_mission:
+            return
+        if not seq_changed and t < m.next_decision_s:
+            return
+        if m.track.length_m - s < self.config.final_m:
+            return
+        self._decide(m, t, s, st)
+
+    def _passed_items(self, m: Member, old: int | None, new: int) -> None:
+        """DO_CHANGE_SPEED items the vehicle ran set the airspeed it flies."""
+        lo = FIRST_ROUTE_SEQ if old is None else old
+        for k in range(lo, min(new, len(m.mission.items))):
+            it = m.mission.items[k]
+            if it.command == MAV_CMD_DO_CHANGE_SPEED and it.param2 > 0:
+                m.level_m_s = float(it.param2)
+                m.next_decision_s = -math.inf
+
+    def _loiters_done(self, m: Member) -> int:
+        seq = m.last_seq or 0
+        return sum(
+            1
+            for k, it in enumerate(m.mission.items)
+            if it.command == MAV_CMD_NAV_LOITER_TURNS and k < seq
+        )
+
+    def _wind(self, st: Any) -> Wind:
+        if st.wind_speed_m_s is not None and st.wind_from_deg is not None:
+            return Wind.from_speed_from(st.wind_speed_m_s, st.wind_from_deg)
+        if (
+            st.airspeed_m_s is not None
+            and st.heading_deg is not None
+            and st.vn_m_s is not None
+            and st.ve_m_s is not None
+        ):
+            h = math.radians(st.heading_deg)
+            return Wind(
+                st.ve_m_s - st.airspeed_m_s * math.sin(h), st.vn_m_s - st.airspeed_m_s * math.cos(h)
+            )
+        return Wind()
+
+    def _decide(self, m: Member, t: float, s: float, st: Any) -> None:
+        d = m.controller.decide(
+            m.track,
+            s_m=s,
+            now_s=t,
+            target_s=m.target_s,
+            wind=self._wind(st),
+            current_level_m_s=m.level_m_s,
+            loiters_done=self._loiters_done(m),
+        )
+        m.last_decision = d
+        time_left = m.target_s - t
+        m.next_decision_s = t + ArrivalController.period_s(time_left)
+        if d.command_m_s is not None and not m.busy_command:
+            m.busy_command = True
+            self._spawn(self._command_speed(m, d, t))
+        if d.verdict == "late":
+            self._late(m, d, t)
+        elif (
+            d.verdict == "early"
+            and time_left > self.config.loiter_min_time_left_s
+            and t - m.last_loiter_s > 120.0
+        ):
+            m.last_loiter_s = t
+            self._spawn(self._insert_loiter(m, d, t, s))
+
+    async def _command_speed(self, m: Member, d: Decision, t: float) -> None:
+        assert d.command_m_s is not None
+        v = m.vehicle
+        try:
+            await v.change_speed(
+                d.command_m_s,
+                timeout_s=self._wall_timeout_s(v),
+                retries=self.config.command_retries,
+            )
+        except GcsError as err:
+            self._emit("speed", f"speed command failed ({err}); will retry", m.vehicle_id)
+            m.next_decision_s = -math.inf
+            return
+        finally:
+            m.busy_command = False
+        m.level_m_s = d.command_m_s
+        m.commanded.append([round(self.clock.now_utc_s(), 3), d.command_m_s, "command"])
+        self._emit("speed", d.reason, m.vehicle_id, "speed", d.command_m_s, t_s=t)
+
+    # -- lateness: move the team time ---------------------------------------------------------
+
+    def _late(self, m: Member, d: Decision, t: float) -> None:
+        ref = self.team_ref_s
+        if ref is None:
+            return
+        new_ref = d.eta_min_s - m.offset_s + self.config.late_margin_s
+        if new_ref <= ref:
+            return
+        self.team_ref_s = new_ref
+        self._emit(
+            "arrival",
+            f"team arrival moved {ref:.1f} -> {new_ref:.1f} s: {m.vehicle_id} cannot arrive "
+            f"before {d.eta_min_s:.1f} s even at {m.limits.airspeed_max_m_s:g} m/s",
+            m.vehicle_id,
+            value=new_ref,
+            t_s=t,
+        )
+        for other in self.members.values():
+            other.target_s = new_ref + other.offset_s
+            other.next_decision_s = -math.inf
+            if other.phase == "ground":
+                self._retime_takeoff(other, t)
+
+    def _retime_takeoff(self, m: Member, t: float) -> None:
+        v = self.scenario.vehicle(m.vehicle_id)
+        limits = PlannerLimits(v.speed_min_m_s, v.speed_max_m_s, v.cruise_m_s, m.limits.step_m_s)
+        window = (max(v.takeoff_window_s[0], t), max(v.takeoff_window_s[1], t))
+        new = takeoff_time_s(m.schedule.path.length_m, m.target_s, limits, window)
+        if abs(new - m.takeoff_s) > 0.5:
+            m.takeoff_s = new
+            self._emit(
+                "takeoff",
+                f"take off at {new:.1f} s to arrive at {m.target_s:.1f} s (eq. 5)",
+                m.vehicle_id,
+                "takeoff_delay",
+                round(new, 3),
+                t_s=t,
+            )
+
+    # -- mission changes --------------------------------------------------------------------
+
+    def _lead_s(self) -> float:
+        """How far ahead (mission s) a changed mission may start: planning and upload time."""
+        wall = self.plan_wall_s + 0.3
+        return max(self.config.min_lead_s, 1.5 * wall * self.clock.rate)
+
+    def _keep_seq(self, m: Member, lead_m: float) -> int | None:
+        """The first route waypoint at least ``lead_m`` ahead of the vehicle."""
+        s_now = m.s_m or 0.0
+        seq = max(m.last_seq or FIRST_ROUTE_SEQ, FIRST_ROUTE_SEQ)
+        for k in range(seq, len(m.mission.items)):
+            it = m.mission.items[k]
+            s = m.mission.item_s_m[k]
+            if it.command == MAV_CMD_NAV_WAYPOINT and s is not None and s >= s_now + lead_m:
+                return k
+        return None
+
+    def _speed_now(self, m: Member) -> float:
+        return float(m.level_m_s or self.scenario.vehicle(m.vehicle_id).cruise_m_s)
+
+    async def _insert_loiter(self, m: Member, d: Decision, t: float, s: float) -> None:
+        assert self.schedule is not None
+        gs = max(m.vehicle.state.groundspeed_m_s or 0.0, 10.0)
+        keep = self._keep_seq(m, gs * self._lead_s())
+        if keep is None:
+            return
+        s_k = m.mission.item_s_m[keep]
+        assert s_k is not None
+        t_k = t + (s_k - s) / gs
+        threats = self._in_force(t)
+        # The planner's loiter arithmetic (eq. 8) is in still air; give it the surplus the
+        # wind-aware ETA found, as a still-air target from the splice waypoint.
+        v_min = m.limits.airspeed_min_m_s
+        surplus = m.target_s - d.eta_max_s
+        target_still_air = t_k + (m.track.length_m - s_k) / v_min + surplus
+        m.busy_mission = True
+        try:
+            schedule = self._current_schedule()
+            vs, adjustments = await asyncio.to_thread(
+                retime_vehicle,
+                schedule,
+                m.vehicle_id,
+                now_s=t_k,
+                s_m=s_k,
+                speed_m_s=self._speed_now(m),
+                target_s=target_still_air,
+                threats=threats,
+                loiter_margin_m_s=self.config.loiter_margin_m_s,
+            )
+            if not vs.loiters or all(lo.s_m < s_k for lo in vs.loiters):
+                return
+            await self._install(m, vs, keep, "loiter inserted")
+            for a in adjustments:
+                self._record_adjustment(a, t)
+        except (InfeasibleError, PlannerError) as err:
+            self._emit("loiter", f"no loiter possible: {err}", m.vehicle_id, t_s=t)
+        except GcsError as err:
+            self._emit("loiter", f"mission upload failed ({err}); flying on", m.vehicle_id, t_s=t)
+        finally:
+            m.busy_mission = False
+
+    def _record_adjustment(self, a: Adjustment, t: float) -> None:
+        if a.strategy == "loiter":
+            self._emit("loiter", a.reason, a.vehicle, "loiter", a.value, t_s=t)
+        elif a.strategy == "takeoff_delay":
+            self._emit("takeoff", a.reason, a.vehicle, "takeoff_delay", a.value, t_s=t)
+        else:
+            self._emit("plan", a.reason, a.vehicle, None, a.value, t_s=t)
+
+    async def _install(self, m: Member, vs: VehicleSchedule, keep: int | None, what: str) -> None:
+        """Upload the vehicle's new schedule (spliced after item ``keep`` when flying)."""
+        assert self.schedule is not None and self.world is not None
+        new = path_mission(self.schedule, vs, self.world.terrain, runout_m=self.config.runout_m)
+        pm = new if keep is None else splice_mission(m.mission, keep, new)
+        await self._upload(m, pm, what)
+        m.mission = pm
+        m.schedule = vs
+        m.track = route_track(vs)
+        m.next_decision_s = -math.inf
+        t = self.now_s()
+        s_k = 0.0 if keep is None else (m.mission.item_s_m[keep] or 0.0)
+        m.loiter_log = [x for x in m.loiter_log if x["s_m"] < s_k]
+        for lo in vs.loiters:
+            if lo.s_m >= s_k:
+                m.loiter_log.append(
+                    {
+                        "s_m": lo.s_m,
+                        "centre_east_m": lo.centre_east_m,
+                        "centre_north_m": lo.centre_north_m,
+                        "radius_m": lo.radius_m,
+                        "turns": lo.turns,
+                        "buffer_id": lo.buffer_id,
+                        "t_s": t,
+                    }
+                )
+        self.schedule = replace(
+            self.schedule,
+            vehicles=tuple(
+                vs if x.vehicle_id == m.vehicle_id else x for x in self.schedule.vehicles
+            ),
+        )
+
+    def _current_schedule(self) -> Schedule:
+        """The schedule with today's targets as its arrival times."""
+        assert self.schedule is not None
+        vehicles = tuple(
+            replace(
+                self.members[vs.vehicle_id].schedule, arrival_s=self.members[vs.vehicle_id].target_s
+            )
+            for vs in self.schedule.vehicles
+        )
+        return replace(self.schedule, vehicles=vehicles, required_arrival_s=self.team_ref_s)
+
+    def _in_force(self, t: float) -> list[ThreatZone]:
+        takeoffs = {
+            m.vehicle_id: m.launched_utc_s - (self.start_utc_s or 0.0)
+            for m in self.members.values()
+            if m.launched_utc_s is not None
+        }
+        scenario = self.scenario.model_copy(
+            update={"threats": [*self.scenario.threats, *self._extra_threats]}
+        )
+        zones = build_threats(scenario, takeoffs)
+        return list(active(zones, t))
+
+    async def _popup(self, zone: ThreatZone) -> None:
+        """Re-plan around a new threat from waypoints ahead, re-time, re-upload."""
+        t = self.now_s()
+        self.threats_appeared.append({"id": zone.id, "utc_s": self.clock.now_utc_s(), "t_s": t})
+        lead = self._lead_s()
+        while True:
+            try:
+                await self._replan_around(zone, t, lead)
+                return
+            except InfeasibleError as err:
+                if "inside forbidden zone" not in str(err) or lead <= self.config.min_lead_s:
+                    self._emit("popup", f"re-plan around {zone.id} failed: {err}", t_s=t)
+                    return
+                lead = max(self.config.min_lead_s, lead / 2.0)
+                self._emit("popup", f"{err}; re-planning from {lead:.0f} s ahead", t_s=t)
+
+    async def _replan_around(self, zone: ThreatZone, t: float, lead: float) -> None:
+        assert self.world is not None
+        at_s = t + lead
+        anchors: dict[str, tuple[float, float]] = {}
+        keeps: dict[str, int | None] = {}
+        for m in self.members.values():
+            if m.phase == "arrived":
+                continue
+            if m.phase == "ground" and m.takeoff_s > at_s:
+                keeps[m.vehicle_id] = None
+                continue
+            gs = max(m.vehicle.state.groundspeed_m_s or 0.0, 10.0)
+            keep = self._keep_seq(m, gs * lead) if m.phase == "route" else None
+            if keep is None:
+                self._emit(
+                    "popup",
+                    f"{zone.id}: no waypoint far enough ahead to re-plan from",
+                    m.vehicle_id,
+                )
+                continue
+            s_k = m.mission.item_s_m[keep]
+            assert s_k is not None
+            anchors[m.vehicle_id] = (s_k, self._speed_now(m))
+            keeps[m.vehicle_id] = keep
+        threats = (
+            [*self._in_force(t), zone]
+            if zone.id not in {z.id for z in self._in_force(t)}
+            else self._in_force(t)
+        )
+        world = replace(self.world, threats=tuple(threats))
+        self._emit("popup", f"threat {zone.id} appears; re-planning from {lead:.0f} s ahead", t_s=t)
+        t0 = time.perf_counter()
+        try:
+            outcome = await asyncio.to_thread(
+                apply_popup,
+                self._current_schedule(),
+                zone,
+                at_s=at_s,
+                world=world,
+                threats=threats,
+                method=self.config.method,
+                rng=self.rng,
+                anchors=anchors,
+                loiter_margin_m_s=self.config.loiter_margin_m_s,
+            )
+        except PlannerError as err:
+            if isinstance(err, InfeasibleError):
+                raise
+            self._emit("popup", f"re-plan around {zone.id} failed: {err}", t_s=t)
+            return
+        self.plan_wall_s = max(self.plan_wall_s, time.perf_counter() - t0)
+        for ev in outcome.events:
+            self._emit(ev.kind, ev.text, t_s=t)
+        new_ref = outcome.schedule.required_arrival_s
+        if (
+            new_ref is not None
+            and self.team_ref_s is not None
+            and abs(new_ref - self.team_ref_s) > 1e-3
+        ):
+            self.team_ref_s = new_ref
+        for a in outcome.adjustments:
+            self._record_adjustment(a, t)
+        installs = []
+        for m in self.members.values():
+            vs = outcome.schedule.vehicle(m.vehicle_id)
+            if new_ref is not None:
+                m.target_s = new_ref + m.offset_s
+            m.next_decision_s = -math.inf
+            if vs is m.schedule or m.vehicle_id not in keeps:
+                continue
+            if m.vehicle_id in outcome.affected:
+                m.planned_paths.append(
+                    {"label": f"after {zone.id}", "t_s": t, "en_m": _path_en(vs)}
+                )
+            if m.phase == "ground":
+                m.takeoff_s = vs.takeoff_s
+            installs.append(self._install_guarded(m, vs, keeps[m.vehicle_id], f"after {zone.id}"))
+        await asyncio.gather(*installs)
+
+    async def _install_guarded(
+        self, m: Member, vs: VehicleSchedule, keep: int | None, what: str
+    ) -> None:
+        m.busy_mission = True
+        try:
+            if keep is not None and (m.last_seq or 0) > keep:
+                self._emit(
+                    "upload",
+                    f"{what}: the vehicle passed the splice waypoint; not installed",
+                    m.vehicle_id,
+                )
+                return
+            await self._install(m, vs, keep, what)
+        except GcsError as err:
+            self._emit("upload", f"{what}: upload failed ({err})", m.vehicle_id)
+        finally:
+            m.busy_mission = False
+
+    # -- arrival ------------------------------------------------------------------------------
+
+    def _watch_goal(self, m: Member, utc: float, e: float, n: float, st: Any) -> None:
+        d = math.hypot(e - m.goal_en_m[0], n - m.goal_en_m[1])
+        if d > self.config.arrival_radius_m:
+            if m.near_goal:
+                self._arrive(m)
+            return
+        m.near_goal.append(
+            TruthSample(
+                utc,
+                st.lat_deg,
+                st.lon_deg,
+                st.alt_amsl_m or 0.0,
+                st.airspeed_m_s or 0.0,
+                st.groundspeed_m_s or 0.0,
+                True,
+            )
+        )
+        if len(m.near_goal) >= 3:
+            d_prev = self._goal_distance(m, m.near_goal[-2])
+            if d > d_prev + 1.0:
+                self._arrive(m)
+
+    def _goal_distance(self, m: Member, s: TruthSample) -> float:
+        e, n = self.frame.to_local(s.lat_deg, s.lon_deg)
+        return math.hypot(float(e) - m.goal_en_m[0], float(n) - m.goal_en_m[1])
+
+    def _arrive(self, m: Member) -> None:
+        glat, glon = self.frame.to_geodetic(*m.goal_en_m)
+        ca = closest_approach(m.near_goal, float(glat), float(glon), self.config.arrival_radius_m)
+        utc = ca[0] if ca is not None else m.near_goal[-1].utc_s
+        m.arrival_utc_s = utc
+        m.phase = "arrived"
+        t = utc - (self.start_utc_s or 0.0)
+        self._emit(
+            "arrived",
+            f"passed the goal at {t:.2f} s (target {m.target_s:.2f} s, "
+            f"error {t - m.target_s:+.2f} s; telemetry)",
+            m.vehicle_id,
+            value=round(t - m.target_s, 3),
+            t_s=t,
+        )
+
+    async def close(self) -> None:
+        for task in list(self._tasks):
+            task.cancel()
+        for task in list(self._tasks):
+            with contextlib.suppress(asyncio.CancelledError, Exception):
+                await task
+        for detach in self._detach:
+            detach()

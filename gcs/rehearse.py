@@ -1,0 +1,480 @@
+"""``python -m gcs rehearse``: fly a scenario's mission against stub vehicles (or vehicles
+already running, with ``--connect``) and report how well the team held its arrival time.
+
+Without ``--connect`` the rehearsal starts ``python -m sitl_stub`` in a child process, one
+vehicle per scenario vehicle on the ground at its start (nose along its planned path), with the
+scenario's airspeed limits, the wind, loss and seed asked for and a truth log of the simulated
+states. The coordinator reaches those vehicles over TCP exactly as it would reach any others;
+the truth log is read only afterwards, for the true goal crossings and separations.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import json
+import math
+import signal
+import socket
+import subprocess
+import sys
+import tempfile
+import time
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from gcs.coordinator import CoordEvent, Coordinator, CoordinatorConfig, Member
+from gcs.errors import GcsError
+from gcs.link import Link
+from gcs.missionclock import MissionClock
+from gcs.truth import TruthSample, closest_approach, min_separation, read_truth
+from gcs.vehicle import Vehicle
+from planner.plan import build_terrain
+from planner.scenario import Scenario
+
+FLIGHT_FORMAT = "tcgcs-flight/1"
+
+
+@dataclass(frozen=True)
+class Blackout:
+    vehicle_id: str
+    start_s: float
+    """Mission time (s) at which the link goes dark."""
+    duration_s: float
+
+
+@dataclass
+class RehearsalOptions:
+    scenario_path: Path
+    scenario: Scenario
+    speedup: float = 200.0
+    wind: tuple[float, float] | None = None
+    loss: float = 0.0
+    seed: int = 0
+    connect: Sequence[str] = ()
+    json_out: Path | None = None
+    report_dir: Path | None = None
+    required_arrival_s: float | None = None
+    blackouts: Sequence[Blackout] = ()
+    threats_from: Path | None = None
+    quiet: bool = False
+    config: CoordinatorConfig = field(default_factory=CoordinatorConfig)
+
+
+def _free_tcp_base(n: int) -> int:
+    """A base port with ``n`` free ports at stride 10 (SITL layout)."""
+    for _ in range(50):
+        with socket.socket() as sock:
+            sock.bind(("127.0.0.1", 0))
+            base = int(sock.getsockname()[1])
+        if base + 10 * n > 65000:
+            continue
+        ok = True
+        for i in range(n):
+            with socket.socket() as sock:
+                try:
+                    sock.bind(("127.0.0.1", base + 10 * i))
+                except OSError:
+                    ok = False
+                    break
+        if ok:
+            return base
+    raise GcsError("no free TCP ports for the stub vehicles")
+
+
+def _stub_homes(coord: Coordinator) -> list[str]:
+    assert coord.schedule is not None
+    scenario = coord.scenario
+    frame = scenario.frame()
+    terrain = build_terrain(scenario)
+    out = []
+    for vs in coord.schedule.vehicles:
+        start = vs.path.start
+        ground = float(terrain.elevation_m(np.array([start.east_m]), np.array([start.north_m]))[0])
+        lat, lon = frame.to_geodetic(start.east_m, start.north_m)
+        out.append(
+            f"{float(lat):.8f},{float(lon):.8f},{ground:.1f},{math.degrees(start.heading_rad):.2f}"
+        )
+    return out
+
+
+def _stub_command(
+    opts: RehearsalOptions, coord: Coordinator, base: int, truth: Path, start_utc_s: float
+) -> list[str]:
+    scenario = opts.scenario
+    cmd = [
+        sys.executable,
+        "-m",
+        "sitl_stub",
+        "--vehicles",
+        str(len(scenario.vehicles)),
+        "--tcp-base",
+        str(base),
+        "--speedup",
+        repr(opts.speedup),
+        "--seed",
+        str(opts.seed),
+        "--loss",
+        repr(opts.loss),
+        "--truth",
+        str(truth),
+        "--start-utc",
+        repr(start_utc_s),
+        # The stub re-requests a lost mission item after this many WALL seconds. ArduPilot's
+        # 1.5 s suits radio links; on loopback at 200x one such wait is 300 s of mission.
+        "--mission-timeout",
+        "0.05",
+    ]
+    for home in _stub_homes(coord):
+        cmd += ["--home", home]
+    for v in scenario.vehicles:
+        cmd += ["--airspeed", f"{v.speed_min_m_s:g},{v.cruise_m_s:g},{v.speed_max_m_s:g}"]
+    if opts.wind is not None:
+        cmd += ["--wind", f"{opts.wind[0]:g},{opts.wind[1]:g}"]
+    if opts.blackouts:
+        cmd += ["--control-stdin"]
+    return cmd
+
+
+async def _wait_ready(proc: asyncio.subprocess.Process, timeout_s: float = 30.0) -> None:
+    assert proc.stdout is not None
+    async with asyncio.timeout(timeout_s):
+        while True:
+            line = await proc.stdout.readline()
+            if not line:
+                err = b""
+                if proc.stderr is not None:
+                    err = await proc.stderr.read()
+                raise GcsError(f"sitl_stub exited before it was ready: {err.decode().strip()}")
+            if b"ready" in line:
+                return
+
+
+class Progress:
+    """One status line per vehicle every so often while the mission runs."""
+
+    def __init__(self, coord: Coordinator, quiet: bool) -> None:
+        self.coord = coord
+        self.quiet = quiet
+
+    def event(self, ev: CoordEvent) -> None:
+        if self.quiet or ev.kind in ("upload",):
+            return
+        who = f"{ev.vehicle:>6}" if ev.vehicle else "  team"
+        print(f"{ev.t_s:9.1f} s {who} {ev.kind:<8} {ev.reason}", flush=True)
+
+    async def run(self, every_wall_s: float = 5.0) -> None:
+        while True:
+            await asyncio.sleep(every_wall_s)
+            if self.quiet or self.coord.start_utc_s is None:
+                continue
+            t = self.coord.now_s()
+            parts = []
+            for m in self.coord.members.values():
+                parts.append(_member_line(m))
+            print(f"{t:9.1f} s  | " + " | ".join(parts), flush=True)
+
+
+def _member_line(m: Member) -> str:
+    d = m.last_decision
+    eta = "" if d is None else f" eta {d.error_s:+.1f}s"
+    s = "" if m.s_m is None else f" {m.s_m / 1000:.1f}/{m.track.length_m / 1000:.1f} km"
+    lvl = "" if m.level_m_s is None else f" {m.level_m_s:g} m/s"
+    return f"{m.vehicle_id} {m.phase}{s}{lvl}{eta}"
+
+
+async def _watch_threats(coord: Coordinator, path: Path) -> None:
+    """Threats appended to a file (one JSON threat per line) appear when read."""
+    from pydantic import TypeAdapter, ValidationError
+
+    from planner.scenario import Threat
+
+    adapter: TypeAdapter[Any] = TypeAdapter(Threat)
+    offset = 0
+    while True:
+        await asyncio.sleep(0.2)
+        try:
+            data = path.read_bytes()
+        except FileNotFoundError:
+            continue
+        while True:
+            nl = data.find(b"\n", offset)
+            if nl < 0:
+                break
+            line = data[offset:nl].strip()
+            offset = nl + 1
+            if not line or coord.start_utc_s is None:
+                continue
+            try:
+                threat = adapter.validate_json(line)
+            except ValidationError as err:
+                first = err.errors()[0]
+                where = ".".join(str(x) for x in first["loc"])
+                print(
+                    f"rehearse: {path}: bad threat ({where}: {first['msg']}); ignored",
+                    file=sys.stderr,
+                )
+                continue
+            coord.add_threat(threat)
+
+
+async def rehearse(opts: RehearsalOptions) -> dict[str, Any]:
+    """Run the rehearsal; return the flight record (also written to ``--json``)."""
+    wall0 = time.perf_counter()
+    clock = MissionClock()
+    coord = Coordinator(
+        opts.scenario, clock, config=opts.config, required_arrival_s=opts.required_arrival_s
+    )
+    progress = Progress(coord, opts.quiet)
+    coord.on_event = progress.event
+    await coord.prepare()
+    if not opts.quiet:
+        print(
+            f"rehearse: planned {len(opts.scenario.vehicles)} vehicles in "
+            f"{coord.plan_wall_s:.1f} s; team arrival {coord.fmt_ref()}",
+            flush=True,
+        )
+    truth_path: Path | None = None
+    proc: asyncio.subprocess.Process | None = None
+    tmp = tempfile.TemporaryDirectory(prefix="tcgcs-rehearse-")
+    try:
+        mission_start: float | None = None
+        stub_start = 0.0
+        if opts.connect:
+            if len(opts.connect) != len(opts.scenario.vehicles):
+                raise GcsError(
+                    f"--connect: {len(opts.connect)} connection(s) for "
+                    f"{len(opts.scenario.vehicles)} scenario vehicles"
+                )
+            conns = list(opts.connect)
+            sysids: list[int | None] = [None] * len(conns)
+        else:
+            base = _free_tcp_base(len(opts.scenario.vehicles))
+            truth_path = Path(tmp.name) / "truth.jsonl"
+            stub_start = time.time()
+            cmd = _stub_command(opts, coord, base, truth_path, stub_start)
+            proc = await asyncio.create_subprocess_exec(
+                *cmd,
+                stdin=subprocess.PIPE if opts.blackouts else subprocess.DEVNULL,
+                stdout=subprocess.PIPE,
+                stderr=subprocess.PIPE,
+            )
+            await _wait_ready(proc)
+            conns = [f"tcp:127.0.0.1:{base + 10 * i}" for i in range(len(opts.scenario.vehicles))]
+            sysids = [i + 1 for i in range(len(conns))]
+        async with contextlib.AsyncExitStack() as stack:
+            vehicles: dict[str, Vehicle] = {}
+            for v, conn, sysid in zip(opts.scenario.vehicles, conns, sysids, strict=True):
+                link = await stack.enter_async_context(Link.open(conn, stream_rate_hz=2.0))
+                peer = await link.wait_vehicle(sysid, timeout_s=15.0)
+                vehicles[v.id] = Vehicle(link, peer.system_id, peer.component_id)
+            coord.bind(vehicles)
+            async with asyncio.timeout(15.0):
+                while not clock.synced:
+                    await asyncio.sleep(0.02)
+            await coord.upload_all()
+            mission_start = clock.now_utc_s() + max(10.0, 1.0 * clock.rate)
+            if proc is not None and opts.blackouts:
+                _send_blackouts(proc, opts, stub_start, mission_start)
+            tasks = [asyncio.create_task(progress.run())]
+            if opts.threats_from is not None:
+                tasks.append(asyncio.create_task(_watch_threats(coord, opts.threats_from)))
+            try:
+                await coord.run(mission_start)
+            finally:
+                for task in tasks:
+                    task.cancel()
+                await coord.close()
+        if proc is not None:
+            await _stop(proc)
+            proc = None
+        record = flight_record(coord, opts, truth_path, time.perf_counter() - wall0)
+    finally:
+        if proc is not None:
+            await _stop(proc)
+        tmp.cleanup()
+    if opts.json_out is not None:
+        opts.json_out.parent.mkdir(parents=True, exist_ok=True)
+        opts.json_out.write_text(json.dumps(record, indent=1) + "\n", encoding="utf-8")
+    return record
+
+
+def _send_blackouts(
+    proc: asyncio.subprocess.Process, opts: RehearsalOptions, stub_start: float, start: float
+) -> None:
+    """Blackouts in mission time, sent to the stub in its simulated time."""
+    assert proc.stdin is not None
+    ids = [v.id for v in opts.scenario.vehicles]
+    for b in opts.blackouts:
+        sim_s = start - stub_start + b.start_s
+        proc.stdin.write(
+            f"blackout {ids.index(b.vehicle_id)} {sim_s:.3f} {b.duration_s:g}\n".encode()
+        )
+
+
+async def _stop(proc: asyncio.subprocess.Process) -> None:
+    if proc.returncode is None:
+        with contextlib.suppress(ProcessLookupError):
+            proc.send_signal(signal.SIGINT)
+        try:
+            async with asyncio.timeout(10.0):
+                await proc.wait()
+        except TimeoutError:
+            proc.kill()
+            await proc.wait()
+
+
+def _ev_json(ev: CoordEvent, start_utc_s: float) -> dict[str, Any]:
+    utc = start_utc_s + ev.t_s if math.isnan(ev.utc_s) else ev.utc_s
+    return {
+        "utc_s": round(utc, 3),
+        "t_s": round(ev.t_s, 3),
+        "vehicle": ev.vehicle,
+        "kind": ev.kind,
+        "strategy": ev.strategy,
+        "value": ev.value,
+        "reason": ev.reason,
+    }
+
+
+def flight_record(
+    coord: Coordinator, opts: RehearsalOptions, truth_path: Path | None, wall_s: float
+) -> dict[str, Any]:
+    """The flight as data: arrivals (true when the simulator is ours), separations, events."""
+    assert coord.start_utc_s is not None
+    start = coord.start_utc_s
+    frame = coord.scenario.frame()
+    truth: dict[int, list[TruthSample]] = {}
+    if truth_path is not None and truth_path.exists():
+        truth = read_truth(truth_path)
+    source = "simulator" if truth else "telemetry"
+    vehicles = []
+    until: dict[int, float] = {}
+    tracks: dict[int, list[TruthSample]] = {}
+    for m in coord.members.values():
+        sysid = m.vehicle.system_id
+        target_utc = start + m.target_s
+        arrival = m.arrival_utc_s
+        track = m.track_log
+        samples = truth.get(sysid)
+        if samples:
+            glat, glon = frame.to_geodetic(*m.goal_en_m)
+            after = m.launched_utc_s
+            ca = closest_approach(
+                samples, float(glat), float(glon), coord.config.arrival_radius_m, after_utc_s=after
+            )
+            arrival = None if ca is None else ca[0]
+            track = []
+            for smp in samples[:: max(1, int(round(2.0 / _period(samples))))]:
+                e, n = frame.to_local(smp.lat_deg, smp.lon_deg)
+                track.append(
+                    [
+                        round(smp.utc_s, 3),
+                        round(float(e), 1),
+                        round(float(n), 1),
+                        round(smp.alt_m, 1),
+                        round(smp.airspeed_m_s, 2),
+                        round(smp.groundspeed_m_s, 2),
+                    ]
+                )
+            tracks[sysid] = samples
+        else:
+            tracks[sysid] = [_sample(frame, row) for row in m.track_log]
+        if arrival is not None:
+            until[sysid] = arrival
+        vs = m.schedule
+        vehicles.append(
+            {
+                "id": m.vehicle_id,
+                "system_id": sysid,
+                "speed_min_m_s": m.limits.airspeed_min_m_s,
+                "speed_max_m_s": m.limits.airspeed_max_m_s,
+                "target_arrival_utc_s": round(target_utc, 3),
+                "arrival_utc_s": None if arrival is None else round(arrival, 3),
+                "error_s": None if arrival is None else round(arrival - target_utc, 3),
+                "telemetry_arrival_utc_s": None
+                if m.arrival_utc_s is None
+                else round(m.arrival_utc_s, 3),
+                "takeoff_utc_s": None if m.launched_utc_s is None else round(m.launched_utc_s, 3),
+                "planned_paths": [
+                    {"label": p["label"], "utc_s": round(start + p["t_s"], 3), "en_m": p["en_m"]}
+                    for p in m.planned_paths
+                ],
+                "loiters": [{**lo, "utc_s": round(start + lo["t_s"], 3)} for lo in m.loiter_log],
+                "track": track,
+                "commanded": m.commanded,
+                "planned_speeds": [
+                    [
+                        round(start + leg.t_start_s, 3),
+                        round(start + leg.t_end_s, 3),
+                        leg.speed_m_s,
+                        "leg",
+                    ]
+                    for leg in vs.legs
+                ]
+                + [
+                    [
+                        round(start + lo.t_start_s, 3),
+                        round(start + lo.t_end_s, 3),
+                        lo.speed_m_s,
+                        "loiter",
+                    ]
+                    for lo in vs.loiters
+                ],
+            }
+        )
+    sep = min_separation(tracks, until_utc_s=until)
+    ids = {m.vehicle.system_id: m.vehicle_id for m in coord.members.values()}
+    ref = coord.team_ref_s
+    return {
+        "format": FLIGHT_FORMAT,
+        "scenario_file": str(opts.scenario_path),
+        "start_utc_s": round(start, 3),
+        "required_arrival_utc_s": None if ref is None else round(start + ref, 3),
+        "required_arrival_s": None if ref is None else round(ref, 3),
+        "separation_m": coord.scenario.separation_m,
+        "min_separation_m": None if sep is None else round(sep[0], 1),
+        "min_separation_pair": None if sep is None else [ids.get(sep[1]), ids.get(sep[2])],
+        "min_separation_utc_s": None if sep is None else round(sep[3], 3),
+        "wall_s": round(wall_s, 2),
+        "speedup": None if opts.connect else opts.speedup,
+        "wind": None
+        if opts.wind is None
+        else {"speed_m_s": opts.wind[0], "from_deg": opts.wind[1]},
+        "loss": opts.loss,
+        "seed": opts.seed,
+        "arrival_source": source,
+        "vehicles": vehicles,
+        "events": [_ev_json(ev, start) for ev in coord.events],
+        "adjustments": [_ev_json(ev, start) for ev in coord.adjustments],
+        "threats_appeared": [
+            {"id": t["id"], "utc_s": round(t["utc_s"], 3)} for t in coord.threats_appeared
+        ],
+    }
+
+
+def _sample(frame: Any, row: Sequence[float]) -> TruthSample:
+    lat, lon = frame.to_geodetic(row[1], row[2])
+    return TruthSample(row[0], float(lat), float(lon), row[3], row[4], row[5], True)
+
+
+def _period(samples: Sequence[TruthSample]) -> float:
+    if len(samples) < 2:
+        return 1.0
+    return max((samples[-1].utc_s - samples[0].utc_s) / (len(samples) - 1), 1e-3)
+
+
+def passed(record: Mapping[str, Any], tolerance_s: float) -> bool:
+    """Every vehicle arrived within tolerance and the separation held."""
+    ok = all(
+        v["error_s"] is not None and abs(v["error_s"]) <= tolerance_s for v in record["vehicles"]
+    )
+    sep = record.get("min_separation_m")
+    return ok and (sep is None or sep >= record["separation_m"])
+
+
+__all__ = ["Blackout", "RehearsalOptions", "flight_record", "passed", "rehearse"]

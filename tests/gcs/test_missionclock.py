@@ -1,0 +1,262 @@
+"""gcs.missionclock: the vehicles' UTC through the local monotonic clock."""
+
+from __future__ import annotations
+
+import asyncio
+import itertools
+import math
+import time
+
+import numpy as np
+import pytest
+
+from gcs.errors import GcsError
+from gcs.missionclock import ANCHOR_OBSERVATIONS, MissionClock
+
+UTC0 = 1_704_067_200.0
+
+
+class FakeMono:
+    """A monotonic clock the test sets by hand."""
+
+    def __init__(self, t: float = 1000.0) -> None:
+        self.t = t
+
+    def __call__(self) -> float:
+        return self.t
+
+
+def feed(
+    clock: MissionClock,
+    mono: FakeMono,
+    *,
+    rate: float,
+    n: int,
+    sysids: tuple[int, ...] = (1,),
+    period_utc_s: float = 1.0,
+    boot0_s: dict[int, float] | None = None,
+    delays_s: np.ndarray | None = None,
+) -> None:
+    """``n`` SYSTEM_TIMEs per vehicle, one every ``period_utc_s`` of UTC, true rate ``rate``.
+
+    UTC is ``UTC0 + rate * (mono - 1000)``; each packet arrives ``delays_s[k]`` late.
+    """
+    boot0 = boot0_s or {}
+    k = 0
+    for j in range(n):
+        utc = UTC0 + j * period_utc_s
+        sent = 1000.0 + (utc - UTC0) / rate
+        for sid in sysids:
+            delay = 0.0 if delays_s is None else float(delays_s[k])
+            k += 1
+            mono.t = max(mono.t, sent + delay)
+            clock.observe(sid, utc, boot0.get(sid, 0.0) + j * period_utc_s, sent + delay)
+
+
+def truth(mono: FakeMono, rate: float) -> float:
+    return UTC0 + rate * (mono.t - 1000.0)
+
+
+def test_not_synced_until_the_first_system_time() -> None:
+    clock = MissionClock(FakeMono())
+    assert not clock.synced and clock.rate == 1.0
+    with pytest.raises(GcsError, match="not synced"):
+        clock.now_utc_s()
+    assert clock.utc_of_boot(1, 5.0) is None
+    clock.observe(1, UTC0, 10.0, 1000.0)
+    assert clock.synced and clock.rate == 1.0  # one observation: rate 1 assumed
+    assert clock.now_utc_s() == UTC0
+    with pytest.raises(ValueError, match="window"):
+        MissionClock(window=1)
+
+
+@pytest.mark.parametrize("rate", [1.0, 200.0])
+def test_rate_and_now_without_jitter(rate: float) -> None:
+    mono = FakeMono()
+    clock = MissionClock(mono)
+    feed(clock, mono, rate=rate, n=30)
+    assert clock.rate == pytest.approx(rate, rel=1e-9)
+    for dt_wall in (0.0, 0.3 / rate, 0.9 / rate):
+        mono.t = 1000.0 + 29.0 / rate + dt_wall
+        assert clock.now_utc_s() == pytest.approx(truth(mono, rate), abs=1e-6)
+
+
+def test_rate_follows_a_change_of_speedup_within_the_window() -> None:
+    mono = FakeMono()
+    clock = MissionClock(mono, window=10)
+    for j in range(10):  # 1x
+        mono.t = 1000.0 + j
+        clock.observe(1, UTC0 + j, float(j), mono.t)
+    assert clock.rate == pytest.approx(1.0)
+    t0, u0 = mono.t, UTC0 + 9.0
+    for j in range(1, 11):  # then 50x
+        mono.t = t0 + j * 0.02
+        clock.observe(1, u0 + j, 9.0 + j, mono.t)
+    assert clock.rate == pytest.approx(50.0)
+
+
+def test_jitter_at_200x_keeps_now_within_a_fraction_of_a_second() -> None:
+    rng = np.random.default_rng(7)
+    rate, n, sysids = 200.0, 400, (1, 2, 3)
+    # One-sided link delays: mostly ~0.3 ms, 5 % of packets 2 ms late (0.4 s of UTC).
+    delays = rng.exponential(0.0003, n * 3) + np.where(rng.random(n * 3) < 0.05, 0.002, 0.0)
+    mono = FakeMono()
+    clock = MissionClock(mono)
+    errors = []
+    k = 0
+    for j in range(n):
+        utc = UTC0 + j
+        sent = 1000.0 + j / rate
+        for sid in sysids:
+            clock.observe(sid, utc, float(j), sent + delays[k])
+            k += 1
+        if j > 20:
+            # Query between this SYSTEM_TIME and the next (wall 5 ms later).
+            mono.t = max(mono.t, sent + float(delays[k - 3 : k].max()) + rng.random() * 0.004)
+            errors.append(clock.now_utc_s() - truth(mono, rate))
+    err = np.array(errors)
+    assert clock.rate == pytest.approx(rate, rel=0.1)
+    assert np.sqrt(np.mean(err**2)) < 0.15
+    assert np.max(np.abs(err)) < 0.6
+
+
+def test_a_late_newest_packet_does_not_drag_now_back() -> None:
+    mono = FakeMono()
+    clock = MissionClock(mono)
+    feed(clock, mono, rate=200.0, n=10)
+    mono.t += 0.004
+    before = clock.now_utc_s()
+    # The next SYSTEM_TIME arrives 3 ms late (0.6 s of UTC): extrapolating from it alone
+    # would put now 0.6 s early; the other anchors keep the estimate.
+    sent = 1000.0 + 10 / 200.0
+    mono.t = sent + 0.003
+    clock.observe(1, UTC0 + 10.0, 10.0, mono.t)
+    assert clock.now_utc_s() == pytest.approx(truth(mono, 200.0), abs=0.05)
+    assert clock.now_utc_s() >= before
+    assert ANCHOR_OBSERVATIONS > 1
+
+
+def test_now_never_decreases() -> None:
+    mono = FakeMono()
+    clock = MissionClock(mono)
+    clock.observe(1, UTC0, 0.0, 1000.0)
+    mono.t = 1001.0
+    clock.observe(1, UTC0 + 1.0, 1.0, 1001.0)
+    mono.t = 1005.0
+    high = clock.now_utc_s()  # rate 1: UTC0 + 5
+    assert high == pytest.approx(UTC0 + 5.0)
+    # The vehicles turn out to run slower: the estimate falls; the clock holds still.
+    mono.t = 1010.0
+    clock.observe(1, UTC0 + 2.0, 2.0, 1010.0)
+    assert clock.rate < 0.5
+    assert clock.now_utc_s() == high
+    values = []
+    for _ in range(200):
+        mono.t += 0.5
+        values.append(clock.now_utc_s())
+    assert all(b >= a for a, b in itertools.pairwise(values))
+    assert values[-1] > high
+
+
+def test_two_vehicles_keep_their_own_boot_offsets() -> None:
+    mono = FakeMono()
+    clock = MissionClock(mono)
+    feed(clock, mono, rate=200.0, n=5, sysids=(1, 2), boot0_s={1: 0.0, 2: 123.456})
+    assert clock.utc_of_boot(1, 2.5) == pytest.approx(UTC0 + 2.5)
+    assert clock.utc_of_boot(2, 123.456 + 2.5) == pytest.approx(UTC0 + 2.5)
+    assert clock.utc_of_boot(3, 1.0) is None
+    assert clock.rate == pytest.approx(200.0)
+    assert clock.rejected == 0 and clock.accepted == 10
+
+
+def test_bad_duplicate_reordered_and_reset_samples() -> None:
+    mono = FakeMono()
+    clock = MissionClock(mono)
+    feed(clock, mono, rate=1.0, n=10)  # UTC0 .. UTC0 + 9, boot 0 .. 9
+    rate = clock.rate
+    for bad in (
+        (1, math.nan, 1.0, 1000.0),
+        (1, UTC0 + 20, math.inf, 1000.0),
+        (1, 0.0, 1.0, 1000.0),  # no GPS time yet
+        (1, UTC0 + 20, -1.0, 1000.0),
+        (1, UTC0 + 9.0, 9.0, 1009.5),  # duplicate
+        (1, UTC0 + 8.5, 8.5, 1009.6),  # reordered
+        (1, UTC0 + 3.0, 3.0, 1009.7),  # very late, same boot offset: not a reset
+    ):
+        clock.observe(*bad)
+    assert clock.rejected == 7 and clock.resets == 0
+    assert clock.rate == rate and clock.utc_of_boot(1, 9.0) == pytest.approx(UTC0 + 9.0)
+    # The vehicle's time is set back by 100 s (boot time runs on): a new timeline.
+    clock.observe(1, UTC0 - 90.0, 10.0, 1010.0)
+    assert clock.rejected == 8 and clock.resets == 1
+    assert clock.utc_of_boot(1, 10.0) == pytest.approx(UTC0 - 90.0)
+    mono.t = 1011.0
+    clock.observe(1, UTC0 - 89.0, 11.0, 1011.0)
+    assert clock.rejected == 8 and clock.accepted == 11
+
+
+async def test_sleep_until_and_sleep_at_200x_in_real_time() -> None:
+    clock = MissionClock()  # time.monotonic
+    rate = 200.0
+    t0 = time.monotonic()
+
+    def utc_now() -> float:
+        return UTC0 + rate * (time.monotonic() - t0)
+
+    async def vehicle() -> None:  # SYSTEM_TIME at 1 Hz of simulated time
+        j = 0
+        while True:
+            clock.observe(1, UTC0 + j, float(j), time.monotonic())
+            j += 1
+            await asyncio.sleep(max(0.0, t0 + j / rate - time.monotonic()))
+
+    task = asyncio.create_task(vehicle())
+    try:
+        while clock.rate == 1.0:
+            await asyncio.sleep(0.001)
+        target = utc_now() + 20.0  # 0.1 s of wall
+        w0 = time.monotonic()
+        await clock.sleep_until(target)
+        waited = time.monotonic() - w0
+        assert clock.now_utc_s() >= target
+        assert utc_now() == pytest.approx(target, abs=2.0)  # 10 ms of wall
+        assert 0.05 < waited < 0.5
+        w0 = time.monotonic()
+        start = clock.now_utc_s()
+        await clock.sleep(10.0)
+        assert clock.now_utc_s() >= start + 10.0
+        assert time.monotonic() - w0 < 0.3
+        await clock.sleep(0.0)
+        await clock.sleep(-3.0)
+        with pytest.raises(ValueError, match="not a number"):
+            await clock.sleep(math.nan)
+        with pytest.raises(ValueError, match="max_wall_step_s"):
+            await clock.sleep_until(target, max_wall_step_s=0.0)
+    finally:
+        task.cancel()
+
+
+async def test_sleep_until_with_an_advancing_fake_clock() -> None:
+    mono = FakeMono(0.0)
+    clock = MissionClock(mono)
+    with pytest.raises(GcsError, match="not synced"):
+        await clock.sleep_until(UTC0)
+    clock.observe(1, UTC0, 0.0, 0.0)
+    mono.t = 0.1
+    clock.observe(1, UTC0 + 1.0, 1.0, 0.1)  # rate 10
+
+    async def advance() -> None:
+        while True:
+            await asyncio.sleep(0.001)
+            mono.t += 0.05  # 0.5 s of UTC per real millisecond
+
+    task = asyncio.create_task(advance())
+    try:
+        async with asyncio.timeout(5):
+            await clock.sleep_until(UTC0 + 30.0, max_wall_step_s=0.002)
+        assert clock.now_utc_s() >= UTC0 + 30.0
+        assert mono.t * 10.0 < 30.0 + 2.0
+        # Already past: returns at once.
+        await clock.sleep_until(UTC0)
+    finally:
+        task.cancel()
