@@ -417,14 +417,17 @@ class Coordinator:
                 await self._popup(self._pending_threats.get_nowait())
             await self.clock.sleep(1.0)
 
-    def _due_popups(self, now: float) -> list[ThreatZone]:
-        takeoffs = {
+    def _takeoffs_s(self) -> dict[str, float]:
+        """Mission time of each launch so far (pop-ups may be timed from them)."""
+        return {
             m.vehicle_id: m.launched_utc_s - (self.start_utc_s or 0.0)
             for m in self.members.values()
             if m.launched_utc_s is not None
         }
+
+    def _due_popups(self, now: float) -> list[ThreatZone]:
         out = []
-        for z in popup_zones(build_threats(self.scenario, takeoffs)):
+        for z in popup_zones(build_threats(self.scenario, self._takeoffs_s())):
             if z.id not in self._popups_done and (z.appears_at_s or math.inf) <= now:
                 self._popups_done.add(z.id)
                 out.append(z)
@@ -467,7 +470,7 @@ class Coordinator:
                     continue
                 if silent:
                     silent = False
-                    gap = self.now_s() - (m.last_fix_utc_s or 0.0) + (self.start_utc_s or 0.0)
+                    gap = self.clock.now_utc_s() - (m.last_fix_utc_s or 0.0)
                     self._emit(
                         "link", f"telemetry back after {gap:.1f} s; re-deciding", m.vehicle_id
                     )
@@ -778,11 +781,7 @@ class Coordinator:
         return replace(self.schedule, vehicles=vehicles, required_arrival_s=self.team_ref_s)
 
     def _in_force(self, t: float) -> list[ThreatZone]:
-        takeoffs = {
-            m.vehicle_id: m.launched_utc_s - (self.start_utc_s or 0.0)
-            for m in self.members.values()
-            if m.launched_utc_s is not None
-        }
+        takeoffs = self._takeoffs_s()
         scenario = self.scenario.model_copy(
             update={"threats": [*self.scenario.threats, *self._extra_threats]}
         )
@@ -829,11 +828,9 @@ class Coordinator:
             assert s_k is not None
             anchors[m.vehicle_id] = (s_k, self._speed_now(m))
             keeps[m.vehicle_id] = keep
-        threats = (
-            [*self._in_force(t), zone]
-            if zone.id not in {z.id for z in self._in_force(t)}
-            else self._in_force(t)
-        )
+        threats = self._in_force(t)
+        if zone.id not in {z.id for z in threats}:
+            threats.append(zone)
         world = replace(self.world, threats=tuple(threats))
         self._emit("popup", f"threat {zone.id} appears; re-planning from {lead:.0f} s ahead", t_s=t)
         t0 = time.perf_counter()

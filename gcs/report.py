@@ -36,8 +36,8 @@ from gcs.errors import GcsError
 from planner.errors import PlannerError
 from planner.geo import FloatArray
 from planner.plan import World, build_world
+from planner.plot import draw_world
 from planner.scenario import Scenario, load_scenario
-from planner.threats import NoFlyZone, RadarSite
 
 __all__ = ["FLIGHT_FORMAT", "arrival_table", "write_report"]
 
@@ -601,50 +601,12 @@ def _plot_paths(flight: _Flight, world: World, title: str, out: Path) -> None:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
     from matplotlib.lines import Line2D
-    from matplotlib.patches import Circle, Polygon
+    from matplotlib.patches import Circle
 
     scenario = world.scenario
-    g = world.grid
     fig, ax = plt.subplots(figsize=(9, 8))
-    extent = (
-        g.min_east_m / KM,
-        (g.min_east_m + (g.n_east - 1) * g.resolution_m) / KM,
-        g.min_north_m / KM,
-        (g.min_north_m + (g.n_north - 1) * g.resolution_m) / KM,
-    )
-    terrain = world.terrain_grid_m.reshape(g.n_north, g.n_east)
-    im = ax.imshow(terrain, origin="lower", extent=extent, cmap="terrain", alpha=0.85)
-    fig.colorbar(im, ax=ax, label="terrain (m AMSL)", shrink=0.8)
     appeared = {tid: flight.t(utc) for tid, utc in flight.threats_appeared}
-    for t in world.threats:
-        popup = t.appears_at_s is not None or t.id in appeared
-        colour = "red" if t.forbidden else "darkorange"
-        style = "--" if popup else "-"
-        label = t.id
-        if popup:
-            label += f"\n(pop-up {appeared[t.id]:.0f} s)" if t.id in appeared else "\n(pop-up)"
-        if isinstance(t, RadarSite):
-            ax.add_patch(
-                Circle(
-                    (t.east_m / KM, t.north_m / KM),
-                    t.radius_m / KM,
-                    fill=t.forbidden and not popup,
-                    alpha=0.35 if t.forbidden and not popup else 1.0,
-                    color=colour,
-                    ls=style,
-                    lw=1.5,
-                )
-            )
-            ax.text(t.east_m / KM, t.north_m / KM, label, ha="center", va="center", fontsize=7)
-        elif isinstance(t, NoFlyZone):
-            verts = np.asarray(t.vertices_m) / KM
-            ax.add_patch(Polygon(verts, closed=True, color=colour, alpha=0.35, ls=style))
-            c = verts.mean(axis=0)
-            ax.text(c[0], c[1], label, ha="center", va="center", fontsize=7)
-    for b in scenario.buffers:
-        e, n = b.center.local(world.frame)
-        ax.add_patch(Circle((e / KM, n / KM), b.radius_m / KM, fill=False, color="green", ls=":"))
-        ax.text(e / KM, n / KM, b.id, color="green", fontsize=7, ha="center")
+    extent = draw_world(fig, ax, world, appeared)
     known = {v.id: v for v in scenario.vehicles}
     colours = _colours()
     for k, v in enumerate(flight.vehicles):

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
@@ -14,7 +15,7 @@ import numpy as np
 from matplotlib.patches import Circle, Polygon
 
 from planner.errors import PlannerError
-from planner.plan import build_world
+from planner.plan import World, build_world
 from planner.scenario import load_scenario
 from planner.threats import NoFlyZone, RadarSite
 
@@ -34,16 +35,17 @@ def _load(path: Path) -> dict[str, Any]:
     return doc
 
 
-def plot_plan(plan_path: Path, out_path: Path) -> None:
-    """Write a PNG of the plan over its scenario's terrain and threats."""
-    doc = _load(plan_path)
-    scenario_file = Path(doc["scenario_file"])
-    if not scenario_file.is_absolute() and not scenario_file.exists():
-        scenario_file = plan_path.parent / scenario_file
-    scenario = load_scenario(scenario_file)
-    world = build_world(scenario)
+def draw_world(
+    fig: Any, ax: Any, world: World, appeared_s: Mapping[str, float] | None = None
+) -> tuple[float, float, float, float]:
+    """Terrain (with a colour bar), threats and buffer areas on ``ax``, in km.
+
+    Pop-up threats are dashed and unfilled; ``appeared_s`` (threat id -> mission s) adds the
+    time a threat appeared to its label and marks it as a pop-up. Returns the map extent
+    (west, east, south, north) in km.
+    """
+    appeared = appeared_s or {}
     g = world.grid
-    fig, ax = plt.subplots(figsize=(9, 8), dpi=110)
     extent = (
         g.min_east_m / KM,
         (g.min_east_m + (g.n_east - 1) * g.resolution_m) / KM,
@@ -54,17 +56,19 @@ def plot_plan(plan_path: Path, out_path: Path) -> None:
     im = ax.imshow(terrain, origin="lower", extent=extent, cmap="terrain", alpha=0.85)
     fig.colorbar(im, ax=ax, label="terrain (m AMSL)", shrink=0.8)
     for t in world.threats:
-        popup = t.appears_at_s is not None
+        popup = t.appears_at_s is not None or t.id in appeared
         colour = "red" if t.forbidden else "darkorange"
         style = "--" if popup else "-"
-        label = f"{t.id}{' (pop-up)' if popup else ''}"
+        label = t.id
+        if popup:
+            label += f"\n(pop-up {appeared[t.id]:.0f} s)" if t.id in appeared else "\n(pop-up)"
         if isinstance(t, RadarSite):
             ax.add_patch(
                 Circle(
                     (t.east_m / KM, t.north_m / KM),
                     t.radius_m / KM,
                     fill=t.forbidden and not popup,
-                    alpha=0.35 if t.forbidden else 1.0,
+                    alpha=0.35 if t.forbidden and not popup else 1.0,
                     color=colour,
                     ls=style,
                     lw=1.5,
@@ -76,10 +80,23 @@ def plot_plan(plan_path: Path, out_path: Path) -> None:
             ax.add_patch(Polygon(verts, closed=True, color=colour, alpha=0.35, ls=style))
             c = verts.mean(axis=0)
             ax.text(c[0], c[1], label, ha="center", va="center", fontsize=7)
-    for b in scenario.buffers:
+    for b in world.scenario.buffers:
         e, n = b.center.local(world.frame)
         ax.add_patch(Circle((e / KM, n / KM), b.radius_m / KM, fill=False, color="green", ls=":"))
         ax.text(e / KM, n / KM, b.id, color="green", fontsize=7, ha="center")
+    return extent
+
+
+def plot_plan(plan_path: Path, out_path: Path) -> None:
+    """Write a PNG of the plan over its scenario's terrain and threats."""
+    doc = _load(plan_path)
+    scenario_file = Path(doc["scenario_file"])
+    if not scenario_file.is_absolute() and not scenario_file.exists():
+        scenario_file = plan_path.parent / scenario_file
+    scenario = load_scenario(scenario_file)
+    world = build_world(scenario)
+    fig, ax = plt.subplots(figsize=(9, 8), dpi=110)
+    extent = draw_world(fig, ax, world)
     colours = plt.rcParams["axes.prop_cycle"].by_key()["color"]
     for k, v in enumerate(doc["vehicles"]):
         pts = np.array([[w["east_m"], w["north_m"]] for w in v["waypoints"]]) / KM
