@@ -237,6 +237,10 @@ def parser() -> argparse.ArgumentParser:
     rh.add_argument("--loss", type=float, default=0.0, help="stub packet loss probability")
     rh.add_argument("--seed", type=int, default=0, help="planner and stub seed")
     rh.add_argument("--connect", nargs="+", default=[], help="fly these vehicles instead")
+    rh.add_argument(
+        "--truth",
+        help="with --connect: the simulator's truth log (sitl_stub --truth), for true arrivals",
+    )
     rh.add_argument("--json", dest="json_out", help="write the flight record here")
     rh.add_argument("--report", help="write the report (figures, tables) into this directory")
     rh.add_argument("--arrival-s", type=float, help="required arrival (mission s) to request")
@@ -292,6 +296,10 @@ def _rehearsal_options(args: argparse.Namespace) -> object:
         blackouts.append(Blackout(vid, start, dur))
     if args.connect and (blackouts or args.wind or args.loss):
         raise UsageError("--blackout, --wind and --loss apply to the stub, not to --connect")
+    if args.truth and not args.connect:
+        raise UsageError("--truth reads a connected simulator's log; it needs --connect")
+    if args.truth and not Path(args.truth).resolve().parent.is_dir():
+        raise UsageError(f"--truth {args.truth}: directory does not exist")
     return RehearsalOptions(
         scenario_path=path,
         scenario=scenario,
@@ -300,6 +308,7 @@ def _rehearsal_options(args: argparse.Namespace) -> object:
         loss=args.loss,
         seed=args.seed,
         connect=args.connect,
+        truth=Path(args.truth) if args.truth else None,
         json_out=Path(args.json_out) if args.json_out else None,
         report_dir=Path(args.report) if args.report else None,
         required_arrival_s=args.arrival_s,

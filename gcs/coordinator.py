@@ -41,6 +41,7 @@ from planner.plan import Method, World, build_world, plan
 from planner.scenario import Scenario, Threat
 from planner.schedule import (
     Adjustment,
+    Anchor,
     Schedule,
     VehicleSchedule,
     apply_popup,
@@ -58,6 +59,23 @@ log = logging.getLogger(__name__)
 Phase = Literal["ground", "takeoff", "route", "arrived"]
 FIRST_ROUTE_SEQ = 2
 """Item 0 is home, item 1 the takeoff; the route starts at item 2."""
+
+TELEMETRY_HZ: dict[str, float] = {
+    "GLOBAL_POSITION_INT": 2.0,  # fixes along the route; the goal crossing
+    "VFR_HUD": 1.0,  # airspeed and groundspeed
+    "WIND": 0.5,
+    "SYSTEM_TIME": 1.0,  # the mission clock
+    "MISSION_CURRENT": 0.5,
+    "SYS_STATUS": 0.2,
+    "GPS_RAW_INT": 0.2,
+    "ATTITUDE": 0.0,  # not used: off
+    "NAV_CONTROLLER_OUTPUT": 0.0,
+}
+"""What the coordinator asks each vehicle to send (Hz of the VEHICLE's time: a simulator at
+200x sends 200 times as many per wall second), by MAV_CMD_SET_MESSAGE_INTERVAL; 0 turns a
+message off on our link. With the heartbeat that is 6.4 messages per vehicle second: 1284 per
+wall second from one stub vehicle at 200x, against 3800 with every stream at 2 Hz (measured),
+which MAVProxy could not route fast enough for mission transfers to complete."""
 
 
 class InfeasibleRequest(GcsError):
@@ -85,6 +103,13 @@ class CoordinatorConfig:
     """A vehicle silent this long (mission s) is reported; its mission keeps it flying."""
     runout_m: float = 300.0
     """A last waypoint this far past the goal, so the aircraft flies through the goal."""
+    waypoint_spacing_m: float = 5000.0
+    """Long legs are split into waypoints this far apart: a mission change splices in at a
+    waypoint ahead, and the nearest one should not be half an hour away."""
+    off_route_m: float = 500.0
+    """A vehicle this far from its route is still joining it (after the climb-out, which
+    heads wherever the aircraft was pointing): its ETA along the route runs late until it is
+    on it, so it does not move the team time meanwhile (it is commanded its top speed)."""
     final_m: float = 150.0
     """No speed decisions closer than this to the goal (the autopilot could not act)."""
     method: Method = "aco"
@@ -126,6 +151,9 @@ class Member:
     launched_utc_s: float | None = None
     level_m_s: float | None = None
     s_m: float | None = None
+    cross_track_m: float = 0.0
+    joining: bool = False
+    """Off its route by more than ``off_route_m`` when last late (said once per episode)."""
     last_seq: int | None = None
     next_decision_s: float = -math.inf
     busy_command: bool = False
@@ -316,7 +344,7 @@ class Coordinator:
         schedule = self.schedule
         for vs in schedule.vehicles:
             v = self.scenario.vehicle(vs.vehicle_id)
-            pm = path_mission(schedule, vs, self.world.terrain, runout_m=self.config.runout_m)
+            pm = self._path_mission(vs)
             goal = vs.path.end
             step = schedule.step_m_s
             limits = SpeedLimits(v.speed_min_m_s, v.speed_max_m_s, step)
@@ -464,7 +492,10 @@ class Coordinator:
         try:
             silent = False
             while m.phase != "arrived":
-                msg = await sub.get(timeout_s=0.05)
+                # Look for silence often enough to see one of link_silence_s (mission time)
+                # at the clock's rate: 15 ms wall at 200x.
+                poll_s = self.config.link_silence_s / max(self.clock.rate, 1.0)
+                msg = await sub.get(timeout_s=min(0.05, max(0.005, poll_s)))
                 if msg is None:
                     silent = self._check_link(m, silent)
                     continue
@@ -534,8 +565,10 @@ class Coordinator:
         self._watch_goal(m, utc, e, n, st)
         if m.phase != "route":
             return
-        s, _xt = m.track.locate(e, n, m.s_m)
+        s, m.cross_track_m = m.track.locate(e, n, m.s_m)
         m.s_m = s
+        if m.cross_track_m <= self.config.off_route_m:
+            m.joining = False
         in_loiter = (
             seq is not None
             and m.mission.items[min(seq, len(m.mission.items) - 1)].command
@@ -597,7 +630,18 @@ class Coordinator:
         if d.command_m_s is not None and not m.busy_command:
             m.busy_command = True
             self._spawn(self._command_speed(m, d, t))
-        if d.verdict == "late":
+        if d.verdict == "late" and m.cross_track_m > self.config.off_route_m:
+            if not m.joining:
+                m.joining = True
+                self._emit(
+                    "arrival",
+                    f"late by {d.eta_min_s - m.target_s:.1f} s at top speed, but "
+                    f"{m.cross_track_m:.0f} m off the route and joining it: the team time "
+                    "stays until it is on the route",
+                    m.vehicle_id,
+                    t_s=t,
+                )
+        elif d.verdict == "late":
             self._late(m, d, t)
         elif (
             d.verdict == "early"
@@ -698,10 +742,17 @@ class Coordinator:
         t_k = t + (s_k - s) / gs
         threats = self._in_force(t)
         # The planner's loiter arithmetic (eq. 8) is in still air; give it the surplus the
-        # wind-aware ETA found, as a still-air target from the splice waypoint.
+        # wind-aware ETA found, as a still-air target from the splice waypoint. The new
+        # mission replaces the loiters after that waypoint, so their time is kept too.
         v_min = m.limits.airspeed_min_m_s
         surplus = m.target_s - d.eta_max_s
-        target_still_air = t_k + (m.track.length_m - s_k) / v_min + surplus
+        wind = self._wind(m.vehicle.state)
+        track = m.track
+        before = sum(1 for lo in track.loiters if lo.s_m < s_k)
+        held_s = track.time_to_go_s(s_k, v_min, wind, before) - track.time_to_go_s(
+            s_k, v_min, wind, len(track.loiters)
+        )
+        target_still_air = t_k + (track.length_m - s_k) / v_min + held_s + surplus
         m.busy_mission = True
         try:
             schedule = self._current_schedule()
@@ -736,10 +787,20 @@ class Coordinator:
         else:
             self._emit("plan", a.reason, a.vehicle, None, a.value, t_s=t)
 
+    def _path_mission(self, vs: VehicleSchedule) -> PathMission:
+        assert self.schedule is not None and self.world is not None
+        return path_mission(
+            self.schedule,
+            vs,
+            self.world.terrain,
+            runout_m=self.config.runout_m,
+            max_spacing_m=self.config.waypoint_spacing_m,
+        )
+
     async def _install(self, m: Member, vs: VehicleSchedule, keep: int | None, what: str) -> None:
         """Upload the vehicle's new schedule (spliced after item ``keep`` when flying)."""
         assert self.schedule is not None and self.world is not None
-        new = path_mission(self.schedule, vs, self.world.terrain, runout_m=self.config.runout_m)
+        new = self._path_mission(vs)
         pm = new if keep is None else splice_mission(m.mission, keep, new)
         await self._upload(m, pm, what)
         m.mission = pm
@@ -807,7 +868,7 @@ class Coordinator:
     async def _replan_around(self, zone: ThreatZone, t: float, lead: float) -> None:
         assert self.world is not None
         at_s = t + lead
-        anchors: dict[str, tuple[float, float]] = {}
+        anchors: dict[str, Anchor] = {}
         keeps: dict[str, int | None] = {}
         for m in self.members.values():
             if m.phase == "arrived":
@@ -826,7 +887,10 @@ class Coordinator:
                 continue
             s_k = m.mission.item_s_m[keep]
             assert s_k is not None
-            anchors[m.vehicle_id] = (s_k, self._speed_now(m))
+            # The vehicle reaches the splice waypoint at its own time, not at t + lead: the
+            # waypoint is the first one at least that far ahead and may be much farther.
+            t_k = t + (s_k - (m.s_m or 0.0)) / gs
+            anchors[m.vehicle_id] = Anchor(s_k, self._speed_now(m), t_k)
             keeps[m.vehicle_id] = keep
         threats = self._in_force(t)
         if zone.id not in {z.id for z in threats}:

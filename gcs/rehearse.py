@@ -6,6 +6,9 @@ vehicle per scenario vehicle on the ground at its start (nose along its planned 
 scenario's airspeed limits, the wind, loss and seed asked for and a truth log of the simulated
 states. The coordinator reaches those vehicles over TCP exactly as it would reach any others;
 the truth log is read only afterwards, for the true goal crossings and separations.
+
+With ``--connect`` the arrivals come from the vehicles' own telemetry, unless ``--truth`` names
+the truth log of the simulator being flown (``python -m sitl_stub --truth FILE``).
 """
 
 from __future__ import annotations
@@ -27,7 +30,7 @@ from typing import Any
 
 import numpy as np
 
-from gcs.coordinator import CoordEvent, Coordinator, CoordinatorConfig, Member
+from gcs.coordinator import TELEMETRY_HZ, CoordEvent, Coordinator, CoordinatorConfig, Member
 from gcs.errors import GcsError
 from gcs.link import Link
 from gcs.missionclock import MissionClock
@@ -56,6 +59,8 @@ class RehearsalOptions:
     loss: float = 0.0
     seed: int = 0
     connect: Sequence[str] = ()
+    truth: Path | None = None
+    """With ``connect``: the connected simulator's truth log, for the true arrivals."""
     json_out: Path | None = None
     report_dir: Path | None = None
     required_arrival_s: float | None = None
@@ -252,6 +257,7 @@ async def rehearse(opts: RehearsalOptions) -> dict[str, Any]:
                 )
             conns = list(opts.connect)
             sysids: list[int | None] = [None] * len(conns)
+            truth_path = opts.truth
         else:
             base = _free_tcp_base(len(opts.scenario.vehicles))
             truth_path = Path(tmp.name) / "truth.jsonl"
@@ -269,7 +275,9 @@ async def rehearse(opts: RehearsalOptions) -> dict[str, Any]:
         async with contextlib.AsyncExitStack() as stack:
             vehicles: dict[str, Vehicle] = {}
             for v, conn, sysid in zip(opts.scenario.vehicles, conns, sysids, strict=True):
-                link = await stack.enter_async_context(Link.open(conn, stream_rate_hz=2.0))
+                link = await stack.enter_async_context(
+                    Link.open(conn, message_rates_hz=TELEMETRY_HZ)
+                )
                 peer = await link.wait_vehicle(sysid, timeout_s=15.0)
                 vehicles[v.id] = Vehicle(link, peer.system_id, peer.component_id)
             coord.bind(vehicles)
@@ -292,6 +300,8 @@ async def rehearse(opts: RehearsalOptions) -> dict[str, Any]:
         if proc is not None:
             await _stop(proc)
             proc = None
+        elif truth_path is not None:
+            await _await_truth(truth_path, coord)
         record = flight_record(coord, opts, truth_path, time.perf_counter() - wall0)
     finally:
         if proc is not None:
@@ -301,6 +311,25 @@ async def rehearse(opts: RehearsalOptions) -> dict[str, Any]:
         opts.json_out.parent.mkdir(parents=True, exist_ok=True)
         opts.json_out.write_text(json.dumps(record, indent=1) + "\n", encoding="utf-8")
     return record
+
+
+async def _await_truth(path: Path, coord: Coordinator, timeout_s: float = 5.0) -> None:
+    """Wait until a running simulator's truth log has reached past every arrival (it is
+    flushed about once a wall second)."""
+    need = max(
+        (m.arrival_utc_s for m in coord.members.values() if m.arrival_utc_s is not None),
+        default=None,
+    )
+    if need is None:
+        return
+    loop = asyncio.get_running_loop()
+    until = loop.time() + timeout_s
+    while loop.time() < until:
+        if path.exists():
+            truth = read_truth(path)
+            if truth and all(s and s[-1].utc_s > need for s in truth.values()):
+                return
+        await asyncio.sleep(0.25)
 
 
 def _send_blackouts(
@@ -351,7 +380,6 @@ def flight_record(
     truth: dict[int, list[TruthSample]] = {}
     if truth_path is not None and truth_path.exists():
         truth = read_truth(truth_path)
-    source = "simulator" if truth else "telemetry"
     vehicles = []
     until: dict[int, float] = {}
     tracks: dict[int, list[TruthSample]] = {}
@@ -361,6 +389,7 @@ def flight_record(
         arrival = m.arrival_utc_s
         track = m.track_log
         samples = truth.get(sysid)
+        source = "simulator" if samples else "telemetry"
         if samples:
             glat, glon = frame.to_geodetic(*m.goal_en_m)
             after = m.launched_utc_s
@@ -396,6 +425,7 @@ def flight_record(
                 "target_arrival_utc_s": round(target_utc, 3),
                 "arrival_utc_s": None if arrival is None else round(arrival, 3),
                 "error_s": None if arrival is None else round(arrival - target_utc, 3),
+                "arrival_source": source,
                 "telemetry_arrival_utc_s": None
                 if m.arrival_utc_s is None
                 else round(m.arrival_utc_s, 3),
@@ -447,7 +477,7 @@ def flight_record(
         else {"speed_m_s": opts.wind[0], "from_deg": opts.wind[1]},
         "loss": opts.loss,
         "seed": opts.seed,
-        "arrival_source": source,
+        "arrival_source": _team_source(vehicles),
         "vehicles": vehicles,
         "events": [_ev_json(ev, start) for ev in coord.events],
         "adjustments": [_ev_json(ev, start) for ev in coord.adjustments],
@@ -455,6 +485,11 @@ def flight_record(
             {"id": t["id"], "utc_s": round(t["utc_s"], 3)} for t in coord.threats_appeared
         ],
     }
+
+
+def _team_source(vehicles: Sequence[Mapping[str, Any]]) -> str:
+    sources = {v["arrival_source"] for v in vehicles}
+    return sources.pop() if len(sources) == 1 else "mixed"
 
 
 def _sample(frame: Any, row: Sequence[float]) -> TruthSample:

@@ -21,7 +21,7 @@ from __future__ import annotations
 import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field, replace
-from typing import Literal
+from typing import Literal, NamedTuple
 
 import numpy as np
 from numpy.typing import NDArray
@@ -498,12 +498,29 @@ def _retime(
     return _Retimed(new, adjustments)
 
 
-Anchors = Mapping[str, tuple[float, float]]
-"""Where airborne vehicles really are: vehicle id -> (s_m along its path, speed_m_s)."""
+class Anchor(NamedTuple):
+    """Where an airborne vehicle really is: ``s_m`` along its path at ``speed_m_s``, at
+    ``t_s`` (mission s; None: at the re-plan time). A coordinator in flight re-plans from a
+    waypoint ahead, which the vehicle reaches at its own time."""
+
+    s_m: float
+    speed_m_s: float
+    t_s: float | None = None
+
+
+Anchors = Mapping[str, Anchor | tuple[float, float]]
+"""Vehicle id -> its :class:`Anchor` (a plain ``(s_m, speed_m_s)`` is at the re-plan time)."""
+
+
+def _anchor_t(at_s: float, anchor: Anchor | tuple[float, float] | None) -> float:
+    """When the vehicle is at its anchor (``at_s`` unless the anchor says)."""
+    if isinstance(anchor, Anchor) and anchor.t_s is not None:
+        return anchor.t_s
+    return at_s
 
 
 def _where(
-    vs: VehicleSchedule, t_s: float, anchor: tuple[float, float] | None
+    vs: VehicleSchedule, t_s: float, anchor: Anchor | tuple[float, float] | None
 ) -> tuple[str, float, float]:
     if anchor is None:
         return vs.state_at(t_s)
@@ -517,7 +534,7 @@ def _window(
     now_s: float,
     step_m_s: float,
     threats: Sequence[ThreatZone],
-    anchor: tuple[float, float] | None = None,
+    anchor: Anchor | tuple[float, float] | None = None,
 ) -> ArrivalWindow:
     phase, s0, _ = _where(vs, now_s, anchor)
     start = now_s
@@ -787,8 +804,9 @@ def apply_popup(
     world, threats
         The world and every threat in force from ``at_s`` (``zone`` included).
     anchors
-        Where airborne vehicles really are at ``at_s`` (s_m along their path, speed m/s);
-        the others are where the schedule has them.
+        Where airborne vehicles really are (:class:`Anchor`: s_m along their path, speed m/s,
+        and the time they are there, ``at_s`` unless given); the others are where the
+        schedule has them at ``at_s``.
     loiter_margin_m_s
         Loiter turns leave the speed this far above the minimum when they can.
 
@@ -818,9 +836,16 @@ def apply_popup(
     vehicles = [new_paths.get(vs.vehicle_id, vs) for vs in current.vehicles]
     staged = replace(current, vehicles=tuple(vehicles))
     where = {v.id: _where(staged.vehicle(v.id), at_s, anchors.get(v.id)) for v in scenario.vehicles}
+    t_at = {v.id: _anchor_t(at_s, anchors.get(v.id)) for v in scenario.vehicles}
     windows = [
         _window(
-            scenario, v, staged.vehicle(v.id), at_s, current.step_m_s, threats, anchors.get(v.id)
+            scenario,
+            v,
+            staged.vehicle(v.id),
+            t_at[v.id],
+            current.step_m_s,
+            threats,
+            anchors.get(v.id),
         )
         for v in scenario.vehicles
         if where[v.id][0] != "arrived"
@@ -833,15 +858,16 @@ def apply_popup(
     for v in scenario.vehicles:
         vs = staged.vehicle(v.id)
         phase, s0, _ = where[v.id]
-        past = tuple(sp for sp in _spans(vs) if sp.t_end_s <= at_s + TIME_TOL_S)
+        t_v = t_at[v.id]
+        past = tuple(sp for sp in _spans(vs) if sp.t_end_s <= t_v + TIME_TOL_S)
         if phase == "arrived" or v.id not in targets:
             need[v.id] = _spans(vs)
             continue
-        dep = max(at_s, vs.takeoff_s) if phase == "ground" else at_s
+        dep = max(t_v, vs.takeoff_s) if phase == "ground" else t_v
         cut = tuple(
-            SpeedSpan(sp.t_start_s, at_s, sp.speed_m_s, sp.kind)
+            SpeedSpan(sp.t_start_s, t_v, sp.speed_m_s, sp.kind)
             for sp in _spans(vs)
-            if sp.t_start_s < at_s < sp.t_end_s
+            if sp.t_start_s < t_v < sp.t_end_s
         )
         v_need = (vs.path.length_m - s0) / max(targets[v.id] - dep, 1e-9)
         need[v.id] = (*past, *cut, SpeedSpan(dep, targets[v.id], v_need, "required"))
@@ -858,11 +884,11 @@ def apply_popup(
             scenario,
             v,
             vs,
-            now_s=at_s,
+            now_s=t_at[v.id],
             target_s=targets[v.id],
             step_m_s=current.step_m_s,
             threats=threats,
-            at=anchor if where[v.id][0] == "leg" and anchor is not None else None,
+            at=(anchor[0], anchor[1]) if where[v.id][0] == "leg" and anchor is not None else None,
             loiter_margin_m_s=loiter_margin_m_s,
         )
         retimed.append(r.schedule)

@@ -57,15 +57,38 @@ def vehicle_mission(schedule: Schedule, vs: VehicleSchedule, terrain: Terrain) -
     return list(path_mission(schedule, vs, terrain).items)
 
 
+def _split_legs(s_m: list[float], max_spacing_m: float) -> list[float]:
+    """``s_m`` (ascending) with evenly spaced marks added where two are farther apart."""
+    out: list[float] = []
+    prev = 0.0
+    for s in s_m:
+        n = math.ceil((s - prev) / max_spacing_m - 1e-9)
+        out.extend(prev + (s - prev) * k / n for k in range(1, n))
+        out.append(s)
+        prev = s
+    return out
+
+
 def path_mission(
-    schedule: Schedule, vs: VehicleSchedule, terrain: Terrain, *, runout_m: float = 0.0
+    schedule: Schedule,
+    vs: VehicleSchedule,
+    terrain: Terrain,
+    *,
+    runout_m: float = 0.0,
+    max_spacing_m: float | None = None,
 ) -> PathMission:
     """:func:`vehicle_mission` with each item's path distance.
 
     ``runout_m`` > 0 adds a last waypoint that far beyond the goal on the final heading, so
     that the aircraft flies through the goal rather than turning away once within its
     waypoint radius of it (ArduPlane's "reached" test).
+
+    ``max_spacing_m`` splits longer legs with evenly spaced waypoints on the path (at the
+    profile's altitude there). A coordinator in flight replaces a mission after a waypoint
+    ahead of the aircraft; a 60 km leg would put the nearest such waypoint half an hour away.
     """
+    if max_spacing_m is not None and not max_spacing_m > _MERGE_M:
+        raise PlannerError(f"max_spacing_m must be more than {_MERGE_M:g} m, got {max_spacing_m}")
     frame = schedule.scenario.frame()
     v = schedule.scenario.vehicle(vs.vehicle_id)
     path = vs.path
@@ -83,6 +106,8 @@ def path_mission(
         s_sorted.append(path.length_m)
     else:
         s_sorted[-1] = path.length_m
+    if max_spacing_m is not None:
+        s_sorted = _split_legs(s_sorted, max_spacing_m)
     waypoints = []
     for s in s_sorted:
         p = path.pose_at(s)

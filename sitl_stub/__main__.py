@@ -76,8 +76,9 @@ def parse_args(argv: Sequence[str] | None = None) -> argparse.Namespace:
         "--airspeed",
         action="append",
         metavar="MIN,CRUISE,MAX",
-        help="airspeeds, m/s (0 < MIN <= CRUISE <= MAX; default 15,22,30); once: every "
-        "vehicle; repeated once per vehicle: vehicle i gets the i-th",
+        help="airspeeds, m/s (0 < MIN <= CRUISE <= MAX; default: the scenario's with "
+        "--scenario, else 15,22,30); once: every vehicle; repeated once per vehicle: vehicle i "
+        "gets the i-th",
     )
     ap.add_argument(
         "--blackout",
@@ -189,9 +190,12 @@ def _check_count(texts: Sequence[str], name: str, n_vehicles: int) -> None:
 
 
 def params_from_args(args: argparse.Namespace) -> list[AirframeParams] | None:
-    """Per-vehicle airframe parameters from ``--airspeed`` (None: the defaults)."""
+    """Per-vehicle airframe parameters from ``--airspeed``; without it, the scenario's
+    airspeed range and cruise speed with ``--scenario`` (None otherwise: the defaults)."""
     texts: list[str] | None = args.airspeed
     if not texts:
+        if args.scenario:
+            return airspeeds_from_scenario(args.scenario, args.vehicles)
         return None
     _check_count(texts, "--airspeed", args.vehicles)
     params = []
@@ -199,15 +203,25 @@ def params_from_args(args: argparse.Namespace) -> list[AirframeParams] | None:
         lo, cruise, hi = _floats(text, "--airspeed", 3, 3)
         if not 0.0 < lo <= cruise <= hi:
             raise UsageError(f"--airspeed needs 0 < MIN <= CRUISE <= MAX (m/s), got {text!r}")
-        params.append(
-            replace(
-                AirframeParams(),
-                airspeed_min_m_s=lo,
-                airspeed_cruise_m_s=cruise,
-                airspeed_max_m_s=hi,
-            )
-        )
+        params.append(_airspeeds(lo, cruise, hi))
     return params * args.vehicles if len(params) == 1 else params
+
+
+def _airspeeds(lo_m_s: float, cruise_m_s: float, hi_m_s: float) -> AirframeParams:
+    return replace(
+        AirframeParams(),
+        airspeed_min_m_s=lo_m_s,
+        airspeed_cruise_m_s=cruise_m_s,
+        airspeed_max_m_s=hi_m_s,
+    )
+
+
+def airspeeds_from_scenario(path: str, n: int) -> list[AirframeParams]:
+    """Vehicle i flies scenario vehicle i's airspeed range and cruise speed."""
+    from planner.scenario import load_scenario
+
+    vehicles = load_scenario(path).vehicles[:n]
+    return [_airspeeds(v.speed_min_m_s, v.cruise_m_s, v.speed_max_m_s) for v in vehicles]
 
 
 def blackouts_from_args(args: argparse.Namespace) -> list[BlackoutSpec]:
@@ -266,7 +280,8 @@ def homes_from_scenario(path: str, n: int) -> list[Home]:
 
 
 async def _control(team: SimTeam, stop: asyncio.Event) -> None:
-    """Control lines on stdin (a rehearsal driving its simulator); EOF stops the team."""
+    """Control lines on stdin (a rehearsal driving its simulator). EOF ends the control
+    input only: the team runs on until it is signalled."""
     loop = asyncio.get_running_loop()
     reader = asyncio.StreamReader()
     await loop.connect_read_pipe(lambda: asyncio.StreamReaderProtocol(reader), sys.stdin)

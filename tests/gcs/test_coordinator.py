@@ -1,10 +1,9 @@
-"""The coordinator: mission splicing and in-flight re-timing (pure), the pre-launch refusal,
-the rehearsal CLI's input checks, and one full rehearsal of the paper scenario against stub
-vehicles over loopback TCP (wind, 10% loss, the pop-up threat)."""
+"""The coordinator: mission splicing and in-flight re-timing (pure), the pre-launch refusal
+and the rehearsal CLI's input checks. Whole rehearsals are in ``test_rehearsals.py``."""
 
 from __future__ import annotations
 
-import math
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -13,14 +12,21 @@ import pytest
 from gcs.__main__ import main
 from gcs.coordinator import Coordinator, InfeasibleRequest
 from gcs.missionclock import MissionClock
-from gcs.rehearse import RehearsalOptions, passed, rehearse
 from planner.errors import PlannerError
 from planner.mission import MAV_CMD_DO_CHANGE_SPEED, MAV_CMD_NAV_LOITER_TURNS, MAV_CMD_NAV_WAYPOINT
 from planner.plan import World, build_world, plan
 from planner.scenario import Scenario, load_scenario
-from planner.schedule import Schedule, build_schedule, retime_vehicle
+from planner.schedule import (
+    Anchor,
+    PopupOutcome,
+    Schedule,
+    apply_popup,
+    build_schedule,
+    popup_zones,
+    retime_vehicle,
+)
 from planner.schedulefile import path_mission, splice_mission
-from planner.threats import active
+from planner.threats import active, build_threats
 
 PAPER = Path(__file__).resolve().parents[2] / "scenarios" / "paper_three_uav.yaml"
 
@@ -142,6 +148,11 @@ async def test_infeasible_request_is_refused_before_launch_naming_time_and_vehic
         (["--loss", "1.5"], "--loss"),
         (["--speedup", "0"], "--speedup"),
         (["--connect", "tcp:127.0.0.1:5760", "--wind", "5,270"], "apply to the stub"),
+        (["--truth", "truth.jsonl"], "--truth reads a connected simulator's log"),
+        (
+            ["--connect", "tcp:127.0.0.1:5760", "--truth", "/no/such/dir/truth.jsonl"],
+            "directory does not exist",
+        ),
     ],
 )
 def test_rehearse_bad_input_is_exit_2_naming_the_option(
@@ -158,33 +169,79 @@ def test_rehearse_missing_scenario_is_exit_2(
     assert "nope.yaml" in capsys.readouterr().err
 
 
-async def test_paper_rehearsal_holds_the_arrival_time(tmp_path: Path) -> None:
-    """The must-show run: 200x, wind 5 m/s from 270, 10% loss, the pop-up threat."""
-    out = tmp_path / "flight.json"
-    record = await rehearse(
-        RehearsalOptions(
-            scenario_path=PAPER,
-            scenario=load_scenario(PAPER),
-            speedup=200.0,
-            wind=(5.0, 270.0),
-            loss=0.1,
-            seed=1,
-            json_out=out,
-            quiet=True,
-        )
-    )
-    assert out.exists()
-    assert record["arrival_source"] == "simulator"
-    errors = {v["id"]: v["error_s"] for v in record["vehicles"]}
-    assert all(e is not None and abs(e) <= 1.0 for e in errors.values()), errors
-    assert passed(record, 1.0)
-    assert record["min_separation_m"] >= record["separation_m"]
-    strategies = {a["strategy"] for a in record["adjustments"]}
-    assert strategies >= {"takeoff_delay", "speed", "loiter"}
-    # the longest-path vehicle launches first; the pop-up appeared and was re-planned around
-    takeoffs = {v["id"]: v["takeoff_utc_s"] for v in record["vehicles"]}
-    assert takeoffs["UAV2"] < takeoffs["UAV1"] and takeoffs["UAV2"] < takeoffs["UAV3"]
-    assert [t["id"] for t in record["threats_appeared"]] == ["POPUP1"]
-    kinds = {e["kind"] for e in record["events"]}
-    assert {"launch", "popup", "replan", "arrived"} <= kinds
-    assert math.isfinite(record["wall_s"]) and record["wall_s"] < 180.0
+def test_long_legs_are_split_into_waypoints_no_farther_apart_than_asked(
+    paper: tuple[Scenario, World, Schedule],
+) -> None:
+    scenario, world, schedule = paper
+    vs = schedule.vehicle("UAV2")
+    plain = path_mission(schedule, vs, world.terrain, runout_m=300.0)
+    split = path_mission(schedule, vs, world.terrain, runout_m=300.0, max_spacing_m=5000.0)
+
+    def route_s(pm: object) -> list[float]:
+        return [pm.item_s_m[k] for k in _route_waypoints(pm)]  # type: ignore[attr-defined]
+
+    s_plain, s_split = route_s(plain), route_s(split)
+    assert max(np.diff(s_plain[:-1])) > 20_000.0  # the planner's legs are long
+    assert max(np.diff(s_split[:-1])) <= 5000.0 + 1e-6
+    assert all(any(abs(a - b) < 1e-6 for b in s_split) for a in s_plain)  # none dropped
+    frame = scenario.frame()
+    for k in _route_waypoints(split)[:-1]:  # the last is the run-out past the goal
+        s = split.item_s_m[k]
+        assert s is not None
+        pose = vs.path.pose_at(s)
+        lat, lon = frame.to_geodetic(pose.east_m, pose.north_m)
+        it = split.items[k]
+        assert (it.x, it.y) == (round(float(lat) * 1e7), round(float(lon) * 1e7))
+        assert it.z == pytest.approx(vs.alt_at(s) - split.items[0].z, abs=0.01)  # above home
+
+    def speeds(pm: object) -> list[float]:
+        items = pm.items  # type: ignore[attr-defined]
+        return [it.param2 for it in items if it.command == MAV_CMD_DO_CHANGE_SPEED]
+
+    assert speeds(split) == speeds(plain)
+    with pytest.raises(PlannerError, match="max_spacing_m"):
+        path_mission(schedule, vs, world.terrain, max_spacing_m=0.0)
+
+
+def test_popup_anchor_time_is_when_the_vehicle_reaches_the_splice_point(
+    paper: tuple[Scenario, World, Schedule],
+) -> None:
+    """A coordinator re-plans from a waypoint ahead; the vehicle is there at its own time,
+    which sets the earliest arrival (the anchor once meant 'there at the re-plan time')."""
+    scenario, world, schedule = paper
+    threats = build_threats(scenario, {vs.vehicle_id: vs.takeoff_s for vs in schedule.vehicles})
+    zone = popup_zones(threats)[0]
+    t_p = float(zone.appears_at_s or 0.0)
+    w = replace(world, threats=tuple(threats))
+    ahead_s = 600.0
+    where = {}
+    for vid in ("UAV1", "UAV2"):
+        phase, s_m, speed = schedule.vehicle(vid).state_at(t_p + ahead_s)
+        assert phase == "leg"
+        where[vid] = (s_m, speed)
+
+    def outcome(with_time: bool) -> PopupOutcome:
+        anchors = {
+            vid: Anchor(s, v, t_p + ahead_s if with_time else None) for vid, (s, v) in where.items()
+        }
+        return apply_popup(
+            schedule, zone, at_s=t_p, world=w, threats=active(threats, t_p),
+            rng=np.random.default_rng(7), anchors=anchors,
+        )  # fmt: skip
+
+    timed, untimed = outcome(True), outcome(False)
+    assert set(timed.affected) == {"UAV1", "UAV2"}
+    # The earliest each can arrive: at its anchor 600 s on, then its new path at top speed.
+    untimed_short = []
+    for vid, (s_m, _) in where.items():
+        v = scenario.vehicle(vid)
+        path_m = timed.schedule.vehicle(vid).path.length_m
+        earliest = t_p + ahead_s + (path_m - s_m) / v.speed_max_m_s
+        assert timed.schedule.vehicle(vid).arrival_s >= earliest - 1e-3, vid
+        if untimed.schedule.vehicle(vid).arrival_s < earliest - 60.0:
+            untimed_short.append(vid)
+    assert untimed_short  # read as 'there at the re-plan time', the team time is unflyable
+    for vid, (s_m, _) in where.items():
+        legs = timed.schedule.vehicle(vid).legs
+        first_new = next(leg for leg in legs if leg.s_start_m >= s_m - 1e-6)
+        assert first_new.t_start_s == pytest.approx(t_p + ahead_s)

@@ -6,7 +6,6 @@ import asyncio
 import contextlib
 import re
 import struct
-import sys
 from collections.abc import AsyncIterator
 from pathlib import Path
 from typing import Any
@@ -28,7 +27,7 @@ from planner.mission import (
 )
 from sitl_stub.api import Home, SimTeam
 from tests.gcs.conftest import HOME, free_udp_port
-from tests.sitl_stub.conftest import mavproxy_wp_list, stop_process
+from tests.sitl_stub.conftest import mavproxy_router, mavproxy_wp_list
 
 DO_CHANGE_SPEED = mavlink2.MAV_CMD_DO_CHANGE_SPEED
 NAV_LOITER_TURNS = mavlink2.MAV_CMD_NAV_LOITER_TURNS
@@ -95,24 +94,6 @@ async def mavsdk_autopilot(port: int) -> AsyncIterator[Any]:
         system = await mavsdk.first_autopilot(timeout_s=10.0)
         assert system is not None
         yield system
-
-
-@contextlib.asynccontextmanager
-async def mavproxy_router(master: str, out: str, workdir: Path) -> AsyncIterator[None]:
-    """MAVProxy between a vehicle (``master``) and us (``out``), non-interactive."""
-    mavproxy = Path(sys.executable).with_name("mavproxy.py")
-    proc = await asyncio.create_subprocess_exec(
-        sys.executable, str(mavproxy), "--master", master, "--out", out,
-        "--state-basedir", str(workdir), "--daemon", "--non-interactive",
-        stdin=asyncio.subprocess.DEVNULL,
-        stdout=asyncio.subprocess.DEVNULL,
-        stderr=asyncio.subprocess.DEVNULL,
-        cwd=workdir,
-    )  # fmt: skip
-    try:
-        yield
-    finally:
-        await stop_process(proc)
 
 
 async def test_udpin_link_through_mavproxy_discovers_and_commands_the_vehicle(

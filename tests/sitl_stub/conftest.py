@@ -6,7 +6,7 @@ import asyncio
 import contextlib
 import socket
 import sys
-from collections.abc import Callable
+from collections.abc import AsyncIterator, Callable
 from pathlib import Path
 from typing import Any
 
@@ -221,3 +221,21 @@ async def mavproxy_wp_list(master: str, workdir: Path, count: int, timeout_s: fl
             proc.stdin.close()
         await stop_process(proc)
     return "".join(out)
+
+
+@contextlib.asynccontextmanager
+async def mavproxy_router(master: str, out: str, workdir: Path, *extra: str) -> AsyncIterator[None]:
+    """MAVProxy between a vehicle (``master``) and us (``out``), non-interactive."""
+    mavproxy = Path(sys.executable).with_name("mavproxy.py")
+    proc = await asyncio.create_subprocess_exec(
+        sys.executable, str(mavproxy), "--master", master, "--out", out,
+        "--state-basedir", str(workdir), "--daemon", "--non-interactive", *extra,
+        stdin=asyncio.subprocess.DEVNULL,
+        stdout=asyncio.subprocess.DEVNULL,
+        stderr=asyncio.subprocess.DEVNULL,
+        cwd=workdir,
+    )  # fmt: skip
+    try:
+        yield
+    finally:
+        await stop_process(proc)

@@ -3,12 +3,15 @@
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import itertools
 import json
 import math
 import re
 import signal
 import sys
+from collections.abc import AsyncIterator
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -27,18 +30,51 @@ from sitl_stub.api import Home
 from tests.sitl_stub.conftest import Client, free_port_base
 
 
-async def test_cli_serves_two_vehicles_and_stops_cleanly_on_sigint() -> None:
-    base = free_port_base(2)
+@dataclass
+class StubRun:
+    """A ``python -m sitl_stub`` child: its ports once ready, its stderr once stopped."""
+
+    proc: asyncio.subprocess.Process
+    ports: list[int] = field(default_factory=list)
+    err: str = ""
+
+
+@contextlib.asynccontextmanager
+async def stub_cli(*args: str, stdin: bool = False) -> AsyncIterator[StubRun]:
+    """Start the CLI, wait for its ready line; on leaving, SIGINT and expect exit 0."""
     proc = await asyncio.create_subprocess_exec(
-        sys.executable, "-m", "sitl_stub", "--vehicles", "2", "--tcp-base", str(base),
-        "--speedup", "10", "--home", "-35.36,149.16,584,90", "--wind", "5,270",
+        sys.executable, "-m", "sitl_stub", *args,
+        stdin=asyncio.subprocess.PIPE if stdin else asyncio.subprocess.DEVNULL,
         stdout=asyncio.subprocess.PIPE, stderr=asyncio.subprocess.PIPE,
     )  # fmt: skip
+    run = StubRun(proc)
     try:
         assert proc.stdout is not None
+        async with asyncio.timeout(30):
+            line = (await proc.stdout.readline()).decode()
+        found = re.search(r"ready, ports \[([\d, ]+)\]", line)
+        assert found, line
+        run.ports = [int(p) for p in found.group(1).split(",")]
+        yield run
+        proc.send_signal(signal.SIGINT)
         async with asyncio.timeout(20):
-            line = await proc.stdout.readline()
-        assert b"ready" in line, line
+            _, err = await proc.communicate()
+        run.err = err.decode()
+        assert proc.returncode == 0, run.err
+        assert "Traceback" not in run.err
+    finally:
+        if proc.returncode is None:
+            proc.kill()
+            await proc.wait()
+
+
+async def test_cli_serves_two_vehicles_and_stops_cleanly_on_sigint() -> None:
+    base = free_port_base(2)
+    async with stub_cli(
+        "--vehicles", "2", "--tcp-base", str(base), "--speedup", "10",
+        "--home", "-35.36,149.16,584,90", "--wind", "5,270",
+    ) as run:  # fmt: skip
+        assert run.ports == [base, base + 10]
         for i in range(2):
             c = await Client.connect(base + 10 * i)
             try:
@@ -46,15 +82,6 @@ async def test_cli_serves_two_vehicles_and_stops_cleanly_on_sigint() -> None:
                 assert hb.get_srcSystem() == i + 1
             finally:
                 await c.close()
-        proc.send_signal(signal.SIGINT)
-        async with asyncio.timeout(20):
-            _, err = await proc.communicate()
-        assert proc.returncode == 0, err
-        assert b"Traceback" not in err
-    finally:
-        if proc.returncode is None:
-            proc.kill()
-            await proc.wait()
 
 
 async def test_cli_rejects_bad_home_with_clear_message() -> None:
@@ -89,18 +116,10 @@ async def test_cli_scenario_places_each_vehicle_at_its_start() -> None:
         assert ground_m < v.start.alt_m - 100.0
         starts.append((lat, lon, ground_m, grid_hdg))
 
-    proc = await asyncio.create_subprocess_exec(
-        sys.executable, "-m", "sitl_stub", "--scenario", str(path), "--vehicles", "3",
-        "--tcp-base", "0", "--speedup", "1",
-        stdout=asyncio.subprocess.PIPE, stderr=asyncio.subprocess.PIPE,
-    )  # fmt: skip
-    try:
-        assert proc.stdout is not None
-        async with asyncio.timeout(30):
-            line = (await proc.stdout.readline()).decode()
-        found = re.search(r"ready, ports \[([\d, ]+)\]", line)
-        assert found, line
-        ports = [int(p) for p in found.group(1).split(",")]
+    async with stub_cli(
+        "--scenario", str(path), "--vehicles", "3", "--tcp-base", "0", "--speedup", "1"
+    ) as run:  # fmt: skip
+        ports = run.ports
         assert len(ports) == 3
         for i, (port, (lat, lon, alt, hdg)) in enumerate(zip(ports, starts, strict=True)):
             c = await Client.connect(port)
@@ -112,14 +131,21 @@ async def test_cli_scenario_places_each_vehicle_at_its_start() -> None:
             assert geodesic_distance_m(lat, lon, pos.lat * 1e-7, pos.lon * 1e-7) < 5.0
             assert pos.alt == round(alt * 1000) and pos.relative_alt == 0
             assert abs((pos.hdg / 100.0 - hdg + 180.0) % 360.0 - 180.0) < 2.0
-        proc.send_signal(signal.SIGINT)
-        async with asyncio.timeout(20):
-            _, err = await proc.communicate()
-        assert proc.returncode == 0, err
-    finally:
-        if proc.returncode is None:
-            proc.kill()
-            await proc.wait()
+        # Without --airspeed, each vehicle flies its scenario airspeed range.
+        for port, v in zip(ports, scenario.vehicles, strict=True):
+            c = await Client.connect(port)
+            try:
+                for name, want in (
+                    (b"AIRSPEED_MIN", v.speed_min_m_s),
+                    (b"AIRSPEED_CRUISE", v.cruise_m_s),
+                    (b"AIRSPEED_MAX", v.speed_max_m_s),
+                ):
+                    c.send(mavlink2.MAVLink_param_request_read_message(0, 1, name, -1))
+                    param = await c.recv(lambda m, n=name: m.get_type() == "PARAM_VALUE"
+                                         and m.param_id == n.decode())  # fmt: skip
+                    assert param.param_value == pytest.approx(want), (v.id, name)
+            finally:
+                await c.close()
 
 
 def test_home_once_per_vehicle_puts_each_vehicle_at_its_own_home() -> None:
@@ -198,20 +224,13 @@ def test_cli_rejects_bad_values_naming_the_option(
 async def test_cli_homes_airspeed_blackout_and_truth_end_to_end(tmp_path: Path) -> None:
     truth = tmp_path / "truth.jsonl"
     homes = [(-35.36, 149.16, 584.0), (-35.40, 149.20, 610.0)]
-    proc = await asyncio.create_subprocess_exec(
-        sys.executable, "-m", "sitl_stub", "--vehicles", "2", "--tcp-base", "0",
-        "--speedup", "20", "--home", "-35.36,149.16,584", "--home", "-35.40,149.20,610",
+    async with stub_cli(
+        "--vehicles", "2", "--tcp-base", "0", "--speedup", "20",
+        "--home", "-35.36,149.16,584", "--home", "-35.40,149.20,610",
         "--airspeed", "18,21,27", "--blackout", "1,0,100000", "--truth", str(truth),
         "--truth-period", "1", "--start-utc", "1704067200",
-        stdout=asyncio.subprocess.PIPE, stderr=asyncio.subprocess.PIPE,
-    )  # fmt: skip
-    try:
-        assert proc.stdout is not None
-        async with asyncio.timeout(20):
-            line = (await proc.stdout.readline()).decode()
-        found = re.search(r"ready, ports \[([\d, ]+)\]", line)
-        assert found, line
-        ports = [int(p) for p in found.group(1).split(",")]
+    ) as run:  # fmt: skip
+        ports = run.ports
         c0, c1 = await Client.connect(ports[0]), await Client.connect(ports[1])
         try:
             c0.send(mavlink2.MAVLink_param_request_read_message(1, 1, b"AIRSPEED_MIN", -1))
@@ -222,14 +241,6 @@ async def test_cli_homes_airspeed_blackout_and_truth_end_to_end(tmp_path: Path) 
         finally:
             await c0.close()
             await c1.close()
-        proc.send_signal(signal.SIGINT)
-        async with asyncio.timeout(20):
-            _, err = await proc.communicate()
-        assert proc.returncode == 0, err
-    finally:
-        if proc.returncode is None:
-            proc.kill()
-            await proc.wait()
     lines = [json.loads(x) for x in truth.read_text().splitlines()]
     assert lines[0]["format"] == "tcgcs-truth/1" and lines[0]["vehicles"] == 2
     assert lines[0]["speedup"] == 20.0 and lines[0]["period_s"] == 1.0
@@ -244,3 +255,49 @@ async def test_cli_homes_airspeed_blackout_and_truth_end_to_end(tmp_path: Path) 
     utcs = [r["utc_s"] for r in rows[::2]]
     assert utcs[0] == pytest.approx(lines[0]["start_utc_s"])
     assert all(b - a == pytest.approx(1.0) for a, b in itertools.pairwise(utcs))
+
+
+async def test_cli_control_stdin_blackout_and_mission_timeout(tmp_path: Path) -> None:
+    """``--control-stdin`` blacks a vehicle out on request and reports bad lines without
+    stopping; ``--mission-timeout`` sets how soon a lost upload item is asked for again."""
+    async with stub_cli(
+        "--vehicles", "2", "--tcp-base", "0", "--speedup", "20",
+        "--home", "-35.36,149.16,584", "--control-stdin", "--mission-timeout", "0.2",
+        stdin=True,
+    ) as run:  # fmt: skip
+        proc, ports = run.proc, run.ports
+        assert proc.stdin is not None and proc.stdout is not None
+        c0, c1 = await Client.connect(ports[0]), await Client.connect(ports[1])
+        try:
+            assert (await c1.recv("HEARTBEAT")).get_srcSystem() == 2
+            proc.stdin.write(b"blackout 7 0 10\nhello\nblackout 1 0 100000\n")
+            await proc.stdin.drain()
+            async with asyncio.timeout(10):
+                said = (await proc.stdout.readline()).decode()
+            assert said.strip() == "sitl_stub: blackout vehicle 1 at 0 s for 100000 s", said
+            # What was already on its way drains; then vehicle 2 is silent, vehicle 1 is not.
+            for _ in range(20):
+                if await c1.try_recv(lambda _m: True, 0.3) is None:
+                    break
+            assert await c1.try_recv(lambda _m: True, 1.0) is None
+            assert (await c0.recv("HEARTBEAT")).get_srcSystem() == 1
+            # An upload whose item never comes: the item is asked for again after 0.2 s wall
+            # (ArduPilot's default, and ours, is 1.5 s).
+            c0.send(mavlink2.MAVLink_mission_count_message(1, 1, 3, 0))
+            req = "MISSION_REQUEST_INT"
+            first = await c0.recv(req)
+            t0 = asyncio.get_running_loop().time()
+            again = await c0.recv(req, timeout=1.2)
+            waited_s = asyncio.get_running_loop().time() - t0
+            assert first.seq == again.seq == 0
+            assert 0.1 < waited_s < 1.0, waited_s
+        finally:
+            await c0.close()
+            await c1.close()
+        proc.stdin.close()  # end of control input: the team keeps running
+        await asyncio.sleep(0.3)
+        assert proc.returncode is None
+    err = run.err
+    assert "control: 'blackout 7 0 10': index, start or duration out of range" in err, err
+    assert "control: 'hello': expected 'blackout INDEX START_SIM_S DURATION_S'" in err, err
+    assert "Traceback" not in err
