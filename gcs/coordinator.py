@@ -38,7 +38,7 @@ from planner.mission import (
     MAV_CMD_NAV_WAYPOINT,
 )
 from planner.plan import Method, World, build_world, plan
-from planner.scenario import Scenario, Threat
+from planner.scenario import Appearance, Scenario, Threat
 from planner.schedule import (
     Adjustment,
     Anchor,
@@ -101,6 +101,9 @@ class CoordinatorConfig:
     """Goal passages are looked for within this distance of the goal."""
     link_silence_s: float = 3.0
     """A vehicle silent this long (mission s) is reported; its mission keeps it flying."""
+    link_silence_wall_s: float = 0.025
+    """...and at least this long in wall time: at 200x, 3 s of mission is 15 ms, less than a
+    busy two-core machine's scheduling jitter (25 ms wall is 5 s of mission at 200x)."""
     runout_m: float = 300.0
     """A last waypoint this far past the goal, so the aircraft flies through the goal."""
     waypoint_spacing_m: float = 5000.0
@@ -152,6 +155,8 @@ class Member:
     level_m_s: float | None = None
     s_m: float | None = None
     cross_track_m: float = 0.0
+    last_fix_wall_s: float = 0.0
+    """Local monotonic time the last fix was taken in (link gaps in wall time)."""
     joining: bool = False
     """Off its route by more than ``off_route_m`` when last late (said once per episode)."""
     last_seq: int | None = None
@@ -229,7 +234,6 @@ class Coordinator:
         self.plan_wall_s = 1.0
         self.threats_appeared: list[dict[str, Any]] = []
         self._extra_threats: list[Threat] = []
-        self._pending_threats: asyncio.Queue[ThreatZone] = asyncio.Queue()
         self._detach: list[Callable[[], None]] = []
         self._tasks: set[asyncio.Task[None]] = set()
         self._popups_done: set[str] = set()
@@ -391,13 +395,28 @@ class Coordinator:
     # -- the flight ------------------------------------------------------------------------
 
     def add_threat(self, threat: Threat, at_s: float | None = None) -> None:
-        """A threat that appears now (or at mission time ``at_s``): re-plan around it."""
-        scenario = self.scenario.model_copy(update={"threats": [*self.scenario.threats, threat]})
-        zone = build_threats(scenario, {})[-1]
-        appears = self.now_s() if at_s is None else at_s
-        zone = replace(zone, appears_at_s=appears)
+        """A threat for the mission in flight: re-planned around when it appears.
+
+        It appears at mission time ``at_s`` if given, else when its own ``appears`` says (a
+        mission time, or a delay after a vehicle's takeoff), else now; a time already past is
+        now. Until then no plan avoids it.
+
+        Raises
+        ------
+        ValueError
+            The mission has not started, or a threat with this id is already in it.
+        """
+        if self.start_utc_s is None:
+            raise ValueError(f"threat {threat.id}: the mission has not started")
+        if threat.id in {t.id for t in (*self.scenario.threats, *self._extra_threats)}:
+            raise ValueError(f"threat {threat.id}: a threat with this id is already in the mission")
+        now = self.now_s()
+        if at_s is not None or threat.appears is None:
+            when = now if at_s is None else max(now, at_s)
+            threat = threat.model_copy(update={"appears": Appearance(at_s=when)})
+        elif threat.appears.at_s is not None and threat.appears.at_s < now:
+            threat = threat.model_copy(update={"appears": Appearance(at_s=now)})
         self._extra_threats.append(threat)
-        self._pending_threats.put_nowait(zone)
 
     async def run(self, start_utc_s: float | None = None) -> None:
         """Launch on schedule and hold the arrival times until every vehicle has arrived."""
@@ -441,8 +460,6 @@ class Coordinator:
                     self._spawn(self._launch(m))
             for zone in self._due_popups(now):
                 await self._popup(zone)
-            while not self._pending_threats.empty():
-                await self._popup(self._pending_threats.get_nowait())
             await self.clock.sleep(1.0)
 
     def _takeoffs_s(self) -> dict[str, float]:
@@ -453,9 +470,16 @@ class Coordinator:
             if m.launched_utc_s is not None
         }
 
+    def _zones(self) -> list[ThreatZone]:
+        """Every threat of the mission, the operator's included, timed from the launches."""
+        scenario = self.scenario.model_copy(
+            update={"threats": [*self.scenario.threats, *self._extra_threats]}
+        )
+        return build_threats(scenario, self._takeoffs_s())
+
     def _due_popups(self, now: float) -> list[ThreatZone]:
         out = []
-        for z in popup_zones(build_threats(self.scenario, self._takeoffs_s())):
+        for z in popup_zones(self._zones()):
             if z.id not in self._popups_done and (z.appears_at_s or math.inf) <= now:
                 self._popups_done.add(z.id)
                 out.append(z)
@@ -492,9 +516,8 @@ class Coordinator:
         try:
             silent = False
             while m.phase != "arrived":
-                # Look for silence often enough to see one of link_silence_s (mission time)
-                # at the clock's rate: 15 ms wall at 200x.
-                poll_s = self.config.link_silence_s / max(self.clock.rate, 1.0)
+                # Look for silence often enough to see the shortest one reported.
+                poll_s = self._silence_s() / max(self.clock.rate, 1.0) / 2.0
                 msg = await sub.get(timeout_s=min(0.05, max(0.005, poll_s)))
                 if msg is None:
                     silent = self._check_link(m, silent)
@@ -502,8 +525,11 @@ class Coordinator:
                 if silent:
                     silent = False
                     gap = self.clock.now_utc_s() - (m.last_fix_utc_s or 0.0)
+                    wall_ms = (time.monotonic() - m.last_fix_wall_s) * 1000.0
                     self._emit(
-                        "link", f"telemetry back after {gap:.1f} s; re-deciding", m.vehicle_id
+                        "link",
+                        f"telemetry back after {gap:.1f} s ({wall_ms:.0f} ms wall); re-deciding",
+                        m.vehicle_id,
                     )
                     m.next_decision_s = -math.inf
                 self._on_fix(m)
@@ -515,15 +541,26 @@ class Coordinator:
         if silent or m.last_fix_utc_s is None or self.start_utc_s is None:
             return silent
         age = self.clock.now_utc_s() - m.last_fix_utc_s
-        if m.phase in ("takeoff", "route") and age > self.config.link_silence_s:
+        wall_s = time.monotonic() - m.last_fix_wall_s
+        cfg = self.config
+        if (
+            m.phase in ("takeoff", "route")
+            and age > cfg.link_silence_s
+            and wall_s > cfg.link_silence_wall_s
+        ):
             self._emit(
                 "link",
-                f"no position for {age:.1f} s: the vehicle flies its uploaded mission and "
-                "last speed meanwhile",
+                f"no position for {age:.1f} s ({wall_s * 1000:.0f} ms wall): the vehicle flies "
+                "its uploaded mission and last speed meanwhile",
                 m.vehicle_id,
             )
             return True
         return False
+
+    def _silence_s(self) -> float:
+        """A position gap (mission s) long enough to report: config, with its wall floor."""
+        cfg = self.config
+        return max(cfg.link_silence_s, cfg.link_silence_wall_s * self.clock.rate)
 
     def _on_fix(self, m: Member) -> None:
         st = m.vehicle.state
@@ -535,6 +572,7 @@ class Coordinator:
         if m.last_fix_utc_s is not None and utc <= m.last_fix_utc_s:
             return
         m.last_fix_utc_s = utc
+        m.last_fix_wall_s = time.monotonic()
         t = utc - self.start_utc_s
         e, n = self.frame.to_local(st.lat_deg, st.lon_deg)
         e, n = float(e), float(n)
@@ -842,12 +880,7 @@ class Coordinator:
         return replace(self.schedule, vehicles=vehicles, required_arrival_s=self.team_ref_s)
 
     def _in_force(self, t: float) -> list[ThreatZone]:
-        takeoffs = self._takeoffs_s()
-        scenario = self.scenario.model_copy(
-            update={"threats": [*self.scenario.threats, *self._extra_threats]}
-        )
-        zones = build_threats(scenario, takeoffs)
-        return list(active(zones, t))
+        return list(active(self._zones(), t))
 
     async def _popup(self, zone: ThreatZone) -> None:
         """Re-plan around a new threat from waypoints ahead, re-time, re-upload."""

@@ -224,7 +224,10 @@ async def _watch_threats(coord: Coordinator, path: Path) -> None:
                     file=sys.stderr,
                 )
                 continue
-            coord.add_threat(threat)
+            try:
+                coord.add_threat(threat)
+            except ValueError as err:
+                print(f"rehearse: {path}: {err}; ignored", file=sys.stderr)
 
 
 async def rehearse(opts: RehearsalOptions) -> dict[str, Any]:

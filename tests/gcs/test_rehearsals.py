@@ -1,7 +1,7 @@
 """Whole rehearsals at 200x against stub vehicles over loopback (about 35 s wall each).
 
 - the paper scenario: wind, 10% loss, the pop-up threat, all three strategies;
-- spaced arrivals 60 s apart;
+- spaced arrivals 60 s apart, with a threat the operator adds in flight;
 - one vehicle's link dark for 10 s, through the CLI (the blackout goes to the stub's stdin);
 - ``--connect`` to a simulator started on its own, one vehicle behind MAVProxy: nothing in the
   loop knows it is the stub, and the arrivals come from telemetry (checked against the
@@ -72,7 +72,21 @@ async def test_paper_rehearsal_holds_the_arrival_time(tmp_path: Path) -> None:
     assert math.isfinite(record["wall_s"]) and record["wall_s"] < 180.0
 
 
-async def test_spaced_rehearsal_meets_each_60_s_slot(tmp_path: Path) -> None:
+async def test_spaced_rehearsal_meets_each_60_s_slot_with_an_operator_threat(
+    tmp_path: Path,
+) -> None:
+    """Slots 60 s apart; besides the scenario's pop-up, the operator adds a no-fly box across
+    UAV3's approach (``--threats-from``, appearing at 2500 s): UAV3 is re-planned from a
+    waypoint ahead and re-timed for its same slot."""
+    threats = tmp_path / "threats.jsonl"
+    box = [[185_600, 203_200], [189_600, 203_200], [189_600, 207_200], [185_600, 207_200]]
+    op1 = {
+        "kind": "no_fly",
+        "id": "OP1",
+        "polygon": [{"east_m": e, "north_m": n} for e, n in box],
+        "appears": {"at_s": 2500},
+    }
+    threats.write_text(json.dumps(op1) + "\n")
     scenario = load_scenario(SPACED)
     record = await rehearse(
         RehearsalOptions(
@@ -82,6 +96,7 @@ async def test_spaced_rehearsal_meets_each_60_s_slot(tmp_path: Path) -> None:
             wind=(5.0, 270.0),
             loss=0.1,
             seed=1,
+            threats_from=threats,
             quiet=True,
         )
     )
@@ -97,6 +112,21 @@ async def test_spaced_rehearsal_meets_each_60_s_slot(tmp_path: Path) -> None:
     for a, b in itertools.pairwise(arrivals):
         assert abs((b - a) - 60.0) <= 2.0, arrivals
     assert targets[0] == pytest.approx(record["required_arrival_utc_s"], abs=1e-3)
+    # OP1 appeared on time and UAV3 alone was re-planned around it, for the same team time.
+    appeared = {t["id"]: t for t in record["threats_appeared"]}
+    assert set(appeared) == {"POPUP1", "OP1"}
+    t_op1 = appeared["OP1"]["utc_s"] - record["start_utc_s"]
+    assert 2500.0 <= t_op1 <= 2510.0
+    after = [e for e in record["events"] if e["t_s"] >= t_op1 - 0.5]
+    replans = [e for e in after if e["kind"] == "replan" and "OP1" in e["reason"]]
+    assert [e["reason"] for e in replans] == ["re-planning UAV3 around OP1"]
+    moves = [e for e in after if e["kind"] == "arrival" and e["t_s"] < t_op1 + 1.0]
+    assert moves and all("feasible for every vehicle" in e["reason"] for e in moves), moves
+    assert [p["label"] for p in by_id["UAV3"]["planned_paths"]][-1] == "after OP1"
+    # The flown track keeps out of the box (the truth log, every 2 s).
+    for row in by_id["UAV3"]["track"]:
+        e, n = row[1], row[2]
+        assert not (185_600 <= e <= 189_600 and 203_200 <= n <= 207_200), row
 
 
 def test_blackout_rehearsal_from_the_cli_recovers_and_arrives(
