@@ -241,11 +241,16 @@ class Coordinator:
     # -- time ------------------------------------------------------------------------------
 
     def bind(self, vehicles: Mapping[str, Vehicle]) -> None:
-        """The vehicle flying each scenario vehicle; feeds their SYSTEM_TIME to the clock."""
+        """The vehicle flying each scenario vehicle: asks it for the telemetry the loop uses
+        (:data:`TELEMETRY_HZ`) and feeds its SYSTEM_TIME to the clock."""
         missing = [v.id for v in self.scenario.vehicles if v.id not in vehicles]
         if missing:
             raise GcsError(f"no link for vehicle(s) {', '.join(missing)}")
         self.vehicles = {v.id: vehicles[v.id] for v in self.scenario.vehicles}
+        for vehicle in self.vehicles.values():
+            # The link keeps these and asks again after a silence (the vehicle may reboot).
+            vehicle.link.message_rates_hz.update(TELEMETRY_HZ)
+            vehicle.link.request_streams(vehicle.system_id)
         self.attach_clock()
 
     def attach_clock(self) -> None:

@@ -30,7 +30,7 @@ from typing import Any
 
 import numpy as np
 
-from gcs.coordinator import TELEMETRY_HZ, CoordEvent, Coordinator, CoordinatorConfig, Member
+from gcs.coordinator import CoordEvent, Coordinator, CoordinatorConfig, Member
 from gcs.errors import GcsError
 from gcs.link import Link
 from gcs.missionclock import MissionClock
@@ -278,9 +278,7 @@ async def rehearse(opts: RehearsalOptions) -> dict[str, Any]:
         async with contextlib.AsyncExitStack() as stack:
             vehicles: dict[str, Vehicle] = {}
             for v, conn, sysid in zip(opts.scenario.vehicles, conns, sysids, strict=True):
-                link = await stack.enter_async_context(
-                    Link.open(conn, message_rates_hz=TELEMETRY_HZ)
-                )
+                link = await stack.enter_async_context(Link.open(conn))
                 peer = await link.wait_vehicle(sysid, timeout_s=15.0)
                 vehicles[v.id] = Vehicle(link, peer.system_id, peer.component_id)
             coord.bind(vehicles)

@@ -508,20 +508,18 @@ class Anchor(NamedTuple):
     t_s: float | None = None
 
 
-Anchors = Mapping[str, Anchor | tuple[float, float]]
-"""Vehicle id -> its :class:`Anchor` (a plain ``(s_m, speed_m_s)`` is at the re-plan time)."""
+Anchors = Mapping[str, Anchor]
+"""Vehicle id -> its :class:`Anchor`."""
 
 
-def _anchor_t(at_s: float, anchor: Anchor | tuple[float, float] | None) -> float:
+def _anchor_t(at_s: float, anchor: Anchor | None) -> float:
     """When the vehicle is at its anchor (``at_s`` unless the anchor says)."""
-    if isinstance(anchor, Anchor) and anchor.t_s is not None:
+    if anchor is not None and anchor.t_s is not None:
         return anchor.t_s
     return at_s
 
 
-def _where(
-    vs: VehicleSchedule, t_s: float, anchor: Anchor | tuple[float, float] | None
-) -> tuple[str, float, float]:
+def _where(vs: VehicleSchedule, t_s: float, anchor: Anchor | None) -> tuple[str, float, float]:
     if anchor is None:
         return vs.state_at(t_s)
     return "leg", anchor[0], anchor[1]
@@ -534,7 +532,7 @@ def _window(
     now_s: float,
     step_m_s: float,
     threats: Sequence[ThreatZone],
-    anchor: Anchor | tuple[float, float] | None = None,
+    anchor: Anchor | None = None,
 ) -> ArrivalWindow:
     phase, s0, _ = _where(vs, now_s, anchor)
     start = now_s
@@ -888,7 +886,9 @@ def apply_popup(
             target_s=targets[v.id],
             step_m_s=current.step_m_s,
             threats=threats,
-            at=(anchor[0], anchor[1]) if where[v.id][0] == "leg" and anchor is not None else None,
+            at=(anchor.s_m, anchor.speed_m_s)
+            if where[v.id][0] == "leg" and anchor is not None
+            else None,
             loiter_margin_m_s=loiter_margin_m_s,
         )
         retimed.append(r.schedule)

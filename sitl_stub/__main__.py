@@ -8,6 +8,7 @@ from __future__ import annotations
 import argparse
 import asyncio
 import contextlib
+import functools
 import logging
 import math
 import signal
@@ -16,10 +17,14 @@ import time
 from collections.abc import Sequence
 from dataclasses import dataclass, replace
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from sitl_stub.api import DEFAULT_TCP_BASE, Home, SimTeam
 from sitl_stub.model import AirframeParams
 from sitl_stub.truth import DEFAULT_TRUTH_PERIOD_S
+
+if TYPE_CHECKING:
+    from planner.scenario import Scenario
 
 log = logging.getLogger("sitl_stub")
 
@@ -216,11 +221,17 @@ def _airspeeds(lo_m_s: float, cruise_m_s: float, hi_m_s: float) -> AirframeParam
     )
 
 
-def airspeeds_from_scenario(path: str, n: int) -> list[AirframeParams]:
-    """Vehicle i flies scenario vehicle i's airspeed range and cruise speed."""
+@functools.cache
+def _scenario(path: str) -> Scenario:
+    """The scenario file, read once for the homes and the airspeeds."""
     from planner.scenario import load_scenario
 
-    vehicles = load_scenario(path).vehicles[:n]
+    return load_scenario(path)
+
+
+def airspeeds_from_scenario(path: str, n: int) -> list[AirframeParams]:
+    """Vehicle i flies scenario vehicle i's airspeed range and cruise speed."""
+    vehicles = _scenario(path).vehicles[:n]
     return [_airspeeds(v.speed_min_m_s, v.cruise_m_s, v.speed_max_m_s) for v in vehicles]
 
 
@@ -260,9 +271,8 @@ def homes_from_scenario(path: str, n: int) -> list[Home]:
     import numpy as np
 
     from planner.plan import build_terrain
-    from planner.scenario import load_scenario
 
-    scenario = load_scenario(path)
+    scenario = _scenario(path)
     frame = scenario.frame()
     vehicles = scenario.vehicles
     if n > len(vehicles):
