@@ -132,6 +132,12 @@ def parse_args(argv: Sequence[str] | None = None) -> argparse.Namespace:
         action="store_true",
         help="request upload items with MISSION_REQUEST (older ArduPilot), not _INT",
     )
+    ap.add_argument(
+        "--exact-missions",
+        action="store_true",
+        help="read uploaded mission items back exactly as sent (default: in ArduPilot's "
+        "stored form: frames 0/3/10, whole-centimetre altitudes, per-command parameters)",
+    )
     ap.add_argument("--host", default="127.0.0.1")
     ap.add_argument("-v", "--verbose", action="store_true")
     return ap.parse_args(_join_negative_values(list(sys.argv[1:] if argv is None else argv)))
@@ -345,6 +351,7 @@ async def serve(
             params=params,
             start_utc_s=time.time() if args.start_utc is None else args.start_utc,
             legacy_mission_requests=args.legacy_mission_requests,
+            ardupilot_mission_storage=not args.exact_missions,
             mission_timeout_s=args.mission_timeout,
             truth_out=args.truth,
             truth_period_s=args.truth_period,

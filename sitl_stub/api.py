@@ -79,6 +79,7 @@ class SimTeam:
         start_utc_s: float = DEFAULT_EPOCH_UTC_S,
         mission_timeout_s: float = 1.5,
         legacy_mission_requests: bool = False,
+        ardupilot_mission_storage: bool = True,
         run: bool = True,
         truth_out: str | Path | None = None,
         truth_period_s: float = DEFAULT_TRUTH_PERIOD_S,
@@ -104,6 +105,7 @@ class SimTeam:
             start_utc_s=start_utc_s,
             mission_timeout_s=mission_timeout_s,
             legacy_mission_requests=legacy_mission_requests,
+            ardupilot_mission_storage=ardupilot_mission_storage,
             tcp_base=tcp_base,
         )
         if truth_out is not None:
@@ -144,6 +146,7 @@ class SimTeam:
         start_utc_s: float = DEFAULT_EPOCH_UTC_S,
         mission_timeout_s: float = 1.5,
         legacy_mission_requests: bool = False,
+        ardupilot_mission_storage: bool = True,
         tcp_base: int = DEFAULT_TCP_BASE,
     ) -> SimTeam:
         """Build the team without opening sockets (``start`` is the usual entry)."""
@@ -176,6 +179,7 @@ class SimTeam:
                     link=link,
                     mission_timeout_s=mission_timeout_s,
                     legacy_mission_requests=legacy_mission_requests,
+                    ardupilot_mission_storage=ardupilot_mission_storage,
                 )
             )
         ports = [0 if tcp_base == 0 else tcp_base + PORT_STRIDE * i for i in range(len(homes))]

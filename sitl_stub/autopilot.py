@@ -409,6 +409,11 @@ class Autopilot:
         return self._current_seq
 
     @property
+    def current_nav_index(self) -> int | None:
+        """The index of the NAV command being flown in a running AUTO mission, else None."""
+        return self._current_seq if self._mission_state == _MISSION_RUNNING else None
+
+    @property
     def target_airspeed_m_s(self) -> float:
         return self._target_airspeed_m_s
 

@@ -43,6 +43,7 @@ from sitl_stub.items import (
     MAV_MISSION_TYPE_RALLY,
     MissionItem,
 )
+from sitl_stub.storage import legacy_x_from_int, legacy_x_to_int, stored_item
 
 LinkId = int
 
@@ -209,15 +210,22 @@ def validate_item(item: MissionItem) -> int:
     return int(mavlink2.MAV_MISSION_ACCEPTED)
 
 
-def item_from_msg(msg: Any) -> tuple[MissionItem | None, int]:
-    """Convert MISSION_ITEM_INT or legacy MISSION_ITEM to a MissionItem, or a result code."""
+def item_from_msg(msg: Any, *, ardupilot: bool = False) -> tuple[MissionItem | None, int]:
+    """Convert MISSION_ITEM_INT or legacy MISSION_ITEM to a MissionItem, or a result code.
+
+    With ``ardupilot`` a MISSION_ITEM's degrees become int 1e7 as AP_Mission's
+    convert_MISSION_ITEM_to_MISSION_ITEM_INT does (``x * 1.0e7f``, truncated), else rounded.
+    """
     if msg.get_type() == "MISSION_ITEM":
         x, y = float(msg.x), float(msg.y)
         if not math.isfinite(x) or abs(x) > 90.0:
             return None, int(mavlink2.MAV_MISSION_INVALID_PARAM5_X)
         if not math.isfinite(y) or abs(y) > 180.0:
             return None, int(mavlink2.MAV_MISSION_INVALID_PARAM6_Y)
-        xi, yi = round(x * 1e7), round(y * 1e7)
+        if ardupilot:
+            xi, yi = legacy_x_to_int(x), legacy_x_to_int(y)
+        else:
+            xi, yi = round(x * 1e7), round(y * 1e7)
     else:
         xi, yi = int(msg.x), int(msg.y)
     item = MissionItem(
@@ -246,7 +254,15 @@ def addressed_to(msg: Any, system_id: int, component_id: int) -> bool:
 
 
 class MissionServer:
-    """The mission service of one vehicle (all three mission types)."""
+    """The mission service of one vehicle (all three mission types).
+
+    With ``ardupilot_storage`` (the default) flown-mission items are kept in the form ArduPilot
+    stores them (:func:`sitl_stub.storage.stored_item`: frames, centimetre altitudes,
+    per-command parameters) and read back that way, and a download marks ``current = 1`` as
+    ``MissionItemProtocol_Waypoints::get_item`` does: on every item whose COMMAND ID equals
+    the index of the NAV command being flown (``current_nav_index()``, None before a mission
+    has started). With ``ardupilot_storage=False`` items are echoed exactly as sent.
+    """
 
     def __init__(
         self,
@@ -258,8 +274,12 @@ class MissionServer:
         max_retries: int = 10,
         capacity: dict[int, int] | None = None,
         legacy_requests: bool = False,
+        ardupilot_storage: bool = True,
+        current_nav_index: Callable[[], int | None] | None = None,
     ) -> None:
         self.system_id = system_id
+        self.ardupilot_storage = ardupilot_storage
+        self.current_nav_index: Callable[[], int | None] = current_nav_index or (lambda: None)
         self.legacy_requests = legacy_requests
         self.component_id = component_id
         self.timeout_s = timeout_s
@@ -302,6 +322,8 @@ class MissionServer:
         if mission_type != MAV_MISSION_TYPE_MISSION:
             return stored
         home = replace(self.home, seq=0, current=0, mission_type=0)
+        if self.ardupilot_storage:
+            home = stored_item(home)
         return (home, *stored[1:])
 
     def count(self, mission_type: int = MAV_MISSION_TYPE_MISSION) -> int:
@@ -481,9 +503,11 @@ class MissionServer:
             # Duplicate or out of order: ignored, as ArduPilot does; the timer re-requests.
             self.counters["ignored"] += 1
             return
-        item, result = item_from_msg(msg)
+        item, result = item_from_msg(msg, ardupilot=self.ardupilot_storage)
         if item is not None:
             result = validate_item(item)
+            if self.ardupilot_storage and mt == MAV_MISSION_TYPE_MISSION:
+                item = stored_item(item)
         if item is None or result != mavlink2.MAV_MISSION_ACCEPTED:
             self._upload = None
             self.last_result = Result.INVALID_ITEM
@@ -555,10 +579,17 @@ class MissionServer:
             self._ack(r, link, src, comp, int(mavlink2.MAV_MISSION_INVALID_SEQUENCE), mt)
             return
         it = items[seq]
+        if self.ardupilot_storage and mt == MAV_MISSION_TYPE_MISSION:
+            current = 1 if it.command == self.current_nav_index() else 0
+            it = replace(it, current=current)
         if msg.get_type() == "MISSION_REQUEST":
+            if self.ardupilot_storage:
+                lat, lon = legacy_x_from_int(it.x), legacy_x_from_int(it.y)
+            else:
+                lat, lon = it.x * 1e-7, it.y * 1e-7
             out: Any = mavlink2.MAVLink_mission_item_message(
                 src, comp, it.seq, it.frame, it.command, it.current, it.autocontinue,
-                it.param1, it.param2, it.param3, it.param4, it.x * 1e-7, it.y * 1e-7, it.z, mt,
+                it.param1, it.param2, it.param3, it.param4, lat, lon, it.z, mt,
             )  # fmt: skip
         else:
             out = mavlink2.MAVLink_mission_item_int_message(

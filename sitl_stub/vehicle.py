@@ -172,6 +172,7 @@ class Vehicle:
         send: SendBytes | None = None,
         mission_timeout_s: float = 1.5,
         legacy_mission_requests: bool = False,
+        ardupilot_mission_storage: bool = True,
     ) -> None:
         self.system_id = system_id
         self.component_id = COMPONENT_ID
@@ -186,6 +187,8 @@ class Vehicle:
             component_id=COMPONENT_ID,
             timeout_s=mission_timeout_s,
             legacy_requests=legacy_mission_requests,
+            ardupilot_storage=ardupilot_mission_storage,
+            current_nav_index=lambda: self.autopilot.current_nav_index,
         )
         self._home_src: tuple[float, float, float] | None = None
         self._sync_home()

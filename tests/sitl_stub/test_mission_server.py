@@ -145,6 +145,8 @@ def test_lost_final_ack_is_repeated_when_last_item_is_resent(server: MissionServ
 
 
 def test_legacy_mission_item_is_accepted_in_upload(server: MissionServer) -> None:
+    """Follows libraries/AP_Mission/AP_Mission.cpp, convert_MISSION_ITEM_to_MISSION_ITEM_INT:
+    degrees * 1.0e7f in float32, so 149.5 deg (1.495e9, float32 step 128) is 1495000064."""
     server.handle(count(2), LINK, 0.0)
     server.handle(item_int(0), LINK, 0.0)
     legacy = from_gcs(
@@ -155,6 +157,19 @@ def test_legacy_mission_item_is_accepted_in_upload(server: MissionServer) -> Non
     r = server.handle(legacy, LINK, 0.1)
     assert r.sends[0].msg.type == mavlink2.MAV_MISSION_ACCEPTED
     assert server.items()[1].x == -355000000
+    assert server.items()[1].y == 11679688 * 128
+
+
+def test_legacy_mission_item_is_rounded_when_echoing_exactly() -> None:
+    server = MissionServer(system_id=1, ardupilot_storage=False)
+    server.handle(count(2), LINK, 0.0)
+    server.handle(item_int(0), LINK, 0.0)
+    legacy = from_gcs(
+        mavlink2.MAVLink_mission_item_message(
+            1, 1, 1, mavlink2.MAV_FRAME_GLOBAL_RELATIVE_ALT, 16, 0, 1, 0, 0, 0, 0, -35.5, 149.5, 80
+        )
+    )
+    server.handle(legacy, LINK, 0.1)
     assert server.items()[1].y == 1495000000
 
 
