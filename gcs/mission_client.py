@@ -21,12 +21,17 @@ import asyncio
 import contextlib
 import weakref
 from collections.abc import Callable, Sequence
-from dataclasses import replace
 from typing import TYPE_CHECKING, Any, Final
 
 from gcs.mission_errors import MissionMismatch, MissionTimeout
 from gcs.mission_protocol import Clear, Download, SetCurrent, Transfer, Upload
-from planner.mission import MissionItem, command_name, items_equal
+from planner.mission import (
+    Autopilot,
+    MissionItem,
+    command_name,
+    first_difference,
+    stored_item,
+)
 
 if TYPE_CHECKING:
     from gcs.link import Link
@@ -171,14 +176,17 @@ async def upload_mission(
     retries: int = DEFAULT_RETRIES,
     verify: bool = False,
     progress: Progress | None = None,
+    autopilot: Autopilot | None = None,
 ) -> None:
     """Upload ``items`` (seq = index, all of ``mission_type``) to vehicle ``target_system``.
 
     Item 0 of the flown mission (type 0) is home on ArduPilot: send a home or placeholder
     item there. No items clears the mission type (MISSION_COUNT 0). With ``verify=True`` the
-    items are downloaded again and compared with :func:`planner.mission.items_equal` (item 0
-    of type 0 and the ``current`` flags are not compared: the vehicle sets them); a difference
-    raises :class:`MissionMismatch` naming the first differing item.
+    items are downloaded again and compared with what the vehicle should hold: the items as
+    ``autopilot`` stores them (:func:`planner.mission.stored_item`: ArduPilot keeps altitudes
+    in centimetres, its own frames and only some params; default: from the vehicle's
+    HEARTBEAT). Item 0 of type 0 and the ``current`` flags are not compared (the vehicle sets
+    them); a difference raises :class:`MissionMismatch` naming the first differing item.
 
     Raises
     ------
@@ -201,32 +209,31 @@ async def upload_mission(
         timeout_s=timeout_s,
         retries=retries,
     )
-    _check_same(upload, list(items), got)
+    if autopilot is None:
+        peer = getattr(link, "vehicles", {}).get(target_system)
+        autopilot = Autopilot.from_heartbeat(None if peer is None else peer.autopilot)
+    _check_same(upload, list(items), got, autopilot)
 
 
-def _check_same(upload: Upload, sent: list[MissionItem], got: list[MissionItem]) -> None:
-    def norm(items: list[MissionItem]) -> list[MissionItem]:
-        return [replace(it, current=0) for it in items]
-
+def _check_same(
+    upload: Upload, sent: list[MissionItem], got: list[MissionItem], autopilot: Autopilot
+) -> None:
+    """Raise MissionMismatch unless ``got`` is ``sent`` as ``autopilot`` stores it."""
     home_is_vehicles = upload.mission_type == 0
-    a, b = norm(sent), norm(got)
-    if items_equal(a, b, compare_home=not home_is_vehicles):
-        return
-    where = upload.describe()
     if home_is_vehicles and not sent and len(got) == 1:
         return  # an empty mission reads back as home alone
-    if len(a) != len(b):
-        first = next(
-            (k for k in range(min(len(a), len(b))) if not _same(a, b, k, home_is_vehicles)),
-            min(len(a), len(b)),
-        )
-        msg = f"{where} verification failed: sent {len(a)} items, read back {len(b)}"
+    first = first_difference(sent, got, autopilot=autopilot, compare_home=not home_is_vehicles)
+    if first is None:
+        return
+    where = upload.describe()
+    if len(sent) != len(got):
+        msg = f"{where} verification failed: sent {len(sent)} items, read back {len(got)}"
         msg += f"; first difference at item {first}"
     else:
-        first = next(k for k in range(len(a)) if not _same(a, b, k, home_is_vehicles))
         msg = (
-            f"{where} verification failed at item {first}: sent {_show(a[first])}, "
-            f"read back {_show(b[first])}"
+            f"{where} verification failed at item {first}: sent {_show(sent[first])}, "
+            f"read back {_show(got[first])} ({autopilot.value} stores it as "
+            f"{_show(stored_item(sent[first], autopilot))})"
         )
     raise MissionMismatch(
         msg,
@@ -235,10 +242,6 @@ def _check_same(upload: Upload, sent: list[MissionItem], got: list[MissionItem])
         mission_type=upload.mission_type,
         operation="upload",
     )
-
-
-def _same(a: list[MissionItem], b: list[MissionItem], k: int, skip_home: bool) -> bool:
-    return (k == 0 and skip_home) or items_equal([a[k]], [b[k]])
 
 
 def _show(it: MissionItem) -> str:

@@ -29,10 +29,11 @@ are constants here, checked against pymavlink's generated dialect by the tests.
 
 from __future__ import annotations
 
+import enum
 import math
 import struct
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 from planner.errors import PlannerError
 
@@ -58,6 +59,7 @@ __all__ = [
     "MAV_MISSION_TYPE_MISSION",
     "RELATIVE_FRAMES",
     "TERRAIN_FRAMES",
+    "Autopilot",
     "Loiter",
     "MissionError",
     "MissionItem",
@@ -67,7 +69,10 @@ __all__ = [
     "command_name",
     "compile_mission",
     "describe",
+    "first_difference",
     "items_equal",
+    "stored_alt_m",
+    "stored_item",
 ]
 
 MAV_CMD_NAV_WAYPOINT = 16
@@ -349,7 +354,8 @@ def compile_mission(
     Returns
     -------
     list of MissionItem
-        ``seq`` = list index; lat/lon rounded to the nearest 1e-7 deg; ``current`` = 0,
+        ``seq`` = list index; lat/lon rounded to the nearest 1e-7 deg; z in whole
+        centimetres as ArduPilot stores it (:func:`stored_alt_m`); ``current`` = 0,
         ``autocontinue`` = 1 everywhere.
 
     Raises
@@ -426,7 +432,9 @@ def compile_mission(
                 param4=float(params[3]),
                 x=x,
                 y=y,
-                z=float(z),
+                # The altitude the autopilot keeps (whole centimetres), so that what is
+                # planned is what is flown and what a verifying download gives back.
+                z=stored_alt_m(float(z)),
             )
         )
 
@@ -471,41 +479,215 @@ def _same_f32(a: float, b: float) -> bool:
     return _f32(a) == _f32(b)
 
 
+# --- what the autopilot stores ------------------------------------------------------------
+
+
+class Autopilot(enum.Enum):
+    """Whose storage a mission is read back from (see :func:`stored_item`)."""
+
+    EXACT = "exact"
+    """Gives back what it was sent, at float32 resolution (a generic MAVLink peer)."""
+    ARDUPILOT = "ardupilot"
+    """ArduPlane's AP_Mission: packed 15-byte commands, altitudes in whole centimetres."""
+    PX4 = "px4"
+    """PX4's mission manager: mission_item_s (double lat/lon, float altitude)."""
+
+    @classmethod
+    def from_heartbeat(cls, mav_autopilot: int | None) -> Autopilot:
+        """MAV_AUTOPILOT of a HEARTBEAT: 3 (ARDUPILOTMEGA) or 12 (PX4), else EXACT."""
+        return {3: cls.ARDUPILOT, 12: cls.PX4}.get(mav_autopilot or 0, cls.EXACT)
+
+
+# AP_Mission::stored_in_location: commands whose x, y, z are kept as a Location.
+_AP_LOCATION_COMMANDS = frozenset(
+    {16, 17, 18, 19, 21, 22, 30, 31, 82, 84, 85, 94, 179, 189, 191, 201}
+)
+
+
+def stored_alt_m(z_m: float) -> float:
+    """The altitude ArduPilot gives back for a sent ``z`` (m): whole centimetres, truncated.
+
+    AP_Mission (libraries/AP_Mission/AP_Mission.cpp, mavlink_int_to_mission_cmd) keeps
+    ``(int32)(z * 100.0f)`` in float32 arithmetic and sends back ``alt / 100.0f``.
+    """
+    if not math.isfinite(z_m):
+        return z_m
+    cm = math.trunc(_f32(_f32(z_m) * 100.0))
+    return _f32(cm / 100.0)
+
+
+def _u16(v: float) -> int:
+    """C's float -> uint16_t conversion for the values missions use (negatives as 0)."""
+    if not math.isfinite(v) or v <= 0.0:
+        return 0
+    return min(math.trunc(v), 0xFFFF)
+
+
+def _ardupilot_params(it: MissionItem) -> tuple[float, float, float, float]:
+    """Params back from AP_Mission's packing for ArduPlane (mission_cmd_to_mavlink_int)."""
+    p1, p2, p3, p4 = it.param1, it.param2, it.param3, it.param4
+    cmd = it.command
+    if cmd == MAV_CMD_NAV_WAYPOINT:
+        # Plane: acceptance radius and pass-by distance in the low/high byte of p1.
+        return 0.0, float(min(0xFF, _u16(p2))), float(min(0xFF, _u16(p3))), 0.0
+    if cmd == MAV_CMD_NAV_LOITER_UNLIM:
+        r = float(_u16(abs(p3)))
+        return 0.0, 0.0, -r if p3 < 0 else r, 0.0
+    if cmd == MAV_CMD_NAV_LOITER_TURNS:
+        r = arduplane_loiter_radius_m(p3) if math.isfinite(p3) else 0.0
+        return float(_u16(p1) & 0xFF), 0.0, -r if p3 < 0 else r, 1.0 if p4 > 0 else 0.0
+    if cmd == MAV_CMD_NAV_LOITER_TIME:
+        return float(_u16(p1)), 0.0, -1.0 if p3 < 0 else 1.0, 1.0 if p4 > 0 else 0.0
+    if cmd == MAV_CMD_NAV_LAND:
+        return float(_u16(p1)), 0.0, 0.0, -1.0 if p4 < 0 else 1.0
+    if cmd == MAV_CMD_NAV_TAKEOFF:
+        return float(_u16(p1)), 0.0, 0.0, 0.0
+    if cmd == MAV_CMD_NAV_RETURN_TO_LAUNCH:
+        return 0.0, 0.0, 0.0, 0.0
+    if cmd == MAV_CMD_DO_CHANGE_SPEED:
+        return float(_u16(p1) & 0xFF), _f32(p2), _f32(p3), 0.0
+    return _f32(p1), _f32(p2), _f32(p3), _f32(p4)
+
+
+def _ardupilot_item(it: MissionItem) -> MissionItem:
+    if it.mission_type != MAV_MISSION_TYPE_MISSION:
+        return _exact_item(it)
+    p1, p2, p3, p4 = _ardupilot_params(it)
+    base = replace(it, current=0, autocontinue=1, param1=p1, param2=p2, param3=p3, param4=p4)
+    if it.command not in _AP_LOCATION_COMMANDS:
+        # DO commands keep no location: x, y, z and the frame come back zero.
+        return replace(base, frame=MAV_FRAME_GLOBAL, x=0, y=0, z=0.0)
+    if it.frame in RELATIVE_FRAMES:
+        frame = MAV_FRAME_GLOBAL_RELATIVE_ALT
+    elif it.frame in TERRAIN_FRAMES:
+        frame = MAV_FRAME_GLOBAL_TERRAIN_ALT
+    else:
+        frame = MAV_FRAME_GLOBAL
+    return replace(base, frame=frame, z=stored_alt_m(it.z))
+
+
+def _px4_item(it: MissionItem) -> MissionItem:
+    base = _exact_item(it)
+    if it.frame == MAV_FRAME_MISSION or it.mission_type != MAV_MISSION_TYPE_MISSION:
+        return base
+    # format_mavlink_mission_item: a global frame comes back as the _INT frame of its kind,
+    # with the params that mission_item_s keeps for the command.
+    frame = (
+        MAV_FRAME_GLOBAL_RELATIVE_ALT_INT
+        if it.frame in RELATIVE_FRAMES or it.frame in TERRAIN_FRAMES
+        else MAV_FRAME_GLOBAL_INT
+    )
+    p1, p2, p3, p4 = base.param1, base.param2, base.param3, base.param4
+    if it.command == MAV_CMD_NAV_WAYPOINT:
+        p3 = 0.0
+    elif it.command in (MAV_CMD_NAV_TAKEOFF,):
+        p1, p2, p3 = 0.0, 0.0, 0.0
+    elif it.command == MAV_CMD_NAV_LAND:
+        p1, p3 = 0.0, 0.0
+    return replace(base, frame=frame, param1=p1, param2=p2, param3=p3, param4=p4)
+
+
+def _exact_item(it: MissionItem) -> MissionItem:
+    return replace(
+        it,
+        current=0,
+        param1=_f32(it.param1),
+        param2=_f32(it.param2),
+        param3=_f32(it.param3),
+        param4=_f32(it.param4),
+        z=_f32(it.z),
+    )
+
+
+_STORED = {
+    Autopilot.EXACT: _exact_item,
+    Autopilot.ARDUPILOT: _ardupilot_item,
+    Autopilot.PX4: _px4_item,
+}
+
+
+def stored_item(item: MissionItem, autopilot: Autopilot) -> MissionItem:
+    """The item as ``autopilot`` gives it back when the mission is downloaded.
+
+    ArduPilot (libraries/AP_Mission/AP_Mission.cpp): location commands come back in frame 0,
+    3 or 10 whichever variant was sent, the altitude in whole centimetres (truncated), only
+    the params the packed command keeps (on Plane NAV_WAYPOINT keeps its acceptance and
+    pass-by radii as bytes, NAV_TAKEOFF its pitch as an integer, NAV_LOITER_TURNS its turns
+    and stored radius); DO commands come back with frame 0 and no position. PX4
+    (src/modules/mavlink/mavlink_mission.cpp): global frames come back as the _INT frame of
+    their kind, altitudes as float32, the params mission_item_s keeps. ``current`` is always
+    0 (the vehicle sets it) and float fields are float32.
+    """
+    return _STORED[autopilot](item)
+
+
+def first_difference(
+    sent: Sequence[MissionItem],
+    got: Sequence[MissionItem],
+    *,
+    autopilot: Autopilot = Autopilot.EXACT,
+    alt_tol_m: float = 1e-3,
+    compare_home: bool = True,
+) -> int | None:
+    """Index of the first item that ``got`` does not hold as ``autopilot`` stores ``sent``.
+
+    None when they agree; ``min(len(sent), len(got))`` when one is a prefix of the other.
+    Integers must match exactly, params as float32 (NaN equals NaN), z within ``alt_tol_m``.
+    With ``compare_home=False`` item 0 is skipped (ArduPilot replaces it with its own home).
+    """
+    for k, (p, q) in enumerate(zip(sent, got, strict=False)):
+        if k == 0 and not compare_home:
+            continue
+        if not _item_same(stored_item(p, autopilot), stored_item(q, autopilot), alt_tol_m):
+            return k
+    if len(sent) != len(got):
+        return min(len(sent), len(got))
+    return None
+
+
+def _item_same(p: MissionItem, q: MissionItem, alt_tol_m: float) -> bool:
+    ints_p = (p.seq, p.frame, p.command, p.current, p.autocontinue, p.x, p.y, p.mission_type)
+    ints_q = (q.seq, q.frame, q.command, q.current, q.autocontinue, q.x, q.y, q.mission_type)
+    if ints_p != ints_q:
+        return False
+    params = zip(
+        (p.param1, p.param2, p.param3, p.param4),
+        (q.param1, q.param2, q.param3, q.param4),
+        strict=True,
+    )
+    if not all(_same_f32(u, v) for u, v in params):
+        return False
+    if math.isnan(p.z) or math.isnan(q.z):
+        return math.isnan(p.z) and math.isnan(q.z)
+    return abs(p.z - q.z) <= alt_tol_m
+
+
 def items_equal(
     a: Sequence[MissionItem],
     b: Sequence[MissionItem],
     *,
     alt_tol_m: float = 1e-3,
     compare_home: bool = True,
+    autopilot: Autopilot | None = None,
 ) -> bool:
-    """True if two missions are the same on the wire.
+    """True if two missions are the same on the wire (or, with ``autopilot``, the same once
+    that autopilot has stored them: see :func:`first_difference`).
 
-    Integers must match exactly; params must be equal as float32 (NaN equals NaN); z within
-    ``alt_tol_m``. With ``compare_home=False`` item 0 is skipped (ArduPilot replaces it with
-    its own home).
+    Without ``autopilot``: integers must match exactly (``current`` included); params must be
+    equal as float32 (NaN equals NaN); z within ``alt_tol_m``. With ``compare_home=False``
+    item 0 is skipped (ArduPilot replaces it with its own home).
     """
+    if autopilot is not None:
+        found = first_difference(
+            a, b, autopilot=autopilot, alt_tol_m=alt_tol_m, compare_home=compare_home
+        )
+        return found is None
     if len(a) != len(b):
         return False
-    for k, (p, q) in enumerate(zip(a, b, strict=True)):
-        if k == 0 and not compare_home:
-            continue
-        ints_p = (p.seq, p.frame, p.command, p.current, p.autocontinue, p.x, p.y, p.mission_type)
-        ints_q = (q.seq, q.frame, q.command, q.current, q.autocontinue, q.x, q.y, q.mission_type)
-        if ints_p != ints_q:
-            return False
-        params = zip(
-            (p.param1, p.param2, p.param3, p.param4),
-            (q.param1, q.param2, q.param3, q.param4),
-            strict=True,
-        )
-        if not all(_same_f32(u, v) for u, v in params):
-            return False
-        if math.isnan(p.z) or math.isnan(q.z):
-            if not (math.isnan(p.z) and math.isnan(q.z)):
-                return False
-        elif abs(p.z - q.z) > alt_tol_m:
-            return False
-    return True
+    return all(
+        (k == 0 and not compare_home) or _item_same(p, q, alt_tol_m)
+        for k, (p, q) in enumerate(zip(a, b, strict=True))
+    )
 
 
 def command_name(command: int) -> str:

@@ -7,6 +7,7 @@ import math
 import struct
 from typing import Any
 
+import numpy as np
 import pytest
 from hypothesis import given
 from hypothesis import strategies as st
@@ -417,7 +418,13 @@ def test_compiled_mission_structure_holds_for_any_valid_route(route: dict[str, A
     assert [(it.x, it.y) for it in nav] == [
         (round(w.lat_deg * 1e7), round(w.lon_deg * 1e7)) for w in wps
     ]
-    assert [it.z for it in nav] == [w.alt_m - home.alt_m for w in wps]
+    # Altitudes come in the whole centimetres ArduPilot keeps (truncated towards zero).
+    for it, w in zip(nav, wps, strict=True):
+        want = w.alt_m - home.alt_m
+        assert abs(it.z - want) < 0.0101
+        assert abs(it.z) <= abs(want) * (1.0 + 2.0**-22) + 1e-4  # float32 above
+        cm = round(it.z * 100.0)  # z is the float32 of a whole number of centimetres
+        assert any(float(np.float32((cm + d) / 100.0)) == it.z for d in (-1, 0, 1))
     for k, it in enumerate(items):
         if it.command == SPEED:
             assert items[k + 1].command == WP
