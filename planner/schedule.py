@@ -11,9 +11,14 @@ vehicles whose remaining route the threat touches from where they are, and re-ti
 for the same arrival time, or the earliest common one when that is no longer feasible.
 
 Model: a vehicle is at the start of its path at takeoff and flies its leg speeds from there
-(climb-out is not modelled); a loiter is ``n`` turns on a circle tangent to the path at a path
-point (so it adds exactly ``2 n pi r``), or, when no tangent circle fits in a buffer, on a
-circle in the buffer reached by a straight out-and-back detour counted in the length.
+(climb-out is not modelled). Speeds are equivalent airspeeds, as ArduPlane commands them (the
+scenario's limits, every DO_CHANGE_SPEED); they carry the aircraft at the true airspeed of the
+air density along the route (:mod:`planner.atmosphere`): a vehicle's remaining path is timed
+at ``speed x tas_per_eas``, the route's harmonic-mean ratio from where it is, and each leg and
+loiter keeps the ratio it was timed with. A loiter is ``n`` turns on a circle tangent to the
+path at a path point (so it adds exactly ``2 n pi r``), or, when no tangent circle fits in a
+buffer, on a circle in the buffer reached by a straight out-and-back detour counted in the
+length.
 """
 
 from __future__ import annotations
@@ -26,6 +31,7 @@ from typing import Literal, NamedTuple
 import numpy as np
 from numpy.typing import NDArray
 
+from planner.atmosphere import mean_eas2tas
 from planner.errors import InfeasibleError
 from planner.flightpath import FlightPath, Segment
 from planner.plan import Method, Plan, World, build_problem, build_world, solve_and_finish
@@ -58,8 +64,15 @@ class Leg:
     s_start_m: float
     s_end_m: float
     speed_m_s: float
+    """Equivalent airspeed commanded, m/s."""
     t_start_s: float
     t_end_s: float
+    tas_per_eas: float = 1.0
+    """True airspeed per unit of ``speed_m_s`` it was timed with (still air: metres per s)."""
+
+    @property
+    def true_airspeed_m_s(self) -> float:
+        return self.speed_m_s * self.tas_per_eas
 
 
 @dataclass(frozen=True, slots=True)
@@ -77,9 +90,12 @@ class LoiterPlan:
     clockwise: bool
     detour_m: float
     speed_m_s: float
+    """Equivalent airspeed, m/s."""
     t_start_s: float
     t_end_s: float
     buffer_id: str
+    tas_per_eas: float = 1.0
+    """True airspeed per unit of ``speed_m_s`` it was timed with."""
 
     @property
     def length_m(self) -> float:
@@ -139,6 +155,10 @@ class VehicleSchedule:
     def alt_at(self, s_m: float) -> float:
         return float(np.interp(s_m, self.wp_s_m, self.wp_alt_m))
 
+    def tas_per_eas(self, s_from_m: float = 0.0) -> float:
+        """True per equivalent airspeed that times the path from ``s_from_m`` (ISA)."""
+        return mean_eas2tas(self.wp_s_m, self.wp_alt_m, s_from_m=s_from_m)
+
     def state_at(self, t_s: float) -> tuple[str, float, float]:
         """``(phase, s_m, speed_m_s)`` at time t: phase ground, leg, loiter or arrived."""
         if not self.airborne_start and (not self.legs or t_s < self.takeoff_s):
@@ -148,7 +168,8 @@ class VehicleSchedule:
                 return "loiter", lo.s_m, lo.speed_m_s
         for leg in self.legs:
             if leg.t_start_s <= t_s < leg.t_end_s:
-                return "leg", leg.s_start_m + (t_s - leg.t_start_s) * leg.speed_m_s, leg.speed_m_s
+                s_m = leg.s_start_m + (t_s - leg.t_start_s) * leg.true_airspeed_m_s
+                return "leg", s_m, leg.speed_m_s
         if t_s >= self.arrival_s:
             return "arrived", self.path.length_m, 0.0
         return "leg", 0.0, self.legs[0].speed_m_s if self.legs else 0.0
@@ -159,10 +180,11 @@ class VehicleSchedule:
             return None
         for lo in self.loiters:
             if lo.t_start_s <= t_s < lo.t_end_s:
-                return _loiter_position(lo, (t_s - lo.t_start_s) * lo.speed_m_s)
+                u_m = (t_s - lo.t_start_s) * lo.speed_m_s * lo.tas_per_eas
+                return _loiter_position(lo, u_m)
         for leg in self.legs:
             if leg.t_start_s <= t_s <= leg.t_end_s:
-                s = leg.s_start_m + (t_s - leg.t_start_s) * leg.speed_m_s
+                s = leg.s_start_m + (t_s - leg.t_start_s) * leg.true_airspeed_m_s
                 p = self.path.pose_at(min(max(s, 0.0), self.path.length_m))
                 return p.east_m, p.north_m
         p = self.path.end
@@ -336,15 +358,18 @@ def _timeline(
     site: _Site | None,
     radius_m: float,
     turns: int,
+    tas_per_eas: float,
 ) -> tuple[list[Leg], list[LoiterPlan], float]:
+    """Legs and loiters from timing pieces whose lengths are in metres / ``tas_per_eas``."""
     legs: list[Leg] = []
     loiters: list[LoiterPlan] = []
     s, t = s0_m, t0_s
     for p in pieces:
         dt = p.duration_s
         if p.kind == "leg":
-            legs.append(Leg(s, s + p.length_m, p.speed_m_s, t, t + dt))
-            s += p.length_m
+            length = p.length_m * tas_per_eas
+            legs.append(Leg(s, s + length, p.speed_m_s, t, t + dt, tas_per_eas))
+            s += length
         else:
             assert site is not None
             loiters.append(
@@ -362,6 +387,7 @@ def _timeline(
                     t,
                     t + dt,
                     site.buffer_id,
+                    tas_per_eas,
                 )
             )
         t += dt
@@ -415,11 +441,13 @@ def _retime(
     adjustments: list[Adjustment] = []
     radius = flyable_loiter_radius_m(v.min_turn_radius_m)
     length = vs.path.length_m
+    # The timing arithmetic runs in metres / tas_per_eas, at equivalent airspeeds.
+    ratio = vs.tas_per_eas(s0)
     on_ground = phase == "ground"
     takeoff = vs.takeoff_s
     if on_ground:
         window = (max(v.takeoff_window_s[0], now_s), max(v.takeoff_window_s[1], now_s))
-        takeoff = takeoff_time_s(length, target_s, limits, window)
+        takeoff = takeoff_time_s(length / ratio, target_s, limits, window)
         start_t = takeoff
         if abs(takeoff - vs.takeoff_s) > TIME_TOL_S or now_s == 0.0:
             adjustments.append(
@@ -435,10 +463,14 @@ def _retime(
             )
     remaining = length - s0
     site = find_loiter_site(scenario, v, vs.path, s0, radius, threats)
-    loiter_site = None if site is None else LoiterSite(site.s_m - s0, radius, site.detour_m)
+    loiter_site = (
+        None
+        if site is None
+        else LoiterSite((site.s_m - s0) / ratio, radius / ratio, site.detour_m / ratio)
+    )
     timing: Timing = time_path(
         v.id,
-        remaining,
+        remaining / ratio,
         target_s - start_t,
         limits,
         site=loiter_site,
@@ -446,11 +478,17 @@ def _retime(
         loiter_margin_m_s=loiter_margin_m_s,
     )
     legs, loiters, arrival = _timeline(
-        timing.pieces, s0_m=s0, t0_s=start_t, site=site, radius_m=radius, turns=timing.turns
+        timing.pieces,
+        s0_m=s0,
+        t0_s=start_t,
+        site=site,
+        radius_m=radius,
+        turns=timing.turns,
+        tas_per_eas=ratio,
     )
     speeds = sorted({leg.speed_m_s for leg in legs})
     held = sum(lo.t_end_s - lo.t_start_s for lo in loiters)
-    mean = remaining / max(target_s - start_t - held, 1e-9)
+    mean = remaining / ratio / max(target_s - start_t - held, 1e-9)
     if speeds and (phase in ("leg", "loiter") or speeds != [v.cruise_m_s]):
         adjustments.append(
             Adjustment(
@@ -463,7 +501,8 @@ def _retime(
                     f"{leg.speed_m_s:g} m/s for {(leg.s_end_m - leg.s_start_m) / 1000:.2f} km"
                     for leg in legs
                 )
-                + f" to arrive at {target_s:.1f} s (mean {mean:.2f} m/s on the path)",
+                + f" to arrive at {target_s:.1f} s (mean {mean:.2f} m/s on the path, "
+                f"true airspeed x{ratio:.3f})",
             )
         )
     for lo in loiters:
@@ -476,7 +515,7 @@ def _retime(
                 f"{lo.turns} turns of {lo.radius_m:g} m in buffer {lo.buffer_id} at "
                 f"{lo.s_m / 1000:.1f} km along the path (+{lo.length_m:.0f} m, eq. 8): "
                 f"{remaining / 1000:.1f} km at {v.speed_min_m_s:g} m/s would arrive "
-                f"{target_s - start_t - remaining / v.speed_min_m_s:.1f} s early",
+                f"{target_s - start_t - remaining / ratio / v.speed_min_m_s:.1f} s early",
             )
         )
     if (
@@ -543,7 +582,7 @@ def _window(
     return vehicle_window(
         v.id,
         now_s=start,
-        remaining_m=vs.path.length_m - s0,
+        remaining_m=(vs.path.length_m - s0) / vs.tas_per_eas(s0),
         limits=_limits(v, step_m_s),
         takeoff_window_s=v.takeoff_window_s if phase == "ground" else None,
         can_loiter=site is not None,
@@ -658,7 +697,8 @@ def build_schedule(
         for v, vs in zip(scenario.vehicles, base, strict=True)
     ]
     natural = {
-        v.id: (0.0 if v.airborne else v.takeoff_window_s[0]) + vs.path.length_m / v.cruise_m_s
+        v.id: (0.0 if v.airborne else v.takeoff_window_s[0])
+        + vs.path.length_m / (v.cruise_m_s * vs.tas_per_eas())
         for v, vs in zip(scenario.vehicles, base, strict=True)
     }
     targets, ref, reason = _targets(scenario, windows, requested, natural)
@@ -669,7 +709,7 @@ def build_schedule(
     pre: dict[str, tuple[SpeedSpan, ...]] = {}
     for v, vs in zip(scenario.vehicles, base, strict=True):
         dep = 0.0 if v.airborne else t0
-        need = vs.path.length_m / max(targets[v.id] - dep, 1e-9)
+        need = vs.path.length_m / vs.tas_per_eas() / max(targets[v.id] - dep, 1e-9)
         pre[v.id] = (SpeedSpan(dep, targets[v.id], need, "required"),)
     stages = [Stage("pre-plan (common takeoff)", 0.0, pre)]
     timed: list[VehicleSchedule] = []
@@ -867,7 +907,7 @@ def apply_popup(
             for sp in _spans(vs)
             if sp.t_start_s < t_v < sp.t_end_s
         )
-        v_need = (vs.path.length_m - s0) / max(targets[v.id] - dep, 1e-9)
+        v_need = (vs.path.length_m - s0) / vs.tas_per_eas(s0) / max(targets[v.id] - dep, 1e-9)
         need[v.id] = (*past, *cut, SpeedSpan(dep, targets[v.id], v_need, "required"))
     stages.append(Stage(f"{zone.id} at {at_s:.0f} s: re-planned, required speed", at_s, need))
     retimed: list[VehicleSchedule] = []

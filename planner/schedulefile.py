@@ -282,6 +282,7 @@ def schedule_json(
                     "detour_m": round(lo.detour_m, 2),
                     "added_m": round(lo.length_m, 2),
                     "speed_m_s": lo.speed_m_s,
+                    "true_airspeed_m_s": round(lo.speed_m_s * lo.tas_per_eas, 3),
                     "t_start_s": round(lo.t_start_s, 3),
                     "t_end_s": round(lo.t_end_s, 3),
                     "buffer": lo.buffer_id,
@@ -301,6 +302,7 @@ def schedule_json(
                     "s_start_m": round(leg.s_start_m, 2),
                     "s_end_m": round(leg.s_end_m, 2),
                     "speed_m_s": leg.speed_m_s,
+                    "true_airspeed_m_s": round(leg.true_airspeed_m_s, 3),
                     "t_start_s": round(leg.t_start_s, 3),
                     "t_end_s": round(leg.t_end_s, 3),
                 }

@@ -9,6 +9,7 @@ from typing import Any
 import numpy as np
 import pytest
 
+from planner.atmosphere import eas2tas, mean_eas2tas
 from planner.deconflict import separation
 from planner.errors import InfeasibleError
 from planner.plan import build_world, plan
@@ -71,11 +72,16 @@ def test_popup_story(paper: tuple[Schedule, Schedule]) -> None:
     assert [v.vehicle_id for v in loiterers] == ["UAV3"]
     uav3 = loiterers[0]
     _, s0, _ = before.vehicle("UAV3").state_at(popup.time_s)
-    remaining = uav3.path.length_m - s0
+    # Equivalent airspeeds carry the aircraft at the true airspeed of its altitudes: time in
+    # metres of still air per unit of EAS.
+    ratio = mean_eas2tas(uav3.wp_s_m, uav3.wp_alt_m, s_from_m=s0)
+    assert 1.02 < ratio < 1.1
+    remaining = (uav3.path.length_m - s0) / ratio
     time_left = after.required_arrival_s - popup.time_s
     assert remaining / time_left < uav3.speed_min_m_s  # required speed below vmin
     lo = uav3.loiters[0]
-    per_turn = 2 * math.pi * lo.radius_m
+    assert lo.tas_per_eas == pytest.approx(ratio)
+    per_turn = 2 * math.pi * lo.radius_m / ratio
     assert (remaining + lo.turns * per_turn) / uav3.speed_min_m_s >= time_left
     assert (remaining + (lo.turns - 1) * per_turn) / uav3.speed_min_m_s < time_left
     assert any(a.vehicle == "UAV3" and a.strategy == "loiter" for a in later)
@@ -156,3 +162,18 @@ def test_airborne_vehicle_loiters_in_a_buffer_on_its_path() -> None:
     _check_consistent(s)
     assert all(v.loiters for v in s.vehicles)
     assert all(a.strategy != "takeoff_delay" for a in s.adjustments)
+
+
+def test_legs_are_timed_at_the_true_airspeed_of_their_altitudes(
+    paper: tuple[Schedule, Schedule],
+) -> None:
+    """A leg commanded at an equivalent airspeed covers ground at the ISA true airspeed of
+    the route's altitudes (1,000-1,250 m here: 5-6 % faster than commanded)."""
+    before, _ = paper
+    for vs in before.vehicles:
+        lo_ratio = eas2tas(float(vs.wp_alt_m.min()))
+        hi_ratio = eas2tas(float(vs.wp_alt_m.max()))
+        assert lo_ratio > 1.02
+        for leg in vs.legs:
+            flown = (leg.s_end_m - leg.s_start_m) / (leg.t_end_s - leg.t_start_s)
+            assert lo_ratio - 1e-6 <= flown / leg.speed_m_s <= hi_ratio + 1e-6
