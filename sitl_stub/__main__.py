@@ -133,6 +133,13 @@ def parse_args(argv: Sequence[str] | None = None) -> argparse.Namespace:
         help="request upload items with MISSION_REQUEST (older ArduPilot), not _INT",
     )
     ap.add_argument(
+        "--speed-bias",
+        action="append",
+        metavar="I,FRACTION",
+        help="vehicle I (0-based) flies (1 + FRACTION) x the true airspeed it should, an "
+        "airspeed sensor error (e.g. 1,0.05; repeatable)",
+    )
+    ap.add_argument(
         "--exact-missions",
         action="store_true",
         help="read uploaded mission items back exactly as sent (default: in ArduPilot's "
@@ -143,7 +150,7 @@ def parse_args(argv: Sequence[str] | None = None) -> argparse.Namespace:
     return ap.parse_args(_join_negative_values(list(sys.argv[1:] if argv is None else argv)))
 
 
-_VALUE_OPTIONS = ("--home", "--wind", "--airspeed", "--blackout")
+_VALUE_OPTIONS = ("--home", "--wind", "--airspeed", "--blackout", "--speed-bias")
 
 
 def _join_negative_values(argv: list[str]) -> list[str]:
@@ -246,16 +253,33 @@ def blackouts_from_args(args: argparse.Namespace) -> list[BlackoutSpec]:
     out = []
     for text in args.blackout or ():
         index, start, duration = _floats(text, "--blackout", 3, 3)
-        if not (index.is_integer() and 0 <= index < args.vehicles):
-            raise UsageError(
-                f"--blackout {text!r}: I (the vehicle) must be a whole number in "
-                f"0..{args.vehicles - 1} (0-based; --vehicles {args.vehicles})"
-            )
+        i = _vehicle_index(text, "--blackout", index, args.vehicles)
         if start < 0:
             raise UsageError(f"--blackout {text!r}: START_S must be >= 0")
         if duration <= 0:
             raise UsageError(f"--blackout {text!r}: DURATION_S must be > 0")
-        out.append(BlackoutSpec(int(index), start, duration))
+        out.append(BlackoutSpec(i, start, duration))
+    return out
+
+
+def _vehicle_index(text: str, name: str, value: float, n_vehicles: int) -> int:
+    if not (value.is_integer() and 0 <= value < n_vehicles):
+        raise UsageError(
+            f"{name} {text!r}: I (the vehicle) must be a whole number in "
+            f"0..{n_vehicles - 1} (0-based; --vehicles {n_vehicles})"
+        )
+    return int(value)
+
+
+def speed_bias_from_args(args: argparse.Namespace) -> dict[int, float]:
+    """``--speed-bias I,FRACTION`` values by vehicle index."""
+    out: dict[int, float] = {}
+    for text in args.speed_bias or ():
+        index, fraction = _floats(text, "--speed-bias", 2, 2)
+        i = _vehicle_index(text, "--speed-bias", index, args.vehicles)
+        if not -0.5 < fraction < 0.5:
+            raise UsageError(f"--speed-bias {text!r}: FRACTION must be in (-0.5, 0.5)")
+        out[i] = fraction
     return out
 
 
@@ -352,6 +376,7 @@ async def serve(
             start_utc_s=time.time() if args.start_utc is None else args.start_utc,
             legacy_mission_requests=args.legacy_mission_requests,
             ardupilot_mission_storage=not args.exact_missions,
+            speed_bias=speed_bias_from_args(args),
             mission_timeout_s=args.mission_timeout,
             truth_out=args.truth,
             truth_period_s=args.truth_period,
@@ -404,6 +429,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         homes = homes_from_args(args)
         params = params_from_args(args)
         blackouts = blackouts_from_args(args)
+        speed_bias_from_args(args)  # usage errors before anything starts
         with contextlib.suppress(KeyboardInterrupt):
             asyncio.run(serve(args, homes, params, blackouts))
     except (UsageError, ValueError, OSError) as err:

@@ -18,8 +18,8 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import math
-from collections.abc import AsyncIterator, Sequence
-from dataclasses import dataclass
+from collections.abc import AsyncIterator, Mapping, Sequence
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
@@ -54,6 +54,13 @@ class Home:
             raise ValueError(f"home altitude {self.alt_m!r} is not a number")
 
 
+def _check_indices(name: str, indices: Mapping[int, object] | Sequence[int], n: int) -> None:
+    """Per-vehicle options name vehicles by 0-based index."""
+    for i in indices:
+        if not 0 <= i < n:
+            raise ValueError(f"{name}: no vehicle {i} (0-based; the team has {n})")
+
+
 class SimTeam:
     """Running vehicles, their TCP ports and the shared simulated clock."""
 
@@ -80,6 +87,7 @@ class SimTeam:
         mission_timeout_s: float = 1.5,
         legacy_mission_requests: bool = False,
         ardupilot_mission_storage: bool = True,
+        speed_bias: Mapping[int, float] | None = None,
         run: bool = True,
         truth_out: str | Path | None = None,
         truth_period_s: float = DEFAULT_TRUTH_PERIOD_S,
@@ -106,6 +114,7 @@ class SimTeam:
             mission_timeout_s=mission_timeout_s,
             legacy_mission_requests=legacy_mission_requests,
             ardupilot_mission_storage=ardupilot_mission_storage,
+            speed_bias=speed_bias,
             tcp_base=tcp_base,
         )
         if truth_out is not None:
@@ -147,6 +156,7 @@ class SimTeam:
         mission_timeout_s: float = 1.5,
         legacy_mission_requests: bool = False,
         ardupilot_mission_storage: bool = True,
+        speed_bias: Mapping[int, float] | None = None,
         tcp_base: int = DEFAULT_TCP_BASE,
     ) -> SimTeam:
         """Build the team without opening sockets (``start`` is the usual entry)."""
@@ -154,12 +164,18 @@ class SimTeam:
             raise ValueError("at least one home is needed")
         if not 0 <= tcp_base <= 65535 - PORT_STRIDE * (len(homes) - 1):
             raise ValueError(f"tcp_base {tcp_base} leaves no room for {len(homes)} vehicles")
+        _check_indices("speed_bias", speed_bias or {}, len(homes))
+        for i, bias in (speed_bias or {}).items():
+            if not (math.isfinite(bias) and -0.5 < bias < 0.5):
+                raise ValueError(f"speed_bias of vehicle {i} must be in (-0.5, 0.5), got {bias!r}")
         clock = SimClock(speedup=speedup, step_s=step_s, start_utc_s=start_utc_s)
         seeds = np.random.SeedSequence(seed).spawn(2 * len(homes))
         vehicles: list[Vehicle] = []
         for i, raw in enumerate(homes):
             home = raw if isinstance(raw, Home) else Home(*raw)
             p = params[i] if isinstance(params, Sequence) else (params or AirframeParams())
+            if speed_bias and i in speed_bias:
+                p = replace(p, speed_bias=float(speed_bias[i]))
             autopilot = Autopilot(
                 params=p,
                 home_lat_deg=home.lat_deg,

@@ -25,6 +25,9 @@ INTERFACE CHANGES (relative to the brief given to the wire engineer)
 
 Behaviour modelled on ArduPlane 4.x (``commands_logic.cpp``, ``AP_Mission``, ``AP_L1_Control``):
 
+- Airspeeds (AIRSPEED_*, DO_CHANGE_SPEED, TECS_LAND_ARSPD) are equivalent airspeed; the model
+  flies true airspeed EAS x EAS2TAS(altitude) x (1 + ``speed_bias``) (``sitl_stub.atmosphere``).
+
 - Mission: item 0 is home and never flown. DO commands between two NAV commands run when the
   mission advances past them (i.e. when the previous NAV item is reached); unsupported DO
   commands are no-ops (DO_JUMP is not followed); unsupported NAV commands are skipped.
@@ -64,6 +67,7 @@ import numpy as np
 from pymavlink.dialects.v20 import ardupilotmega as mav
 
 from sitl_stub import model
+from sitl_stub.atmosphere import eas2tas
 from sitl_stub.items import MissionItem
 from sitl_stub.model import GRAVITY_M_S2, AirframeParams, FlightState, Wind
 
@@ -328,6 +332,9 @@ class Autopilot:
         self._pending: list[Event] = []
         self._new_airspeed_m_s = -1.0
         self._target_airspeed_m_s = params.airspeed_cruise_m_s
+        self._eas2tas = 1.0  # at the current altitude (1 when airspeeds are flown as TAS)
+        self._tas_scale = 1.0  # true airspeed per unit of demanded EAS (EAS2TAS x (1 + bias))
+        self._update_tas_scale()
         self._guided_target: Point | None = None
         # navigation targets
         self._nav = _NAV_IDLE
@@ -409,6 +416,26 @@ class Autopilot:
         return self._current_seq
 
     @property
+    def eas2tas(self) -> float:
+        """True/equivalent airspeed ratio at the aircraft's altitude (ISA; 1 if flown as TAS)."""
+        return self._eas2tas
+
+    @property
+    def eas_m_s(self) -> float:
+        """The aircraft's true equivalent airspeed."""
+        return self._state.airspeed_m_s / self._eas2tas
+
+    @property
+    def measured_eas_m_s(self) -> float:
+        """The equivalent airspeed the autopilot believes (its sensor, with the speed bias)."""
+        return self._state.airspeed_m_s / self._tas_scale
+
+    def _update_tas_scale(self) -> None:
+        p = self._params
+        self._eas2tas = eas2tas(self._state.alt_m) if p.equivalent_airspeed else 1.0
+        self._tas_scale = self._eas2tas * (1.0 + p.speed_bias)
+
+    @property
     def current_nav_index(self) -> int | None:
         """The index of the NAV command being flown in a running AUTO mission, else None."""
         return self._current_seq if self._mission_state == _MISSION_RUNNING else None
@@ -426,7 +453,7 @@ class Autopilot:
             target_bearing_deg=math.degrees(self._target_bearing) % 360.0,
             wp_dist_m=self._wp_dist,
             alt_error_m=self._alt_error,
-            aspd_error_m_s=self._target_airspeed_m_s - self._state.airspeed_m_s,
+            aspd_error_m_s=self._target_airspeed_m_s - self.measured_eas_m_s,
             xtrack_error_m=self._xtrack,
         )
 
@@ -543,11 +570,23 @@ class Autopilot:
         st = self._state
         p = self._params
         ground = self._home[2]
+        self._update_tas_scale()
+        scale = self._tas_scale
         if not self._armed:
             self._nav_roll = 0.0
             self._target_airspeed_m_s = p.airspeed_cruise_m_s
             self._state = model.step_scalar(
-                st, p.airspeed_cruise_m_s, 0.0, 0.0, ground, False, p, self._wind, dt_s, self._prng
+                st,
+                p.airspeed_cruise_m_s * scale,
+                0.0,
+                0.0,
+                ground,
+                False,
+                p,
+                self._wind,
+                dt_s,
+                self._prng,
+                scale,
             )
             return
         mode = self._mode
@@ -557,7 +596,7 @@ class Autopilot:
         if st.on_ground and self._nav != _NAV_TAKEOFF and self._nav != _NAV_LAND:
             # Throttle suppressed on the ground outside a takeoff.
             self._state = model.step_scalar(
-                st, 0.0, 0.0, 0.0, ground, False, p, self._wind, dt_s, self._prng
+                st, 0.0, 0.0, 0.0, ground, False, p, self._wind, dt_s, self._prng, scale
             )
             return
         if (
@@ -569,9 +608,9 @@ class Autopilot:
             rel = st.alt_m - self._home[2]
             events.append(Text(SEVERITY_INFO, f"Takeoff complete at {rel:.2f}m"))
             self._start_loiter_here()
-        tas, bank, climb, motor = self._guidance(st, mode)
+        eas, bank, climb, motor = self._guidance(st, mode)
         self._state = model.step_scalar(
-            st, tas, bank, climb, ground, motor, p, self._wind, dt_s, self._prng
+            st, eas * scale, bank, climb, ground, motor, p, self._wind, dt_s, self._prng, scale
         )
         if self._nav == _NAV_LAND:
             self._after_land_step(st, events)
@@ -581,7 +620,7 @@ class Autopilot:
 
     # ------------------------------------------------------------------ guidance
     def _guidance(self, st: FlightState, mode: Mode) -> tuple[float, float, float, bool]:
-        """Navigation and altitude/speed demands: (airspeed, bank, climb rate, motor on)."""
+        """Navigation and altitude/speed demands: (EAS, bank, climb rate, motor on)."""
         p = self._params
         kn, ke = self._scales()
         nav = self._nav
@@ -674,6 +713,7 @@ class Autopilot:
         return tas, bank, climb, motor
 
     def _airspeed_target(self, st: FlightState, mode: Mode) -> float:
+        """The demanded equivalent airspeed (what the autopilot's sensor should read)."""
         p = self._params
         if self._nav == _NAV_LAND:
             tas = p.land_airspeed_m_s
@@ -687,7 +727,7 @@ class Autopilot:
             )
             under = p.min_groundspeed_m_s - fwd
             if under > 0.0:
-                tas = max(tas, st.airspeed_m_s + under)
+                tas = max(tas, (st.airspeed_m_s + under) / self._tas_scale)
         return _clamp(tas, p.airspeed_min_m_s, p.airspeed_max_m_s)
 
     def _loiter_nav(self, st: FlightState, an: float, ae: float, cn: float, ce: float) -> float:

@@ -27,7 +27,13 @@ _TWO_PI = 2.0 * math.pi
 
 @dataclass(frozen=True, slots=True)
 class AirframeParams:
-    """Airframe and autopilot parameters (ArduPlane parameter names in the comments)."""
+    """Airframe and autopilot parameters (ArduPlane parameter names in the comments).
+
+    Airspeeds are EQUIVALENT airspeed (as ArduPlane's) when ``equivalent_airspeed`` is True
+    (the default): the aircraft flies true airspeed = EAS x EAS2TAS at its altitude
+    (:mod:`sitl_stub.atmosphere`). ``speed_bias`` is an airspeed sensor error: the aircraft
+    flies (1 + speed_bias) x the true airspeed it should, while it reports what it believes.
+    """
 
     airspeed_min_m_s: float = 15.0  # ARSPD_FBW_MIN (AIRSPEED_MIN)
     airspeed_max_m_s: float = 30.0  # ARSPD_FBW_MAX (AIRSPEED_MAX)
@@ -58,6 +64,8 @@ class AirframeParams:
     land_flare_sink_m_s: float = 0.5  # LAND_SINK... demanded sink rate in the flare
     land_disarm_delay_s: float = 20.0  # LAND_DISARMDELAY
     max_substep_s: float = 0.1  # larger dt_s is split into sub-steps of at most this
+    equivalent_airspeed: bool = True  # airspeeds are EAS (ArduPlane); False: flown as TAS
+    speed_bias: float = 0.0  # flies (1 + bias) x the true airspeed it should (sensor error)
 
 
 @dataclass(frozen=True, slots=True)
@@ -232,8 +240,13 @@ def step_scalar(
     wind: Wind,
     dt_s: float,
     rng: Rng,
+    tas_scale: float = 1.0,
 ) -> FlightState:
-    """``step`` with the controls unpacked (the autopilot's hot path; no Controls object)."""
+    """``step`` with the controls unpacked (the autopilot's hot path; no Controls object).
+
+    ``tas_scale`` is true airspeed per unit of the airframe's airspeeds (EAS2TAS x (1 + bias)):
+    it scales the airspeed limits and the rotate speed; ``target_airspeed_m_s`` is true.
+    """
     exp = math.exp
     cos = math.cos
     sin = math.sin
@@ -270,7 +283,7 @@ def step_scalar(
         else:
             gs = max(0.0, gs - p.ground_brake_decel_m_s2 * dt_s)
         airspeed = max(0.0, gs - (wn * ch + we * sh))
-        rotate = p.takeoff_rotate_speed_m_s or p.airspeed_min_m_s
+        rotate = (p.takeoff_rotate_speed_m_s or p.airspeed_min_m_s) * tas_scale
         roll = 0.0
         climb = 0.0
         vn = gs * ch
@@ -282,10 +295,10 @@ def step_scalar(
         # Airspeed: first order toward the (clamped) demand, acceleration-limited.
         if motor_on:
             target = target_airspeed_m_s
-            if target < p.airspeed_min_m_s:
-                target = p.airspeed_min_m_s
-            elif target > p.airspeed_max_m_s:
-                target = p.airspeed_max_m_s
+            if target < p.airspeed_min_m_s * tas_scale:
+                target = p.airspeed_min_m_s * tas_scale
+            elif target > p.airspeed_max_m_s * tas_scale:
+                target = p.airspeed_max_m_s * tas_scale
         else:
             target = target_airspeed_m_s
         d = (target - airspeed) * (1.0 - exp(-dt_s / p.airspeed_time_constant_s))

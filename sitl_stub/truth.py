@@ -7,13 +7,16 @@ File format ``tcgcs-truth/1``: a header line ::
 then, every ``period_s`` simulated seconds, one line per vehicle ::
 
     {"utc_s": ..., "i": 0, "sysid": 1, "lat_deg": ..., "lon_deg": ..., "alt_m": ...,
-     "airspeed_m_s": ..., "groundspeed_m_s": ..., "armed": false, "on_ground": true}
+     "airspeed_m_s": ..., "eas_m_s": ..., "groundspeed_m_s": ..., "armed": false,
+     "on_ground": true}
 
-``utc_s`` is the simulated UTC of the step (what SYSTEM_TIME reports then; all vehicles of
-one row share it), ``alt_m`` is AMSL. Lines are buffered and written whole: the file is
-flushed every ``flush_lines`` lines, at least every ``flush_wall_s`` wall seconds while
-recording, and on :meth:`TruthRecorder.close`, so a reader tailing it only ever sees a
-partial last line while a flush is in progress.
+``utc_s`` is the TRUE simulated UTC of the step (all vehicles of one row share it; a vehicle
+started with a UTC offset, or without UTC, reports other times in SYSTEM_TIME), ``alt_m`` is
+AMSL, ``airspeed_m_s`` the TRUE airspeed and ``eas_m_s`` the true equivalent airspeed (what
+ArduPlane's airspeeds are; with a speed bias the vehicle's VFR_HUD differs from it). Lines
+are buffered and written whole: the file is flushed every ``flush_lines`` lines, at least
+every ``flush_wall_s`` wall seconds while recording, and on :meth:`TruthRecorder.close`, so a
+reader tailing it only ever sees a partial last line while a flush is in progress.
 """
 
 from __future__ import annotations
@@ -131,13 +134,15 @@ class TruthRecorder:
             s = v.autopilot.state
             lat, lon, alt = round(s.lat_deg, 9), round(s.lon_deg, 9), round(s.alt_m, 3)
             tas, gs = round(s.airspeed_m_s, 3), round(s.groundspeed_m_s, 3)
+            eas = round(v.autopilot.eas_m_s, 3)
             armed, ground = v.autopilot.armed, s.on_ground
-            if math.isfinite(utc + lat + lon + alt + tas + gs):
+            if math.isfinite(utc + lat + lon + alt + tas + eas + gs):
                 # Hand-formatted (3x faster than json.dumps); float repr is valid JSON.
                 buf.append(
                     f'{{"utc_s": {utc!r}, "i": {i}, "sysid": {v.system_id}, '
                     f'"lat_deg": {lat!r}, "lon_deg": {lon!r}, "alt_m": {alt!r}, '
-                    f'"airspeed_m_s": {tas!r}, "groundspeed_m_s": {gs!r}, '
+                    f'"airspeed_m_s": {tas!r}, "eas_m_s": {eas!r}, '
+                    f'"groundspeed_m_s": {gs!r}, '
                     f'"armed": {"true" if armed else "false"}, '
                     f'"on_ground": {"true" if ground else "false"}}}\n'
                 )
@@ -150,6 +155,7 @@ class TruthRecorder:
                     "lon_deg": lon,
                     "alt_m": alt,
                     "airspeed_m_s": tas,
+                    "eas_m_s": eas,
                     "groundspeed_m_s": gs,
                     "armed": armed,
                     "on_ground": ground,

@@ -623,7 +623,8 @@ class Vehicle:
     def _set_param_field(self, field: str, value: float, name: str) -> None:
         params: AirframeParams = self.autopilot.params
         try:
-            new = replace(params, **{field: value})
+            changes: dict[str, Any] = {field: value}
+            new = replace(params, **changes)
             self.autopilot.set_params(new)
         except (ValueError, TypeError) as err:
             self.statustext(mavlink2.MAV_SEVERITY_WARNING, f"{name}: {err}")
@@ -667,8 +668,10 @@ class Vehicle:
         s = self.autopilot.state
         gs = math.hypot(s.vel_north_m_s, s.vel_east_m_s)
         throttle = 0 if (s.on_ground and not self.autopilot.armed) else 50
+        # ArduPlane reports its airspeed sensor's equivalent airspeed (GCS_Mavlink.cpp,
+        # GCS_MAVLINK_Plane::vfr_hud_airspeed): what the autopilot believes, bias included.
         return (
-            s.airspeed_m_s,
+            self.autopilot.measured_eas_m_s,
             gs,
             round(math.degrees(s.heading_rad)) % 360,
             throttle,

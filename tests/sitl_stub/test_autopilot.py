@@ -181,13 +181,20 @@ def test_full_mission_takeoff_reaches_its_altitude(full_mission: tuple[Autopilot
     assert not s.on_ground
 
 
+def isa_tas_per_eas(alt_m: float) -> float:
+    """sqrt(rho0/rho) in the ISA troposphere (T = 288.15 K - 6.5 K/km; rho ~ T^4.2559)."""
+    temp_ratio = 1.0 - 6.5e-3 * alt_m / 288.15
+    return float(temp_ratio ** (-4.2559 / 2.0))
+
+
 def test_full_mission_speed_change_takes_effect(full_mission: tuple[Autopilot, Trace]) -> None:
+    """The commanded speeds are equivalent airspeed: true airspeed is EAS x EAS2TAS."""
     _, trace = full_mission
     t = trace.time_of(ItemReached(5))
     before = next(s for s in trace.states if s.time_s >= t)
     after = next(s for s in trace.states if s.time_s >= t + 15.0)
-    assert before.airspeed_m_s == pytest.approx(22.0, abs=0.5)
-    assert after.airspeed_m_s == pytest.approx(28.0, abs=0.5)
+    assert before.airspeed_m_s / isa_tas_per_eas(before.alt_m) == pytest.approx(22.0, abs=0.5)
+    assert after.airspeed_m_s / isa_tas_per_eas(after.alt_m) == pytest.approx(28.0, abs=0.5)
 
 
 def test_full_mission_cuts_the_corner(full_mission: tuple[Autopilot, Trace]) -> None:
@@ -417,7 +424,7 @@ def test_change_speed_in_auto() -> None:
     assert ap.change_speed(0, 26.0)
     run(ap, 20)
     assert ap.target_airspeed_m_s == 26.0
-    assert ap.state.airspeed_m_s == pytest.approx(26.0, abs=0.3)
+    assert ap.eas_m_s == pytest.approx(26.0, abs=0.3)
     assert ap.nav.aspd_error_m_s == pytest.approx(0.0, abs=0.3)
     assert not ap.change_speed(0, 35.0)  # outside [min, max]: refused, as ArduPlane
     assert ap.change_speed(0, -1.0)  # no change
@@ -447,7 +454,7 @@ def test_groundspeed_change_sets_a_minimum_groundspeed_into_a_headwind() -> None
     assert ap.params.min_groundspeed_m_s == 15.0
     run(ap, 25)
     assert ap.state.groundspeed_m_s == pytest.approx(15.0, abs=0.7)
-    assert ap.state.airspeed_m_s == pytest.approx(27.0, abs=0.7)
+    assert ap.state.airspeed_m_s == pytest.approx(27.0, abs=0.7)  # true airspeed
 
 
 # ---------------------------------------------------------------------- modes

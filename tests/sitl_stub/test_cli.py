@@ -25,6 +25,7 @@ from sitl_stub.__main__ import (
     main,
     params_from_args,
     parse_args,
+    speed_bias_from_args,
 )
 from sitl_stub.api import Home
 from tests.sitl_stub.conftest import Client, free_port_base
@@ -189,6 +190,14 @@ def test_airspeed_once_or_per_vehicle_and_blackouts_parse() -> None:
     assert blackouts_from_args(args) == [BlackoutSpec(1, 30.0, 60.0), BlackoutSpec(0, 0.0, 5.5)]
 
 
+def test_speed_bias_parses_per_vehicle() -> None:
+    args = parse_args([
+        "--vehicles", "3", "--home", "0,0,0", "--speed-bias", "1,0.05", "--speed-bias", "2,-0.05",
+    ])  # fmt: skip
+    assert speed_bias_from_args(args) == {1: 0.05, 2: -0.05}
+    assert speed_bias_from_args(parse_args(["--home", "0,0,0"])) == {}
+
+
 @pytest.mark.parametrize(
     ("argv", "message"),
     [
@@ -208,6 +217,9 @@ def test_airspeed_once_or_per_vehicle_and_blackouts_parse() -> None:
         (["--home", "0,0,0", "--blackout", "0,-1,5"], "START_S"),
         (["--home", "0,0,0", "--blackout", "0,1,0"], "DURATION_S"),
         (["--home", "0,0,0", "--truth-period", "0"], "--truth-period"),
+        (["--home", "0,0,0", "--speed-bias", "1,0.05"], "--speed-bias '1,0.05': I"),
+        (["--home", "0,0,0", "--speed-bias", "0,0.6"], "FRACTION"),
+        (["--home", "0,0,0", "--speed-bias", "0"], "--speed-bias needs 2"),
         (["--home", "0,0,0", "--start-utc", "-5"], "--start-utc"),
         (["--home", "0,0,0", "--truth", "/no/such/dir/t.jsonl"], "--truth"),
     ],

@@ -182,3 +182,31 @@ def test_blackout_already_due_starts_at_once_and_a_longer_one_is_kept() -> None:
         team.schedule_blackout(2, 0.0, 1.0)
     with pytest.raises(ValueError, match="duration"):
         team.schedule_blackout(0, 0.0, 0.0)
+
+
+async def test_truth_keeps_true_airspeed_and_adds_eas_with_speed_bias(tmp_path: Path) -> None:
+    """``airspeed_m_s`` is true airspeed, ``eas_m_s`` the true equivalent airspeed; vehicle 1's
+    +5 % speed bias (SimTeam.start(speed_bias=...)) shows in both but not in its VFR_HUD."""
+    out = tmp_path / "truth.jsonl"
+    async with SimTeam.start(
+        homes=HOMES, tcp_base=0, run=False, truth_out=out, speed_bias={1: 0.05}
+    ) as team:
+        assert [v.autopilot.params.speed_bias for v in team.vehicles] == [0.0, 0.05]
+        for v in team.vehicles:
+            assert v.autopilot.arm(force=True)[0]
+            assert v.autopilot.set_mode(Mode.TAKEOFF)
+        team.step(900)
+        hud = [v.message("VFR_HUD").airspeed for v in team.vehicles]
+    last = read_lines(out)[-2:]
+    for row in last:
+        assert row["airspeed_m_s"] > row["eas_m_s"]  # 600+ m AMSL: TAS above EAS
+    assert last[0]["eas_m_s"] == pytest.approx(22.0, abs=0.3)
+    assert last[1]["eas_m_s"] == pytest.approx(22.0 * 1.05, abs=0.3)
+    assert hud == pytest.approx([22.0, 22.0], abs=0.3)
+
+
+def test_speed_bias_is_checked() -> None:
+    with pytest.raises(ValueError, match="no vehicle 2"):
+        SimTeam.create(homes=HOMES, speed_bias={2: 0.05})
+    with pytest.raises(ValueError, match="speed_bias"):
+        SimTeam.create(homes=HOMES, speed_bias={0: 0.9})
