@@ -140,6 +140,20 @@ def parse_args(argv: Sequence[str] | None = None) -> argparse.Namespace:
         "airspeed sensor error (e.g. 1,0.05; repeatable)",
     )
     ap.add_argument(
+        "--utc-offset",
+        action="append",
+        metavar="I,SECONDS",
+        help="vehicle I's (0-based) SYSTEM_TIME is the true simulated UTC + SECONDS "
+        "(repeatable; time_boot and the truth log's utc_s are unchanged)",
+    )
+    ap.add_argument(
+        "--no-utc",
+        action="append",
+        type=int,
+        metavar="I",
+        help="vehicle I (0-based) reports no UTC: SYSTEM_TIME.time_unix_usec = 0 (repeatable)",
+    )
+    ap.add_argument(
         "--exact-missions",
         action="store_true",
         help="read uploaded mission items back exactly as sent (default: in ArduPilot's "
@@ -150,7 +164,7 @@ def parse_args(argv: Sequence[str] | None = None) -> argparse.Namespace:
     return ap.parse_args(_join_negative_values(list(sys.argv[1:] if argv is None else argv)))
 
 
-_VALUE_OPTIONS = ("--home", "--wind", "--airspeed", "--blackout", "--speed-bias")
+_VALUE_OPTIONS = ("--home", "--wind", "--airspeed", "--blackout", "--speed-bias", "--utc-offset")
 
 
 def _join_negative_values(argv: list[str]) -> list[str]:
@@ -283,6 +297,19 @@ def speed_bias_from_args(args: argparse.Namespace) -> dict[int, float]:
     return out
 
 
+def utc_offsets_from_args(args: argparse.Namespace) -> dict[int, float]:
+    """``--utc-offset I,SECONDS`` values by vehicle index (checked against ``--no-utc``)."""
+    out: dict[int, float] = {}
+    for text in args.utc_offset or ():
+        index, seconds = _floats(text, "--utc-offset", 2, 2)
+        out[_vehicle_index(text, "--utc-offset", index, args.vehicles)] = seconds
+    for i in args.no_utc or ():
+        _vehicle_index(str(i), "--no-utc", float(i), args.vehicles)
+        if i in out:
+            raise UsageError(f"--no-utc {i}: vehicle {i} also has a --utc-offset")
+    return out
+
+
 def initial_bearing_deg(lat1: float, lon1: float, lat2: float, lon2: float) -> float:
     """Great-circle initial bearing from point 1 to point 2 (degrees, [0, 360))."""
     p1, p2 = math.radians(lat1), math.radians(lat2)
@@ -377,6 +404,8 @@ async def serve(
             legacy_mission_requests=args.legacy_mission_requests,
             ardupilot_mission_storage=not args.exact_missions,
             speed_bias=speed_bias_from_args(args),
+            utc_offset_s=utc_offsets_from_args(args),
+            no_utc=tuple(args.no_utc or ()),
             mission_timeout_s=args.mission_timeout,
             truth_out=args.truth,
             truth_period_s=args.truth_period,
@@ -430,6 +459,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         params = params_from_args(args)
         blackouts = blackouts_from_args(args)
         speed_bias_from_args(args)  # usage errors before anything starts
+        utc_offsets_from_args(args)
         with contextlib.suppress(KeyboardInterrupt):
             asyncio.run(serve(args, homes, params, blackouts))
     except (UsageError, ValueError, OSError) as err:

@@ -18,7 +18,7 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import math
-from collections.abc import AsyncIterator, Mapping, Sequence
+from collections.abc import AsyncIterator, Collection, Mapping, Sequence
 from dataclasses import dataclass, replace
 from pathlib import Path
 
@@ -88,6 +88,8 @@ class SimTeam:
         legacy_mission_requests: bool = False,
         ardupilot_mission_storage: bool = True,
         speed_bias: Mapping[int, float] | None = None,
+        utc_offset_s: Mapping[int, float] | None = None,
+        no_utc: Collection[int] = (),
         run: bool = True,
         truth_out: str | Path | None = None,
         truth_period_s: float = DEFAULT_TRUTH_PERIOD_S,
@@ -115,6 +117,8 @@ class SimTeam:
             legacy_mission_requests=legacy_mission_requests,
             ardupilot_mission_storage=ardupilot_mission_storage,
             speed_bias=speed_bias,
+            utc_offset_s=utc_offset_s,
+            no_utc=no_utc,
             tcp_base=tcp_base,
         )
         if truth_out is not None:
@@ -157,6 +161,8 @@ class SimTeam:
         legacy_mission_requests: bool = False,
         ardupilot_mission_storage: bool = True,
         speed_bias: Mapping[int, float] | None = None,
+        utc_offset_s: Mapping[int, float] | None = None,
+        no_utc: Collection[int] = (),
         tcp_base: int = DEFAULT_TCP_BASE,
     ) -> SimTeam:
         """Build the team without opening sockets (``start`` is the usual entry)."""
@@ -168,6 +174,12 @@ class SimTeam:
         for i, bias in (speed_bias or {}).items():
             if not (math.isfinite(bias) and -0.5 < bias < 0.5):
                 raise ValueError(f"speed_bias of vehicle {i} must be in (-0.5, 0.5), got {bias!r}")
+        utc_offsets = dict(utc_offset_s or {})
+        _check_indices("utc_offset_s", utc_offsets, len(homes))
+        _check_indices("no_utc", list(no_utc), len(homes))
+        for i, offset in utc_offsets.items():
+            if not math.isfinite(offset):
+                raise ValueError(f"utc_offset_s of vehicle {i} must be a number, got {offset!r}")
         clock = SimClock(speedup=speedup, step_s=step_s, start_utc_s=start_utc_s)
         seeds = np.random.SeedSequence(seed).spawn(2 * len(homes))
         vehicles: list[Vehicle] = []
@@ -196,6 +208,7 @@ class SimTeam:
                     mission_timeout_s=mission_timeout_s,
                     legacy_mission_requests=legacy_mission_requests,
                     ardupilot_mission_storage=ardupilot_mission_storage,
+                    utc_offset_s=None if i in no_utc else float(utc_offsets.get(i, 0.0)),
                 )
             )
         ports = [0 if tcp_base == 0 else tcp_base + PORT_STRIDE * i for i in range(len(homes))]
@@ -214,7 +227,8 @@ class SimTeam:
 
     @property
     def utc_s(self) -> float:
-        """Simulated UTC (what SYSTEM_TIME reports), seconds since the Unix epoch."""
+        """True simulated UTC, seconds since the Unix epoch (SYSTEM_TIME of a vehicle without
+        a UTC offset; ``vehicles[i].utc_s`` is what vehicle ``i`` reports)."""
         return self.clock.utc_s
 
     def true_state(self, i: int) -> FlightState:

@@ -173,8 +173,12 @@ class Vehicle:
         mission_timeout_s: float = 1.5,
         legacy_mission_requests: bool = False,
         ardupilot_mission_storage: bool = True,
+        utc_offset_s: float | None = 0.0,
     ) -> None:
         self.system_id = system_id
+        # This vehicle's clock error against the true simulated UTC; None: it has no UTC
+        # (SYSTEM_TIME.time_unix_usec = 0, as an autopilot without GPS time).
+        self.utc_offset_s = utc_offset_s
         self.component_id = COMPONENT_ID
         self.autopilot = autopilot
         self.clock = clock
@@ -704,8 +708,16 @@ class Vehicle:
             10,
         )
 
+    @property
+    def utc_s(self) -> float | None:
+        """The UTC this vehicle reports (true simulated UTC + its offset), None without UTC."""
+        if self.utc_offset_s is None:
+            return None
+        return self.clock.utc_s + self.utc_offset_s
+
     def _system_time(self) -> tuple[Any, ...]:
-        return (round(self.clock.utc_s * 1e6), self.clock.time_boot_ms)
+        utc = self.utc_s
+        return (0 if utc is None else round(utc * 1e6), self.clock.time_boot_ms)
 
     def _wind(self) -> tuple[Any, ...]:
         s = self.autopilot.state
@@ -751,7 +763,7 @@ class Vehicle:
             0.0,
             0.0,
             0.0,
-            int(self.clock.utc_s * 1e6),
+            int((self.utc_s or 0.0) * 1e6),
         )
 
     def _autopilot_version(self) -> tuple[Any, ...]:
