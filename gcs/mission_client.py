@@ -25,6 +25,8 @@ from typing import TYPE_CHECKING, Any, Final
 
 from gcs.mission_errors import MissionMismatch, MissionTimeout
 from gcs.mission_protocol import Clear, Download, SetCurrent, Transfer, Upload
+from gcs.modes import AUTOPILOT_PX4
+from gcs.retry import DEFAULT_POLICY, RetryPolicy
 from planner.mission import (
     Autopilot,
     MissionItem,
@@ -39,6 +41,7 @@ if TYPE_CHECKING:
 __all__ = [
     "DEFAULT_RETRIES",
     "DEFAULT_TIMEOUT_S",
+    "DEFAULT_WINDOW",
     "Progress",
     "clear_mission",
     "download_mission",
@@ -49,12 +52,18 @@ __all__ = [
 
 DEFAULT_TIMEOUT_S: Final = 1.5
 DEFAULT_RETRIES: Final = 5
+"""The MAVLink mission service's fixed timeout and retry count: what ``timeout_s=`` and
+``retries=`` gave by default before the adaptive policy (:mod:`gcs.retry`) replaced them."""
+DEFAULT_WINDOW: Final = 8
+"""Item requests outstanding in a download from a vehicle that answers any request."""
 
 Progress = Callable[[int, int], None]
 """Called with (done, total) items whenever a transfer moves on."""
 
 # One lock per (link, vehicle): transfers with one vehicle on one link take turns.
 _locks: weakref.WeakKeyDictionary[Any, dict[int, asyncio.Lock]] = weakref.WeakKeyDictionary()
+# The smoothed round trip the last transfer measured, per (link, vehicle): the next one's start.
+_srtt_s: weakref.WeakKeyDictionary[Any, dict[int, float]] = weakref.WeakKeyDictionary()
 
 
 def _lock(link: Link, target_system: int) -> asyncio.Lock:
@@ -67,7 +76,8 @@ def _lock(link: Link, target_system: int) -> asyncio.Lock:
 
 def _watchdog_s(transfer: Transfer) -> float:
     """Longest time a correct transfer can go without a new step or progress, plus margin."""
-    return 4.0 * (transfer.retries + 1) * transfer.timeout_s + 2.0 * transfer.timeout_s
+    longest_wait_s = transfer.timeout_s or transfer.policy.max_rto_s
+    return transfer.stall_limit_s + 2.0 * longest_wait_s
 
 
 class _Driver:
@@ -95,13 +105,12 @@ class _Driver:
 
     def on_message(self, msg: Any, _rx_s: float) -> None:
         t = self.transfer
-        if (
-            t.done
-            or msg.get_srcSystem() != t.target_system
-            or msg.get_type() not in t.message_types
-        ):
+        if t.done or msg.get_srcSystem() != t.target_system:
             return
         now = self.loop.time()
+        if msg.get_type() not in t.message_types:
+            t.heard(now)  # a heartbeat or telemetry: the vehicle is there
+            return
         self._send(t.handle(msg, now), now)
 
     async def run(self) -> None:
@@ -143,6 +152,8 @@ async def run_transfer(link: Link, transfer: Transfer, *, progress: Progress | N
             await driver.run()
         finally:
             remove()
+            if transfer.rtt.samples and transfer.rtt.srtt_s is not None:
+                _srtt_s.setdefault(link, {})[transfer.target_system] = transfer.rtt.srtt_s
             # Cancelled from outside, or the watchdog fired: tell the vehicle.
             for out in transfer.cancel(driver.loop.time()):
                 link.send(out)
@@ -152,9 +163,22 @@ async def run_transfer(link: Link, transfer: Transfer, *, progress: Progress | N
 
 
 def _options(
-    link: Link, target_system: int, target_component: int, timeout_s: float, retries: int
+    link: Link,
+    target_system: int,
+    target_component: int,
+    timeout_s: float | None,
+    retries: int | None,
+    policy: RetryPolicy | None = None,
+    within_s: float | None = None,
 ) -> dict[str, Any]:
-    """The keyword arguments every transfer takes: its target, timers and our own ids."""
+    """The keyword arguments every transfer takes: its target, timers and our own ids.
+
+    The last transfer's round trip with this vehicle, else the link's TIMESYNC round trip,
+    seeds the adaptive timeout.
+    """
+    rtt_hint_s = _srtt_s.get(link, {}).get(target_system)
+    if rtt_hint_s is None:
+        rtt_hint_s = getattr(getattr(link, "counters", None), "rtt_s", None)
     return {
         "target_system": target_system,
         "target_component": target_component,
@@ -162,7 +186,16 @@ def _options(
         "retries": retries,
         "own_system": getattr(link, "system_id", None),
         "own_component": getattr(link, "component_id", None),
+        "policy": policy or DEFAULT_POLICY,
+        "rtt_hint_s": rtt_hint_s,
+        "within_s": within_s,
     }
+
+
+def _answers_any_request(link: Link, target_system: int) -> bool:
+    """A vehicle known not to be PX4 (ArduPilot, the stub) takes requests and items ahead."""
+    peer = getattr(link, "vehicles", {}).get(target_system)
+    return peer is not None and int(peer.autopilot) != AUTOPILOT_PX4
 
 
 async def upload_mission(
@@ -172,10 +205,12 @@ async def upload_mission(
     *,
     mission_type: int = 0,
     target_component: int = 1,
-    timeout_s: float = DEFAULT_TIMEOUT_S,
-    retries: int = DEFAULT_RETRIES,
+    timeout_s: float | None = None,
+    retries: int | None = None,
     verify: bool = False,
     progress: Progress | None = None,
+    policy: RetryPolicy | None = None,
+    within_s: float | None = None,
     autopilot: Autopilot | None = None,
 ) -> None:
     """Upload ``items`` (seq = index, all of ``mission_type``) to vehicle ``target_system``.
@@ -188,6 +223,13 @@ async def upload_mission(
     HEARTBEAT). Item 0 of type 0 and the ``current`` flags are not compared (the vehicle sets
     them); a difference raises :class:`MissionMismatch` naming the first differing item.
 
+    Timeouts: by default each resend waits a timeout that follows the measured round trip,
+    and the upload fails only when the vehicle has been silent for ``policy.silence_s`` or the
+    upload has not advanced for ``policy.stall_s`` (:mod:`gcs.retry`). ``timeout_s`` fixes
+    the resend timeout instead; ``retries`` limits the resends of one exchange. ``within_s``
+    bounds the upload itself: a transfer still going then is cancelled (``MissionTimeout``)
+    and the vehicle keeps the mission it had.
+
     Raises
     ------
     MissionInputError
@@ -196,8 +238,9 @@ async def upload_mission(
         A subclass per MAV_MISSION_RESULT the vehicle answered (e.g. MissionInvalidItem naming
         the item), MissionTimeout, MissionProtocolError or MissionMismatch.
     """
-    opts = _options(link, target_system, target_component, timeout_s, retries)
-    upload = Upload(items, mission_type=mission_type, **opts)
+    opts = _options(link, target_system, target_component, timeout_s, retries, policy, within_s)
+    ahead = _answers_any_request(link, target_system)
+    upload = Upload(items, mission_type=mission_type, send_ahead=ahead, **opts)
     await run_transfer(link, upload, progress=progress)
     if not verify:
         return
@@ -258,13 +301,22 @@ async def download_mission(
     *,
     mission_type: int = 0,
     target_component: int = 1,
-    timeout_s: float = DEFAULT_TIMEOUT_S,
-    retries: int = DEFAULT_RETRIES,
+    timeout_s: float | None = None,
+    retries: int | None = None,
     progress: Progress | None = None,
+    policy: RetryPolicy | None = None,
+    within_s: float | None = None,
+    window: int | None = None,
 ) -> list[MissionItem]:
-    """The vehicle's items of ``mission_type``, as received (type 0: item 0 is its home)."""
-    opts = _options(link, target_system, target_component, timeout_s, retries)
-    download = Download(mission_type=mission_type, **opts)
+    """The vehicle's items of ``mission_type``, as received (type 0: item 0 is its home).
+
+    Timeouts as :func:`upload_mission`. ``window``: item requests outstanding at once
+    (default: :data:`DEFAULT_WINDOW` for a vehicle known not to be PX4, else 1, in order).
+    """
+    opts = _options(link, target_system, target_component, timeout_s, retries, policy, within_s)
+    if window is None:
+        window = DEFAULT_WINDOW if _answers_any_request(link, target_system) else 1
+    download = Download(mission_type=mission_type, window=window, **opts)
     await run_transfer(link, download, progress=progress)
     return list(download.items)
 
@@ -275,11 +327,12 @@ async def clear_mission(
     *,
     mission_type: int = 0,
     target_component: int = 1,
-    timeout_s: float = DEFAULT_TIMEOUT_S,
-    retries: int = DEFAULT_RETRIES,
+    timeout_s: float | None = None,
+    retries: int | None = None,
+    policy: RetryPolicy | None = None,
 ) -> None:
     """Delete the vehicle's items of ``mission_type`` (255: every type) with CLEAR_ALL."""
-    opts = _options(link, target_system, target_component, timeout_s, retries)
+    opts = _options(link, target_system, target_component, timeout_s, retries, policy)
     clear = Clear(mission_type=mission_type, **opts)
     await run_transfer(link, clear)
 
@@ -290,11 +343,12 @@ async def set_current_item(
     seq: int,
     *,
     target_component: int = 1,
-    timeout_s: float = DEFAULT_TIMEOUT_S,
-    retries: int = DEFAULT_RETRIES,
+    timeout_s: float | None = None,
+    retries: int | None = None,
+    policy: RetryPolicy | None = None,
 ) -> None:
     """Make ``seq`` the current mission item (MISSION_SET_CURRENT, confirmed by
     MISSION_CURRENT); a vehicle that refuses times out naming the item it still reports."""
-    opts = _options(link, target_system, target_component, timeout_s, retries)
+    opts = _options(link, target_system, target_component, timeout_s, retries, policy)
     set_current = SetCurrent(seq, **opts)
     await run_transfer(link, set_current)

@@ -16,13 +16,15 @@ It never touches a socket, a clock or asyncio, so tests drive it with a fake clo
 - Clear: MISSION_CLEAR_ALL -> MISSION_ACK. SetCurrent: MISSION_SET_CURRENT(seq) ->
   MISSION_CURRENT with that seq. On timeout: resend.
 
-Timeouts and retries follow the MAVLink mission service (about 1.5 s per exchange, 5
-retries): ``retries`` counts resends after a silent ``timeout_s``; a transfer that is still
-silent after the last resend ends with :class:`Result.TIMEOUT`. In an upload the vehicle
-drives: any valid request from it resets the retry counter (it is alive), so an upload that
-only makes no progress (a peer re-requesting the same item forever) is bounded separately,
-by ``4 * (retries + 1) * timeout_s`` without a new item requested. (MAVSDK counts a repeated
-request as a retry too; here it does not, so duplicated packets cannot use up the retries.)
+Timeouts (:mod:`gcs.retry`): by default a resend waits a timeout that follows the measured
+round trip (SRTT + 4 RTTVAR, Karn's rule, 10 ms to 1.5 s), and a transfer fails only when
+nothing has been heard from the vehicle for ``policy.silence_s`` (5 s) or it has not advanced
+for ``policy.stall_s`` (10 s), not after a count of resends while the vehicle answers.
+``timeout_s`` fixes the timeout and ``retries`` bounds the resends of one exchange, as the
+MAVLink mission service has them (1.5 s, 5); any valid request from the vehicle resets that
+count (duplicated packets cannot use it up), and an upload that only makes no progress is
+bounded by ``4 * (retries + 1) * timeout_s`` without a new item requested. ``within_s``
+bounds a whole transfer.
 An upload or download that ends by timeout or protocol error, or that the caller cancels,
 sends MISSION_ACK MAV_MISSION_OPERATION_CANCELLED so the vehicle stops waiting for it.
 
@@ -70,6 +72,7 @@ from gcs.mission_errors import (
     error_for_result,
     result_name,
 )
+from gcs.retry import DEFAULT_POLICY, RetryPolicy, RttEstimator
 from planner.mission import INT32_UNSET, MissionItem
 
 __all__ = [
@@ -85,6 +88,8 @@ __all__ = [
 ]
 
 MAV_MISSION_TYPE_ALL = 255
+SEND_AHEAD_MAX = 7
+"""Items an upload sends beyond the one last requested, at most, after timeouts."""
 _INT32_MIN, _INT32_MAX = -(2**31), 2**31 - 1
 _SEQ_MAX = 65535
 
@@ -198,22 +203,36 @@ class Transfer:
         target_system: int,
         target_component: int = 1,
         mission_type: int = 0,
-        timeout_s: float = 1.5,
-        retries: int = 5,
+        timeout_s: float | None = None,
+        retries: int | None = None,
         own_system: int | None = None,
         own_component: int | None = None,
+        policy: RetryPolicy = DEFAULT_POLICY,
+        rtt_hint_s: float | None = None,
+        within_s: float | None = None,
     ) -> None:
-        if not (math.isfinite(timeout_s) and timeout_s > 0):
+        if timeout_s is not None and not (math.isfinite(timeout_s) and timeout_s > 0):
             raise ValueError(f"timeout_s must be a positive number of seconds, got {timeout_s!r}")
-        if isinstance(retries, bool) or not isinstance(retries, int) or retries < 0:
+        if retries is not None and (
+            isinstance(retries, bool) or not isinstance(retries, int) or retries < 0
+        ):
             raise ValueError(f"retries must be an integer >= 0, got {retries!r}")
+        if within_s is not None and not (math.isfinite(within_s) and within_s > 0):
+            raise ValueError(f"within_s must be a positive number of seconds, got {within_s!r}")
         if not 1 <= target_system <= 255:
             raise ValueError(f"target_system must be in [1, 255], got {target_system!r}")
         self.target_system = target_system
         self.target_component = target_component
         self.mission_type = mission_type
         self.timeout_s = timeout_s
+        """A fixed resend timeout (None: adaptive, from the measured round trip)."""
         self.retries = retries
+        """Resends of one exchange before giving up (None: the policy's silence and stall
+        bounds decide, however many resends that takes)."""
+        self.policy = policy
+        self.within_s = within_s
+        """The whole transfer must end within this many seconds of its start (None: no limit)."""
+        self.rtt = RttEstimator(policy, rtt_hint_s)
         self.own_system = own_system
         self.own_component = own_component
         self.step = Step.IDLE
@@ -221,10 +240,18 @@ class Transfer:
         self.mav_result: int | None = None
         """The MAV_MISSION_RESULT of the MISSION_ACK that ended the transfer, if any."""
         self.retries_done = 0
+        """Resends of the exchange under way."""
         self._last_nack: int | None = None
-        self.counters: dict[str, int] = {"handled": 0, "ignored": 0, "resent": 0}
+        self.counters: dict[str, int] = {
+            "handled": 0, "ignored": 0, "resent": 0, "rtt_samples": 0, "needless_resends": 0,
+        }  # fmt: skip
         self._deadline_s: float | None = None
         self._error: MissionError | None = None
+        self._started_s = 0.0
+        self._last_heard_s = 0.0
+        self._last_progress_s = 0.0
+        self._exchange_s = 0.0  # when the exchange under way was first sent
+        self._clean = True  # ...and nothing of it was sent twice since (Karn's rule)
 
     # -- queries -------------------------------------------------------------------------
 
@@ -237,9 +264,28 @@ class Transfer:
         """(done, total) in the transfer's own unit (items, or 0/1 for single exchanges)."""
         return (1, 1) if self.result is Result.SUCCESS else (0, 1)
 
+    @property
+    def stall_limit_s(self) -> float:
+        """Time without progress after which the transfer ends as timed out."""
+        if self.retries is None:
+            return self.policy.stall_s
+        return 4.0 * (self.retries + 1) * (self.timeout_s or self.policy.max_rto_s)
+
+    @property
+    def timeout_now_s(self) -> float:
+        """The resend timeout in force (fixed, or adaptive from the round trips so far)."""
+        return self.timeout_s if self.timeout_s is not None else self.rtt.rto_s
+
     def next_deadline(self) -> float | None:
         """Time (same clock as ``now_s``) at which ``tick`` has something to do, if any."""
-        return None if self.done else self._deadline_s
+        if self.done or self._deadline_s is None:
+            return None
+        t = self._deadline_s
+        if self.within_s is not None:
+            t = min(t, self._started_s + self.within_s)
+        if self.retries is None:
+            t = min(t, self._last_heard_s + self.policy.silence_s)
+        return min(t, self._last_progress_s + self.stall_limit_s)
 
     def error(self) -> MissionError | None:
         """The typed error of a failed transfer (None while running or on success)."""
@@ -255,8 +301,13 @@ class Transfer:
         """Begin the transfer; returns the first message(s) to send."""
         if self.step is not Step.IDLE:
             raise RuntimeError(f"{self.describe()}: transfer already started")
-        self._deadline_s = now_s + self.timeout_s
+        self._started_s = self._last_heard_s = self._last_progress_s = now_s
+        self._new_exchange(now_s)
         return self._start(now_s)
+
+    def heard(self, now_s: float) -> None:
+        """Anything at all arrived from the vehicle (a heartbeat, telemetry): it is there."""
+        self._last_heard_s = now_s
 
     def handle(self, msg: Any, now_s: float) -> list[Any]:
         """Process one received message; messages not for this transfer are ignored."""
@@ -264,23 +315,86 @@ class Transfer:
             self.counters["ignored"] += 1
             return []
         self.counters["handled"] += 1
+        self._last_heard_s = now_s
         return self._handle(msg, now_s)
 
     def tick(self, now_s: float) -> list[Any]:
-        """Resend after a silent ``timeout_s``, or end with TIMEOUT after the last retry.
+        """Resend after a silent timeout, or end with TIMEOUT when a bound is reached.
 
-        An upload or download that times out returns a MISSION_ACK
+        The bounds: ``within_s`` since the start; with ``retries`` None, ``policy.silence_s``
+        without hearing the vehicle and ``stall_limit_s`` without progress; else ``retries``
+        resends of one exchange. An upload or download that times out returns a MISSION_ACK
         MAV_MISSION_OPERATION_CANCELLED, so that the vehicle stops waiting for it.
         """
-        if self.done or self._deadline_s is None or now_s < self._deadline_s:
+        deadline = self.next_deadline()
+        if deadline is None or now_s < deadline:
             return []
-        if self.retries_done >= self.retries:
-            self._fail_timeout(f"{self._awaited()} after {self.retries} retries{self._note()}")
-            return self._cancel_messages()
+        waiting = f"waiting for {self._awaited()}"
+        if self.within_s is not None and now_s >= self._started_s + self.within_s:
+            return self._give_up(
+                f"timed out: not finished within {self.within_s:.3g} s ({waiting})"
+            )
+        if self.retries is None and now_s - self._last_heard_s >= self.policy.silence_s:
+            silent = now_s - self._last_heard_s
+            return self._give_up(
+                f"timed out: nothing heard from the vehicle for {silent:.1f} s ({waiting})"
+            )
+        if now_s - self._last_progress_s >= self.stall_limit_s:
+            stalled = now_s - self._last_progress_s
+            return self._give_up(
+                f"timed out: no progress for {stalled:.1f} s ({waiting}{self._note()})"
+            )
+        assert self._deadline_s is not None
+        if now_s < self._deadline_s:
+            return []
+        if self.retries is not None and self.retries_done >= self.retries:
+            return self._give_up(f"timed out {waiting} after {self.retries} retries{self._note()}")
         self.retries_done += 1
         self.counters["resent"] += 1
-        self._deadline_s = now_s + self.timeout_s
+        self._clean = False
+        self._deadline_s = now_s + self._wait_s(now_s)
         return self._resend(now_s)
+
+    def _give_up(self, what: str) -> list[Any]:
+        self._fail(
+            Result.TIMEOUT,
+            MissionTimeout(
+                f"{self.describe()} {what}",
+                vehicle=self.target_system,
+                seq=self._timeout_seq(),
+                mission_type=self.mission_type,
+                operation=self.operation,
+            ),
+        )
+        return self._cancel_messages()
+
+    def _wait_s(self, now_s: float) -> float:
+        if self.timeout_s is not None:
+            return self.timeout_s
+        return self.rtt.wait_s(self.retries_done, now_s - self._last_heard_s)
+
+    def _new_exchange(self, now_s: float) -> None:
+        """A new request went out: its own timer and resend count."""
+        self.retries_done = 0
+        self._exchange_s = now_s
+        self._clean = True
+        self._deadline_s = now_s + self._wait_s(now_s)
+
+    def _answered(self, now_s: float) -> None:
+        """The exchange under way was answered: a round-trip sample if it went out once."""
+        if self._clean:
+            self._sample(now_s - self._exchange_s)
+
+    def _sample(self, rtt_s: float) -> None:
+        self.rtt.sample(rtt_s)
+        self.counters["rtt_samples"] += 1
+
+    def _progressed(self, now_s: float) -> None:
+        self._last_progress_s = now_s
+
+    def _needless(self) -> None:
+        self.counters["needless_resends"] += 1
+        self.rtt.needless_resend()
 
     def cancel(self, now_s: float) -> list[Any]:
         """Abandon a running transfer (the caller gave up); returns the messages to send.
@@ -346,9 +460,6 @@ class Transfer:
         mt = getattr(msg, "mission_type", None)
         return mt is None or int(mt) == self.mission_type
 
-    def _refresh(self, now_s: float) -> None:
-        self._deadline_s = now_s + self.timeout_s
-
     def _succeed(self) -> None:
         self.step = Step.DONE
         self.result = Result.SUCCESS
@@ -368,18 +479,6 @@ class Transfer:
                 mav_result,
                 vehicle=self.target_system,
                 seq=seq,
-                mission_type=self.mission_type,
-                operation=self.operation,
-            ),
-        )
-
-    def _fail_timeout(self, what: str) -> None:
-        self._fail(
-            Result.TIMEOUT,
-            MissionTimeout(
-                f"{self.describe()} timed out waiting for {what}",
-                vehicle=self.target_system,
-                seq=self._timeout_seq(),
                 mission_type=self.mission_type,
                 operation=self.operation,
             ),
@@ -434,24 +533,33 @@ def _check_items(items: Sequence[MissionItem], mission_type: int, vehicle: int) 
 
 
 class Upload(Transfer):
-    """Send items to the vehicle (a full upload of one mission type)."""
+    """Send items to the vehicle (a full upload of one mission type).
+
+    ``send_ahead``: on a timeout, send items after the one last requested too (one more on
+    each consecutive timeout, the newest :data:`SEND_AHEAD_MAX` of them). When the vehicle's
+    request for the next item was lost, it takes the next item at once instead of waiting for
+    its own re-request timer (1.5 s on ArduPilot and the stub); items it already has, or that
+    come before the one it misses, it ignores or NACKs with INVALID_SEQUENCE, which the
+    upload tolerates. Off for PX4, which does not expect items it did not request.
+    """
 
     operation = "upload"
     message_types = frozenset({"MISSION_REQUEST_INT", "MISSION_REQUEST", "MISSION_ACK"})
 
-    def __init__(self, items: Sequence[MissionItem], **kwargs: Any) -> None:
+    def __init__(
+        self, items: Sequence[MissionItem], *, send_ahead: bool = False, **kwargs: Any
+    ) -> None:
         super().__init__(**kwargs)
         _check_items(items, self.mission_type, self.target_system)
         self.items = tuple(items)
+        self.send_ahead = send_ahead
         self.highest_requested = -1
         """Highest seq the vehicle asked for: it holds every item below."""
-        self.counters.update(legacy_requests=0, bad_requests=0, stale_acks=0, tolerated_nacks=0)
-        self._last_progress_s = 0.0
-
-    @property
-    def stall_limit_s(self) -> float:
-        """Time without a new item requested after which the upload ends as timed out."""
-        return 4.0 * (self.retries + 1) * self.timeout_s
+        self.counters.update(
+            legacy_requests=0, bad_requests=0, stale_acks=0, tolerated_nacks=0, sent_ahead=0
+        )
+        self._messages: list[Any | None] = [None] * len(self.items)
+        self._highest_sent = -1
 
     @property
     def progress(self) -> tuple[int, int]:
@@ -469,25 +577,28 @@ class Upload(Transfer):
         )
 
     def _item(self, seq: int) -> Any:
-        return item_message(
-            self.items[seq], self.target_system, self.target_component, self.mission_type
-        )
+        self._highest_sent = max(self._highest_sent, seq)
+        msg = self._messages[seq]
+        if msg is None:
+            msg = self._messages[seq] = item_message(
+                self.items[seq], self.target_system, self.target_component, self.mission_type
+            )
+        return msg
 
     def _start(self, now_s: float) -> list[Any]:
         self.step = Step.SEND_COUNT
-        self._last_progress_s = now_s
         return [self._count()]
 
     def _handle(self, msg: Any, now_s: float) -> list[Any]:
         if msg.get_type() == "MISSION_ACK":
-            self._on_ack(int(msg.type))
+            self._on_ack(int(msg.type), now_s)
             return []
         seq = int(msg.seq)
         if not 0 <= seq < len(self.items):
             # A stale request from an earlier, longer upload is possible; a peer that keeps
             # asking for items that do not exist is broken.
             self.counters["bad_requests"] += 1
-            if self.counters["bad_requests"] > self.retries:
+            if self.counters["bad_requests"] > (5 if self.retries is None else self.retries):
                 self._fail_protocol(
                     f"it requested item {seq} of a {len(self.items)}-item upload",
                     seq,
@@ -497,34 +608,41 @@ class Upload(Transfer):
         if msg.get_type() == "MISSION_REQUEST":
             self.counters["legacy_requests"] += 1
         self.step = Step.SEND_ITEMS
-        self.retries_done = 0
         if seq > self.highest_requested:
+            # The answer to our last item (or to the COUNT): the vehicle moved on.
+            self._answered(now_s)
             self.highest_requested = seq
-            self._last_progress_s = now_s
+            self._progressed(now_s)
+            self._new_exchange(now_s)
+            return [self._item(seq)]
+        if seq < self.highest_requested:
+            # Asked again for an item it had moved past: a late copy of an old request, so an
+            # earlier resend of ours was needless (or the link duplicates).
+            self._needless()
         elif now_s - self._last_progress_s > self.stall_limit_s:
-            self._fail(
-                Result.TIMEOUT,
-                MissionTimeout(
-                    f"{self.describe()} timed out: no progress for "
-                    f"{now_s - self._last_progress_s:.3g} s, the vehicle kept requesting "
-                    f"item {self.highest_requested}",
-                    vehicle=self.target_system,
-                    seq=self.highest_requested,
-                    mission_type=self.mission_type,
-                    operation=self.operation,
-                ),
+            return self._give_up(
+                f"timed out: no progress for {now_s - self._last_progress_s:.3g} s, the "
+                f"vehicle kept requesting item {self.highest_requested}"
             )
-            return self._cancel_messages()
-        self._refresh(now_s)
+        # Answered again: the vehicle is alive (the resends start over), but its next request
+        # may answer either copy, so it gives no round-trip sample.
+        self.retries_done = 0
+        self._clean = False
+        self._deadline_s = now_s + self._wait_s(now_s)
         return [self._item(seq)]
 
-    def _on_ack(self, result: int) -> None:
+    def _on_ack(self, result: int, now_s: float) -> None:
         n = len(self.items)
         if result == MAV_MISSION_ACCEPTED:
-            complete = self.highest_requested == n - 1 and (n > 0 or self.step is Step.SEND_COUNT)
+            # With items sent ahead the vehicle may hold the last one before it asked for it.
+            last_sent = self.send_ahead and n > 0 and self._highest_sent == n - 1
+            complete = last_sent or (
+                self.highest_requested == n - 1 and (n > 0 or self.step is Step.SEND_COUNT)
+            )
             if not complete:
                 self.counters["stale_acks"] += 1
                 return
+            self._answered(now_s)
             self.mav_result = result
             self._succeed()
             return
@@ -537,7 +655,16 @@ class Upload(Transfer):
     def _resend(self, now_s: float) -> list[Any]:
         if self.step is Step.SEND_COUNT:
             return [self._count()]
-        return [self._item(self.highest_requested)]
+        h = self.highest_requested
+        if not self.send_ahead:
+            return [self._item(h)]
+        # The vehicle needs an item from h to one past the highest sent: h and the newest few
+        # go again, and one more each time (the vehicle may have taken all we sent ahead and
+        # its requests been lost).
+        top = min(len(self.items) - 1, self._highest_sent + 1, h + self.retries_done)
+        ahead = range(max(h + 1, top - SEND_AHEAD_MAX + 1), top + 1)
+        self.counters["sent_ahead"] += len(ahead)
+        return [self._item(h), *(self._item(seq) for seq in ahead)]
 
     def _awaited(self) -> str:
         n = len(self.items)
@@ -557,22 +684,35 @@ class Upload(Transfer):
 
 
 class Download(Transfer):
-    """Read the vehicle's items of one mission type (item 0 of type 0 is its home)."""
+    """Read the vehicle's items of one mission type (item 0 of type 0 is its home).
+
+    ``window``: how many item requests may be outstanding. 1 asks for one item at a time, in
+    order, as PX4 requires (it aborts a download on a request out of sequence). ArduPilot and
+    the stub answer any request, so with a window the next requests go out as each item
+    arrives, replies pace the transfer, and lost items are asked for again together.
+    """
 
     operation = "download"
     message_types = frozenset({"MISSION_COUNT", "MISSION_ITEM_INT", "MISSION_ITEM", "MISSION_ACK"})
 
-    def __init__(self, **kwargs: Any) -> None:
+    def __init__(self, *, window: int = 1, **kwargs: Any) -> None:
         super().__init__(**kwargs)
+        if isinstance(window, bool) or not isinstance(window, int) or window < 1:
+            raise ValueError(f"window must be an integer >= 1, got {window!r}")
+        self.window = window
         self.count: int | None = None
         self.items: list[MissionItem] = []
-        self.counters.update(legacy_items=0, stale_acks=0, tolerated_nacks=0)
+        """The items received so far, in order from item 0 (all of them on success)."""
+        self.counters.update(legacy_items=0, stale_acks=0, tolerated_nacks=0, duplicates=0)
+        self._ahead: dict[int, MissionItem] = {}  # received beyond the in-order prefix
+        self._outstanding: dict[int, float | None] = {}  # seq -> sent at (None: resent)
+        self._next_seq = 0  # lowest seq never requested
 
     @property
     def progress(self) -> tuple[int, int]:
         if self.count is None:
             return (0, 0)
-        return (len(self.items), self.count)
+        return (len(self.items) + len(self._ahead), self.count)
 
     def _cancel_messages(self) -> list[Any]:
         return [self._ack(MAV_MISSION_OPERATION_CANCELLED)]
@@ -582,10 +722,23 @@ class Download(Transfer):
             self.target_system, self.target_component, self.mission_type
         )
 
-    def _request_item(self) -> Any:
+    def _request(self, seq: int) -> Any:
         return mavlink2.MAVLink_mission_request_int_message(
-            self.target_system, self.target_component, len(self.items), self.mission_type
+            self.target_system, self.target_component, seq, self.mission_type
         )
+
+    def _request_more(self, now_s: float) -> list[Any]:
+        """Fill the window with new requests, lowest seq first."""
+        assert self.count is not None
+        out = []
+        while len(self._outstanding) < self.window and self._next_seq < self.count:
+            seq = self._next_seq
+            self._next_seq += 1
+            self._outstanding[seq] = now_s
+            out.append(self._request(seq))
+        if out:
+            self._new_exchange(now_s)
+        return out
 
     def _start(self, now_s: float) -> list[Any]:
         self.step = Step.REQUEST_LIST
@@ -598,34 +751,46 @@ class Download(Transfer):
             return []
         if mtype == "MISSION_COUNT":
             if self.step is not Step.REQUEST_LIST:
-                return []  # a duplicate
+                self.counters["duplicates"] += 1
+                return []
+            self._answered(now_s)
+            self._progressed(now_s)
             self.count = int(msg.count)
-            self.retries_done = 0
-            self._refresh(now_s)
             if self.count == 0:
                 self._succeed()
                 return [self._ack(MAV_MISSION_ACCEPTED)]
             self.step = Step.REQUEST_ITEMS
-            return [self._request_item()]
+            return self._request_more(now_s)
         # MISSION_ITEM_INT or legacy MISSION_ITEM.
-        if self.step is not Step.REQUEST_ITEMS or int(msg.seq) != len(self.items):
-            return []  # duplicate, stale or out of order: the missing one is re-requested
+        seq = int(msg.seq)
+        if self.step is not Step.REQUEST_ITEMS or seq not in self._outstanding:
+            # A duplicate, a late copy, or one not asked for: dropped.
+            self.counters["duplicates"] += 1
+            if self.step is Step.REQUEST_ITEMS and seq < self._next_seq:
+                self._needless()
+            return []
         item = item_from_message(msg)
         if item is None:
-            self._fail_protocol(
-                f"item {len(self.items)} has x {msg.x!r}, y {msg.y!r} (not int32 x 1e7)",
-                len(self.items),
-            )
+            self._fail_protocol(f"item {seq} has x {msg.x!r}, y {msg.y!r} (not int32 x 1e7)", seq)
             return self._cancel_messages()
         if mtype == "MISSION_ITEM":
             self.counters["legacy_items"] += 1
-        self.items.append(item)
-        self.retries_done = 0
-        self._refresh(now_s)
-        if len(self.items) == self.count:
+        sent_s = self._outstanding.pop(seq)
+        if sent_s is not None:
+            self._sample(now_s - sent_s)
+        self._progressed(now_s)
+        self._ahead[seq] = item
+        items, ahead = self.items, self._ahead
+        while len(items) in ahead:
+            items.append(ahead.pop(len(items)))
+        if len(items) == self.count:
             self._succeed()
             return [self._ack(MAV_MISSION_ACCEPTED)]
-        return [self._request_item()]
+        out = self._request_more(now_s)
+        if not out:
+            # Nothing new to ask for: the timer now runs for the ones still missing.
+            self._new_exchange(now_s)
+        return out
 
     def _on_ack(self, result: int) -> None:
         if result == MAV_MISSION_ACCEPTED:
@@ -643,7 +808,9 @@ class Download(Transfer):
     def _resend(self, now_s: float) -> list[Any]:
         if self.step is Step.REQUEST_LIST:
             return [self._request_list()]
-        return [self._request_item()]
+        for seq in self._outstanding:
+            self._outstanding[seq] = None
+        return [self._request(seq) for seq in sorted(self._outstanding)]
 
     def _awaited(self) -> str:
         if self.step is Step.REQUEST_LIST:

@@ -34,8 +34,11 @@ Behaviour modelled on ArduPlane 4.x (``commands_logic.cpp``, ``AP_Mission``, ``A
 - NAV_WAYPOINT: L1 navigation along prev -> next; reached within
   ``turn_distance(wp_radius, next_turn_angle)`` (param2 > 0 overrides; param3 pass-by > 0 sets
   it to 0) or when past the finish line. Pass-by offsetting of the point is not modelled.
-- NAV_TAKEOFF: ground roll on the current heading at full throttle, rotate at the rotate speed,
-  climb at ``takeoff_climb_rate_m_s`` holding heading; done when altitude >= target (param7).
+- NAV_TAKEOFF (ArduPlane/takeoff.cpp, commands_logic.cpp verify_takeoff): ground roll on the
+  heading it had when the roll began, at full throttle; rotate at the rotate speed; climb at
+  ``takeoff_climb_rate_m_s`` (9 m/s, ArduPlane SITL's full-throttle climb-out, above
+  TECS_CLMB_MAX) holding that ground course; done when altitude >= target (param7), then the
+  next leg starts from where the aircraft is (next_WP_loc = prev_WP_loc = current_loc).
 - NAV_LOITER_TURNS / TIME / UNLIM: approach on the leg line while farther than 3 radii, then
   L1 loiter (radius |param3|, 0 -> WP_LOITER_RAD; param3 < 0 counter-clockwise). Turns are
   counted from when the aircraft is on the circle; afterwards the aircraft keeps circling until
@@ -609,8 +612,20 @@ class Autopilot:
             events.append(Text(SEVERITY_INFO, f"Takeoff complete at {rel:.2f}m"))
             self._start_loiter_here()
         eas, bank, climb, motor = self._guidance(st, mode)
+        climb_max = p.takeoff_climb_rate_m_s if self._nav == _NAV_TAKEOFF else 0.0
         self._state = model.step_scalar(
-            st, eas * scale, bank, climb, ground, motor, p, self._wind, dt_s, self._prng, scale
+            st,
+            eas * scale,
+            bank,
+            climb,
+            ground,
+            motor,
+            p,
+            self._wind,
+            dt_s,
+            self._prng,
+            scale,
+            climb_max,
         )
         if self._nav == _NAV_LAND:
             self._after_land_step(st, events)

@@ -49,7 +49,11 @@ class AirframeParams:
     alt_time_constant_s: float = 5.0  # TECS_TIME_CONST: altitude error -> climb demand
     takeoff_accel_m_s2: float = 3.0  # ground-roll acceleration at full throttle
     takeoff_rotate_speed_m_s: float = 0.0  # TKOFF_ROTATE_SPD; 0 -> airspeed_min_m_s
-    takeoff_climb_rate_m_s: float = 4.0  # climb rate held during NAV_TAKEOFF / TAKEOFF
+    # Climb rate during NAV_TAKEOFF / TAKEOFF mode. ArduPlane climbs out at TKOFF_THR_MAX with
+    # the pitch TECS demands to hold airspeed (takeoff.cpp, TECS takeoff stage): the airframe's
+    # full-throttle climb, not TECS_CLMB_MAX. Measured on ArduPlane SITL V4.7.0-dev: 607-828 m
+    # in 66-88 s (about 9 m/s) over about 2 km.
+    takeoff_climb_rate_m_s: float = 9.0
     takeoff_mode_alt_m: float = 50.0  # TKOFF_ALT: TAKEOFF mode target above home
     ground_brake_decel_m_s2: float = 2.0  # rolling/braking deceleration on the ground
     glide_ratio: float = 10.0  # motor off in the air (disarmed): sink = airspeed / ratio
@@ -241,11 +245,13 @@ def step_scalar(
     dt_s: float,
     rng: Rng,
     tas_scale: float = 1.0,
+    climb_max_m_s: float = 0.0,
 ) -> FlightState:
     """``step`` with the controls unpacked (the autopilot's hot path; no Controls object).
 
     ``tas_scale`` is true airspeed per unit of the airframe's airspeeds (EAS2TAS x (1 + bias)):
     it scales the airspeed limits and the rotate speed; ``target_airspeed_m_s`` is true.
+    ``climb_max_m_s`` > 0 replaces ``climb_rate_max_m_s`` (a full-throttle takeoff climb).
     """
     exp = math.exp
     cos = math.cos
@@ -316,8 +322,9 @@ def step_scalar(
         sh = sin(heading)
         if motor_on:
             climb_cmd = climb_rate_cmd_m_s
-            if climb_cmd > p.climb_rate_max_m_s:
-                climb_cmd = p.climb_rate_max_m_s
+            climb_max = climb_max_m_s or p.climb_rate_max_m_s
+            if climb_cmd > climb_max:
+                climb_cmd = climb_max
             elif climb_cmd < -p.sink_rate_max_m_s:
                 climb_cmd = -p.sink_rate_max_m_s
         else:

@@ -58,7 +58,9 @@ from sitl_stub.mission_server import MissionServer
 GCS_SYS, GCS_COMP = 255, 190
 VEHICLE = 1
 TIMEOUT_S = 1.5
-OURS = dict(target_system=VEHICLE, own_system=GCS_SYS, own_component=GCS_COMP)
+OURS: dict[str, Any] = dict(target_system=VEHICLE, own_system=GCS_SYS, own_component=GCS_COMP)
+# The MAVLink service's fixed timers, as a caller who sets timeout_s and retries gets them.
+FIXED: dict[str, Any] = dict(OURS, timeout_s=TIMEOUT_S, retries=5)
 
 
 def wire(msg: Any, src: int = VEHICLE, comp: int = 1) -> Any:
@@ -122,7 +124,7 @@ def types(msgs: list[Any]) -> list[str]:
 
 
 def upload(n: int = 3, **kw: Any) -> Upload:
-    return Upload(mission(n, kw.get("mission_type", 0)), **{**OURS, **kw})
+    return Upload(mission(n, kw.get("mission_type", 0)), **{**FIXED, **kw})
 
 
 # -- upload ------------------------------------------------------------------------------
@@ -139,7 +141,7 @@ def test_upload_starts_with_mission_count_to_the_autopilot() -> None:
 
 def test_upload_answers_each_request_with_its_item_and_succeeds_on_ack() -> None:
     items = mission(3)
-    up = Upload(items, **OURS)
+    up = Upload(items, **FIXED)
     up.start(0.0)
     for k in range(3):
         (sent,) = up.handle(req(k), 0.1 * (k + 1))
@@ -360,7 +362,7 @@ def test_gcs_cancel_tells_the_vehicle_and_ends_with_mission_cancelled() -> None:
     assert down.cancel(0.0) == []  # not started: nothing to tell
     down.start(0.0)
     assert types(down.cancel(0.1)) == ["MISSION_ACK"]
-    clear = Clear(**OURS)
+    clear = Clear(**FIXED)
     clear.start(0.0)
     assert clear.cancel(0.1) == [] and clear.result is Result.CANCELLED
 
@@ -450,7 +452,7 @@ def test_nack_from_another_system_does_not_end_the_upload() -> None:
 
 
 def download(**kw: Any) -> Download:
-    return Download(**{**OURS, **kw})
+    return Download(**{**FIXED, **kw})
 
 
 def test_download_requests_list_then_each_item_then_acks() -> None:
@@ -592,7 +594,7 @@ def test_download_unsupported_mission_type() -> None:
 
 
 def test_clear_all_sends_clear_and_succeeds_on_ack() -> None:
-    clear = Clear(mission_type=2, **OURS)
+    clear = Clear(mission_type=2, **FIXED)
     (msg,) = clear.start(0.0)
     assert msg.get_type() == "MISSION_CLEAR_ALL" and msg.mission_type == 2
     assert types(clear.tick(1.5)) == ["MISSION_CLEAR_ALL"]
@@ -602,13 +604,13 @@ def test_clear_all_sends_clear_and_succeeds_on_ack() -> None:
 
 
 def test_clear_all_nack_and_timeout() -> None:
-    clear = Clear(**OURS)
+    clear = Clear(**FIXED)
     clear.start(0.0)
     clear.handle(ack(mavlink2.MAV_MISSION_ERROR), 0.1)
     err = clear.error()
     assert type(err) is MissionError and clear.result is Result.VEHICLE_ERROR
     assert str(err).startswith("vehicle 1: mission clear rejected: MAV_MISSION_ERROR")
-    silent = Clear(retries=0, **OURS)
+    silent = Clear(**{**FIXED, "retries": 0})
     silent.start(0.0)
     silent.tick(1.5)
     assert str(silent.error()) == (
@@ -621,7 +623,7 @@ def current(seq: int, total: int = 10, src: int = VEHICLE) -> Any:
 
 
 def test_set_current_is_confirmed_by_mission_current_with_that_seq() -> None:
-    sc = SetCurrent(5, **OURS)
+    sc = SetCurrent(5, **FIXED)
     (msg,) = sc.start(0.0)
     assert msg.get_type() == "MISSION_SET_CURRENT"
     assert (msg.target_system, msg.target_component, msg.seq) == (1, 1, 5)
@@ -633,7 +635,7 @@ def test_set_current_is_confirmed_by_mission_current_with_that_seq() -> None:
 
 
 def test_set_current_resends_and_times_out_saying_what_the_vehicle_reports() -> None:
-    sc = SetCurrent(50, retries=1, **OURS)
+    sc = SetCurrent(50, **{**FIXED, "retries": 1})
     sc.start(0.0)
     sc.handle(current(2), 0.5)
     assert types(sc.tick(1.5)) == ["MISSION_SET_CURRENT"]
@@ -707,9 +709,23 @@ class Channel:
             heapq.heappush(self.queue, (at + 0.001, next(self._n), to, parsed))
 
 
-def run(transfer: Transfer, server: MissionServer, channel: Channel, t0: float = 0.0) -> float:
-    """Drive the two state machines until the transfer ends; returns the fake time."""
+HEARTBEAT = mavlink2.MAVLink_heartbeat_message(1, 3, 0, 0, 3, 3)  # fixed wing, ArduPilot
+
+
+def run(
+    transfer: Transfer,
+    server: MissionServer,
+    channel: Channel,
+    t0: float = 0.0,
+    *,
+    heartbeat_s: float | None = None,
+) -> float:
+    """Drive the two state machines until the transfer ends; returns the fake time.
+
+    ``heartbeat_s``: the vehicle also sends a HEARTBEAT this often, through the same channel.
+    """
     gcs_src, vehicle_src = (GCS_SYS, GCS_COMP), (VEHICLE, 1)
+    next_heartbeat_s = t0 if heartbeat_s is None else t0 + heartbeat_s
 
     def to_vehicle(msgs: list[Any], now: float) -> None:
         for m in msgs:
@@ -726,16 +742,23 @@ def run(transfer: Transfer, server: MissionServer, channel: Channel, t0: float =
         steps += 1
         assert steps < 200_000, "the transfer never ended"
         times = [t for t in (transfer.next_deadline(), server.next_deadline()) if t is not None]
+        if heartbeat_s is not None:
+            times.append(next_heartbeat_s)
         if channel.queue:
             times.append(channel.queue[0][0])
         assert times, "nothing can happen any more but the transfer is not done"
         # A hair past the earliest event: the server compares ``now - last >= timeout``,
         # which float rounding can make false exactly at its own deadline.
         now = max(now, min(times) + 1e-9)
+        if heartbeat_s is not None and now >= next_heartbeat_s:
+            channel.send("gcs", HEARTBEAT, now, vehicle_src)
+            next_heartbeat_s += heartbeat_s
         while channel.queue and channel.queue[0][0] <= now:
             _, _, to, msg = heapq.heappop(channel.queue)
             if to == "vehicle":
                 from_vehicle(server.handle(msg, 1, now), now)
+            elif msg.get_type() == "HEARTBEAT":
+                transfer.heard(now)
             else:
                 to_vehicle(transfer.handle(msg, now), now)
         to_vehicle(transfer.tick(now), now)
@@ -778,7 +801,7 @@ def test_upload_then_download_through_a_faulty_channel_gives_the_items_back(
     channel = Channel(random.Random(seed), loss, dup, reorder)
     server = MissionServer(system_id=VEHICLE, home=STUB_HOME, legacy_requests=legacy)
     items = scenario_items(n, mission_type)
-    up = Upload(items, mission_type=mission_type, retries=30, **OURS)
+    up = Upload(items, mission_type=mission_type, **{**FIXED, "retries": 30})
     t = run(up, server, channel)
     assert up.result is Result.SUCCESS, up.error()
     stored = as_planner(server.items(mission_type))
@@ -787,7 +810,7 @@ def test_upload_then_download_through_a_faulty_channel_gives_the_items_back(
         expected = [as_planner((server.home,))[0]]
     assert items_equal(stored, expected)
 
-    down = Download(mission_type=mission_type, retries=30, **OURS)
+    down = Download(mission_type=mission_type, **{**FIXED, "retries": 30})
     run(down, server, channel, t + 5.0)
     assert down.result is Result.SUCCESS, down.error()
     assert items_equal(down.items, stored)
@@ -807,7 +830,7 @@ def test_upload_with_few_retries_succeeds_exactly_or_fails_typed_keeping_a_whole
     old = scenario_items(3, 1)
     server.store(tuple(stub_items.MissionItem(**_fields(it)) for it in old), 1)
     items = scenario_items(n, 1)
-    up = Upload(items, mission_type=1, retries=retries, **OURS)
+    up = Upload(items, mission_type=1, **{**FIXED, "retries": retries})
     run(up, server, channel)
     stored = as_planner(server.items(1))
     if up.result is Result.SUCCESS:
@@ -844,10 +867,10 @@ def test_outcomes_at_30_percent_loss(
         server = MissionServer(system_id=VEHICLE, home=STUB_HOME)
         transfer: Transfer
         if kind == "upload":
-            transfer = Upload(mission(n), retries=retries, **OURS)
+            transfer = Upload(mission(n), **{**FIXED, "retries": retries})
         else:
             server.store(tuple(stub_items.MissionItem(**_fields(it)) for it in mission(n)))
-            transfer = Download(retries=retries, **OURS)
+            transfer = Download(**{**FIXED, "retries": retries})
         run(transfer, server, channel)
         if transfer.result is Result.SUCCESS:
             ok += 1
