@@ -57,6 +57,25 @@ async def command_rtt(c: Client) -> float:
     return loop.time() - t0
 
 
+async def answer_requests(c: Client, items: list[Any], *, first: Any, retry_s: float) -> int:
+    """The rest of an upload whose MISSION_COUNT was taken: answer every request (copies
+    too, as Client.upload does), resend the last item on silence; the ACK's result."""
+    last = first
+    c.send(last)
+    async with asyncio.timeout(20.0):
+        while True:
+            msg = await c.try_recv(
+                lambda m: m.get_type() in ("MISSION_REQUEST_INT", "MISSION_ACK"), retry_s
+            )
+            if msg is None:
+                c.send(last)
+            elif msg.get_type() == "MISSION_ACK":
+                return int(msg.type)
+            elif 0 <= msg.seq < len(items):
+                last = items[msg.seq]
+                c.send(last)
+
+
 @pytest.fixture
 async def team() -> AsyncIterator[SimTeam]:
     # A short re-request timeout: a reordered item costs 0.3 s, not 1.5 s.
@@ -93,7 +112,22 @@ async def test_duplication_set_at_run_time_keeps_upload_exact(team: SimTeam) -> 
     c = await Client.connect(team.ports[0])
     try:
         items = mission(8, 100.0)
-        result = await c.upload(items, retry_s=0.5, deadline_s=20.0)
+        # Item 0 goes out only once the vehicle has taken both copies of MISSION_COUNT (each
+        # copy is answered with a request for item 0, itself duplicated: four requests per
+        # COUNT sent). Under load the stub's delayed second copy can be handled after an item
+        # that arrived later, and a COUNT taken after item 0 restarts the upload, after which
+        # late copies of early items are accepted instead of ignored.
+        counts_sent = 1
+        c.send(mavlink2.MAVLink_mission_count_message(1, 1, len(items), 0))
+        async with asyncio.timeout(20.0):
+            while (
+                sum(m.get_type() == "MISSION_REQUEST_INT" and m.seq == 0 for m in c.history)
+                < 4 * counts_sent
+            ):
+                if await c.try_recv("MISSION_REQUEST_INT", 0.5) is None:
+                    c.send(mavlink2.MAVLink_mission_count_message(1, 1, len(items), 0))
+                    counts_sent += 1
+        result = await answer_requests(c, items, first=items[0], retry_s=0.5)
         assert result == mavlink2.MAV_MISSION_ACCEPTED
         assert stored_matches(team, items)
         assert_download_matches(await c.download(retry_s=0.5), items)
