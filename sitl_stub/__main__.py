@@ -154,6 +154,12 @@ def parse_args(argv: Sequence[str] | None = None) -> argparse.Namespace:
         help="vehicle I (0-based) reports no UTC: SYSTEM_TIME.time_unix_usec = 0 (repeatable)",
     )
     ap.add_argument(
+        "--true-wind-estimate",
+        action="store_true",
+        help="WIND reports the true wind (default: with a seeded 0.8-1.6 m/s estimation error "
+        "per vehicle, as ArduPlane's estimate has)",
+    )
+    ap.add_argument(
         "--exact-missions",
         action="store_true",
         help="read uploaded mission items back exactly as sent (default: in ArduPilot's "
@@ -406,6 +412,7 @@ async def serve(
             speed_bias=speed_bias_from_args(args),
             utc_offset_s=utc_offsets_from_args(args),
             no_utc=tuple(args.no_utc or ()),
+            wind_estimate_error=not args.true_wind_estimate,
             mission_timeout_s=args.mission_timeout,
             truth_out=args.truth,
             truth_period_s=args.truth_period,

@@ -31,6 +31,7 @@ from sitl_stub.model import AirframeParams, FlightState, Wind
 from sitl_stub.server import TeamServer
 from sitl_stub.truth import DEFAULT_TRUTH_PERIOD_S, TruthRecorder
 from sitl_stub.vehicle import Vehicle
+from sitl_stub.wind_estimate import WindEstimateError
 
 DEFAULT_TCP_BASE = 5760
 PORT_STRIDE = 10
@@ -90,6 +91,7 @@ class SimTeam:
         speed_bias: Mapping[int, float] | None = None,
         utc_offset_s: Mapping[int, float] | None = None,
         no_utc: Collection[int] = (),
+        wind_estimate_error: bool = True,
         run: bool = True,
         truth_out: str | Path | None = None,
         truth_period_s: float = DEFAULT_TRUTH_PERIOD_S,
@@ -119,6 +121,7 @@ class SimTeam:
             speed_bias=speed_bias,
             utc_offset_s=utc_offset_s,
             no_utc=no_utc,
+            wind_estimate_error=wind_estimate_error,
             tcp_base=tcp_base,
         )
         if truth_out is not None:
@@ -163,6 +166,7 @@ class SimTeam:
         speed_bias: Mapping[int, float] | None = None,
         utc_offset_s: Mapping[int, float] | None = None,
         no_utc: Collection[int] = (),
+        wind_estimate_error: bool = True,
         tcp_base: int = DEFAULT_TCP_BASE,
     ) -> SimTeam:
         """Build the team without opening sockets (``start`` is the usual entry)."""
@@ -181,7 +185,8 @@ class SimTeam:
             if not math.isfinite(offset):
                 raise ValueError(f"utc_offset_s of vehicle {i} must be a number, got {offset!r}")
         clock = SimClock(speedup=speedup, step_s=step_s, start_utc_s=start_utc_s)
-        seeds = np.random.SeedSequence(seed).spawn(2 * len(homes))
+        # Children 0..2n-1 seed the flight and the link as before; 2n+i the wind estimate.
+        seeds = np.random.SeedSequence(seed).spawn(3 * len(homes))
         vehicles: list[Vehicle] = []
         for i, raw in enumerate(homes):
             home = raw if isinstance(raw, Home) else Home(*raw)
@@ -209,6 +214,11 @@ class SimTeam:
                     legacy_mission_requests=legacy_mission_requests,
                     ardupilot_mission_storage=ardupilot_mission_storage,
                     utc_offset_s=None if i in no_utc else float(utc_offsets.get(i, 0.0)),
+                    wind_error=WindEstimateError.draw(
+                        np.random.default_rng(seeds[2 * len(homes) + i])
+                    )
+                    if wind_estimate_error
+                    else None,
                 )
             )
         ports = [0 if tcp_base == 0 else tcp_base + PORT_STRIDE * i for i in range(len(homes))]

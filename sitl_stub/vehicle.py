@@ -25,6 +25,7 @@ from sitl_stub.items import MissionItem
 from sitl_stub.link import FaultyLink
 from sitl_stub.mission_server import LinkId, MissionServer, MissionStored, addressed_to
 from sitl_stub.model import AirframeParams, FlightState, crossing_time
+from sitl_stub.wind_estimate import WindEstimateError
 from sitl_stub.wire import MessageSpec, Packer, spec_for
 
 log = logging.getLogger(__name__)
@@ -174,11 +175,14 @@ class Vehicle:
         legacy_mission_requests: bool = False,
         ardupilot_mission_storage: bool = True,
         utc_offset_s: float | None = 0.0,
+        wind_error: WindEstimateError | None = None,
     ) -> None:
         self.system_id = system_id
         # This vehicle's clock error against the true simulated UTC; None: it has no UTC
         # (SYSTEM_TIME.time_unix_usec = 0, as an autopilot without GPS time).
         self.utc_offset_s = utc_offset_s
+        # WIND reports the true wind plus this error (None: the true wind).
+        self.wind_error = wind_error
         self.component_id = COMPONENT_ID
         self.autopilot = autopilot
         self.clock = clock
@@ -721,8 +725,13 @@ class Vehicle:
 
     def _wind(self) -> tuple[Any, ...]:
         s = self.autopilot.state
-        speed = math.hypot(s.wind_north_m_s, s.wind_east_m_s)
-        direction = math.degrees(math.atan2(-s.wind_east_m_s, -s.wind_north_m_s)) % 360.0
+        north, east = s.wind_north_m_s, s.wind_east_m_s
+        if self.wind_error is not None:
+            err_n, err_e = self.wind_error.north_east_m_s(s.time_s)
+            north += err_n
+            east += err_e
+        speed = math.hypot(north, east)
+        direction = math.degrees(math.atan2(-east, -north)) % 360.0
         return (direction, speed, 0.0)
 
     def _nav_controller_output(self) -> tuple[Any, ...]:

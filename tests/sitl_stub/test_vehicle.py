@@ -292,8 +292,9 @@ async def test_wind_makes_groundspeed_differ_from_airspeed() -> None:
             # Flying north into a wind from the north: groundspeed is lower.
             assert hud.groundspeed < hud.airspeed - 4.0
             w = await c.recv("WIND")
-            assert w.speed == pytest.approx(8.0, abs=0.5)
-            assert min(w.direction, 360 - w.direction) < 5.0
+            # The estimate carries a 0.8-1.6 m/s error (tests/sitl_stub/test_wind_estimate.py).
+            assert w.speed == pytest.approx(8.0, abs=1.7)
+            assert min(w.direction, 360 - w.direction) < 13.0
         finally:
             await c.close()
 
