@@ -160,6 +160,12 @@ def parse_args(argv: Sequence[str] | None = None) -> argparse.Namespace:
         "per vehicle, as ArduPlane's estimate has)",
     )
     ap.add_argument(
+        "--one-client-per-port",
+        action="store_true",
+        help="serve one TCP client per vehicle at a time, as ArduPilot SITL (others wait, "
+        "connected but unserved, until it disconnects); default: any number of clients",
+    )
+    ap.add_argument(
         "--exact-missions",
         action="store_true",
         help="read uploaded mission items back exactly as sent (default: in ArduPilot's "
@@ -413,6 +419,7 @@ async def serve(
             utc_offset_s=utc_offsets_from_args(args),
             no_utc=tuple(args.no_utc or ()),
             wind_estimate_error=not args.true_wind_estimate,
+            one_client_per_port=args.one_client_per_port,
             mission_timeout_s=args.mission_timeout,
             truth_out=args.truth,
             truth_period_s=args.truth_period,

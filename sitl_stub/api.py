@@ -92,6 +92,7 @@ class SimTeam:
         utc_offset_s: Mapping[int, float] | None = None,
         no_utc: Collection[int] = (),
         wind_estimate_error: bool = True,
+        one_client_per_port: bool = False,
         run: bool = True,
         truth_out: str | Path | None = None,
         truth_period_s: float = DEFAULT_TRUTH_PERIOD_S,
@@ -122,6 +123,7 @@ class SimTeam:
             utc_offset_s=utc_offset_s,
             no_utc=no_utc,
             wind_estimate_error=wind_estimate_error,
+            one_client_per_port=one_client_per_port,
             tcp_base=tcp_base,
         )
         if truth_out is not None:
@@ -167,6 +169,7 @@ class SimTeam:
         utc_offset_s: Mapping[int, float] | None = None,
         no_utc: Collection[int] = (),
         wind_estimate_error: bool = True,
+        one_client_per_port: bool = False,
         tcp_base: int = DEFAULT_TCP_BASE,
     ) -> SimTeam:
         """Build the team without opening sockets (``start`` is the usual entry)."""
@@ -222,7 +225,11 @@ class SimTeam:
                 )
             )
         ports = [0 if tcp_base == 0 else tcp_base + PORT_STRIDE * i for i in range(len(homes))]
-        return cls(TeamServer(vehicles, clock, host=host, ports=ports))
+        return cls(
+            TeamServer(
+                vehicles, clock, host=host, ports=ports, one_client_per_port=one_client_per_port
+            )
+        )
 
     # -- queries -------------------------------------------------------------------------
 

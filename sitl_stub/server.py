@@ -9,6 +9,12 @@ Connections are ``asyncio.Protocol`` objects (no per-connection tasks); delayed 
 ``call_at`` timers cancelled on close. The only task is the simulation loop, which the caller
 runs inside its own ``TaskGroup``.
 
+With ``one_client_per_port`` a vehicle serves one client at a time, as ArduPilot SITL's TCP
+serial ports do (libraries/AP_HAL_SITL/UARTDriver.cpp: ``listen(fd, 5)``, and
+``_check_connection`` accepts only while not connected): a second client's connect succeeds
+but it is neither read nor sent anything until the first disconnects; then the longest-waiting
+client is served.
+
 Writes are batched: a packet is appended to its connection's buffer and every buffer touched
 during one pass of the event loop goes out in ONE ``transport.write`` at the start of the next
 pass (a ``call_soon``), so the order of packets on a connection is kept and a simulation tick
@@ -88,23 +94,41 @@ class _Connection(asyncio.Protocol):
     def connection_made(self, transport: asyncio.BaseTransport) -> None:
         assert isinstance(transport, asyncio.Transport)
         self.transport = transport
+        port = self.port
+        if port.one_client and (port.connections or port.waiting):
+            # Like a connection in SITL's listen backlog: connected, never read, sent nothing.
+            transport.pause_reading()
+            port.waiting.append(self)
+            return
+        self.activate()
+
+    def activate(self) -> None:
+        """Start serving this client (at once, or when the client before it has gone)."""
         self._open = True
         self.port.connections[self.link_id] = self
 
     def connection_lost(self, exc: Exception | None) -> None:
-        self.port.connections.pop(self.link_id, None)
+        was_served = self.port.connections.pop(self.link_id, None) is not None
+        if self in self.port.waiting:
+            self.port.waiting.remove(self)
         if self._timer is not None:
             self._timer.cancel()
             self._timer = None
         self._open = False
         self._wbuf.clear()
         self.transport = None
+        if was_served:
+            self.port.serve_next()
 
     def close(self) -> None:
         if self.transport is not None:
             self.flush()
             self._open = False
             self.transport.close()
+
+    def resume(self) -> None:
+        if self.transport is not None:
+            self.transport.resume_reading()
 
     # -- inbound ---------------------------------------------------------------------------
 
@@ -201,9 +225,18 @@ class VehiclePort:
     """The TCP listener of one vehicle and its connections."""
 
     def __init__(
-        self, vehicle: Vehicle, host: str, port: int, batcher: WriteBatcher | None = None
+        self,
+        vehicle: Vehicle,
+        host: str,
+        port: int,
+        batcher: WriteBatcher | None = None,
+        *,
+        one_client: bool = False,
     ) -> None:
         self.vehicle = vehicle
+        self.one_client = one_client
+        # Clients connected while another is served (one_client only), oldest first.
+        self.waiting: list[_Connection] = []
         self.host = host
         self.requested_port = port
         self.port = port
@@ -222,6 +255,15 @@ class VehiclePort:
             if target is not None:
                 target.send(data)
 
+    def serve_next(self) -> None:
+        """Serve the longest-waiting client, if any (the served one has gone)."""
+        while self.waiting and not self.connections:
+            conn = self.waiting.pop(0)
+            if conn.transport is None or conn.transport.is_closing():
+                continue
+            conn.resume()
+            conn.activate()
+
     def new_connection(self) -> asyncio.Protocol:
         """The protocol object for one new client (the listener's factory)."""
         return _Connection(self)
@@ -236,7 +278,8 @@ class VehiclePort:
     async def close(self) -> None:
         if self._server is not None:
             self._server.close()
-        for conn in list(self.connections.values()):
+        waiting, self.waiting = self.waiting, []
+        for conn in [*self.connections.values(), *waiting]:
             conn.close()
         if self._server is not None:
             await self._server.wait_closed()
@@ -262,6 +305,7 @@ class TeamServer:
         *,
         host: str = "127.0.0.1",
         ports: Sequence[int],
+        one_client_per_port: bool = False,
     ) -> None:
         if len(ports) != len(vehicles):
             raise ValueError("one port per vehicle")
@@ -269,7 +313,8 @@ class TeamServer:
         self.clock = clock
         batcher = WriteBatcher()  # one batch per event-loop pass for every client
         self.ports = [
-            VehiclePort(v, host, p, batcher) for v, p in zip(vehicles, ports, strict=True)
+            VehiclePort(v, host, p, batcher, one_client=one_client_per_port)
+            for v, p in zip(vehicles, ports, strict=True)
         ]
         self._step_listeners: list[Any] = []
 
