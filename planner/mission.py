@@ -35,6 +35,8 @@ import struct
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, replace
 
+import numpy as np
+
 from planner.errors import PlannerError
 
 __all__ = [
@@ -65,6 +67,7 @@ __all__ = [
     "MissionItem",
     "SpeedChange",
     "Waypoint",
+    "ardupilot_alt_m",
     "arduplane_loiter_radius_m",
     "command_name",
     "compile_mission",
@@ -434,7 +437,7 @@ def compile_mission(
                 y=y,
                 # The altitude the autopilot keeps (whole centimetres), so that what is
                 # planned is what is flown and what a verifying download gives back.
-                z=stored_alt_m(float(z)),
+                z=ardupilot_alt_m(float(z)),
             )
         )
 
@@ -491,11 +494,16 @@ class Autopilot(enum.Enum):
     """ArduPlane's AP_Mission: packed 15-byte commands, altitudes in whole centimetres."""
     PX4 = "px4"
     """PX4's mission manager: mission_item_s (double lat/lon, float altitude)."""
+    UNKNOWN = "unknown"
+    """Not heard from: an item agrees when it comes back in any of the forms above."""
 
     @classmethod
     def from_heartbeat(cls, mav_autopilot: int | None) -> Autopilot:
-        """MAV_AUTOPILOT of a HEARTBEAT: 3 (ARDUPILOTMEGA) or 12 (PX4), else EXACT."""
-        return {3: cls.ARDUPILOT, 12: cls.PX4}.get(mav_autopilot or 0, cls.EXACT)
+        """MAV_AUTOPILOT of a HEARTBEAT: 3 (ARDUPILOTMEGA) or 12 (PX4), None (no HEARTBEAT)
+        UNKNOWN, else EXACT."""
+        if mav_autopilot is None:
+            return cls.UNKNOWN
+        return {3: cls.ARDUPILOT, 12: cls.PX4}.get(mav_autopilot, cls.EXACT)
 
 
 # AP_Mission::stored_in_location: commands whose x, y, z are kept as a Location.
@@ -504,16 +512,41 @@ _AP_LOCATION_COMMANDS = frozenset(
 )
 
 
+_CENTI_F32 = _f32(0.01)
+
+
+def _kept_cm(z_m: float) -> int:
+    """``Location::alt`` for a sent z: ``(int32)(z * 100.0f)``, float32, truncated."""
+    return math.trunc(_f32(_f32(z_m) * 100.0))
+
+
 def stored_alt_m(z_m: float) -> float:
     """The altitude ArduPilot gives back for a sent ``z`` (m): whole centimetres, truncated.
 
     AP_Mission (libraries/AP_Mission/AP_Mission.cpp, mavlink_int_to_mission_cmd) keeps
-    ``(int32)(z * 100.0f)`` in float32 arithmetic and sends back ``alt / 100.0f``.
+    ``(int32)(z * 100.0f)`` in float32 arithmetic and sends back ``alt * 0.01f``. The value
+    given back is not always kept as itself when sent again (``612.72`` comes back as
+    ``612.71``): :func:`ardupilot_alt_m` gives altitudes that are.
     """
     if not math.isfinite(z_m):
         return z_m
-    cm = math.trunc(_f32(_f32(z_m) * 100.0))
-    return _f32(cm / 100.0)
+    return _f32(_f32(float(_kept_cm(z_m))) * _CENTI_F32)
+
+
+def ardupilot_alt_m(z_m: float) -> float:
+    """An altitude (m) on ArduPilot's centimetre grid, within 1 cm of ``z_m``, that
+    ArduPilot keeps as the same centimetre whenever it is sent (truncation towards zero of
+    ``z_m``'s centimetres, nudged by float32 steps where ``z * 100.0f`` would fall short)."""
+    if not math.isfinite(z_m):
+        return z_m
+    cm = _kept_cm(z_m)
+    z = _f32(cm / 100.0)
+    away = math.inf if cm >= 0 else -math.inf
+    for _ in range(8):
+        if _kept_cm(z) == cm:
+            return z
+        z = _f32(float(np.nextafter(np.float32(z), np.float32(away))))
+    return z
 
 
 def _u16(v: float) -> int:
@@ -603,7 +636,11 @@ _STORED = {
     Autopilot.EXACT: _exact_item,
     Autopilot.ARDUPILOT: _ardupilot_item,
     Autopilot.PX4: _px4_item,
+    Autopilot.UNKNOWN: _exact_item,
 }
+
+
+_ANY_FORM = (Autopilot.EXACT, Autopilot.ARDUPILOT, Autopilot.PX4)
 
 
 def stored_item(item: MissionItem, autopilot: Autopilot) -> MissionItem:
@@ -616,7 +653,7 @@ def stored_item(item: MissionItem, autopilot: Autopilot) -> MissionItem:
     and stored radius); DO commands come back with frame 0 and no position. PX4
     (src/modules/mavlink/mavlink_mission.cpp): global frames come back as the _INT frame of
     their kind, altitudes as float32, the params mission_item_s keeps. ``current`` is always
-    0 (the vehicle sets it) and float fields are float32.
+    0 (the vehicle sets it) and float fields are float32. EXACT and UNKNOWN: as sent.
     """
     return _STORED[autopilot](item)
 
@@ -632,13 +669,17 @@ def first_difference(
     """Index of the first item that ``got`` does not hold as ``autopilot`` stores ``sent``.
 
     None when they agree; ``min(len(sent), len(got))`` when one is a prefix of the other.
-    Integers must match exactly, params as float32 (NaN equals NaN), z within ``alt_tol_m``.
+    Integers must match exactly, params as float32 (NaN equals NaN), z within ``alt_tol_m``
+    (or four float32 steps, if more). An item also agrees when it comes back as sent.
     With ``compare_home=False`` item 0 is skipped (ArduPilot replaces it with its own home).
     """
     for k, (p, q) in enumerate(zip(sent, got, strict=False)):
         if k == 0 and not compare_home:
             continue
-        if not _item_same(stored_item(p, autopilot), stored_item(q, autopilot), alt_tol_m):
+        # What the autopilot gives back, or (a vehicle that keeps more) what was sent.
+        back = _exact_item(q)
+        forms = _ANY_FORM if autopilot is Autopilot.UNKNOWN else (autopilot, Autopilot.EXACT)
+        if not any(_item_same(stored_item(p, a), back, alt_tol_m) for a in forms):
             return k
     if len(sent) != len(got):
         return min(len(sent), len(got))
@@ -659,7 +700,8 @@ def _item_same(p: MissionItem, q: MissionItem, alt_tol_m: float) -> bool:
         return False
     if math.isnan(p.z) or math.isnan(q.z):
         return math.isnan(p.z) and math.isnan(q.z)
-    return abs(p.z - q.z) <= alt_tol_m
+    # A few float32 steps at least: above 8 km they are larger than a millimetre.
+    return abs(p.z - q.z) <= max(alt_tol_m, abs(p.z) * 2.0**-21)
 
 
 def items_equal(

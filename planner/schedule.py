@@ -447,7 +447,7 @@ def _retime(
     takeoff = vs.takeoff_s
     if on_ground:
         window = (max(v.takeoff_window_s[0], now_s), max(v.takeoff_window_s[1], now_s))
-        takeoff = takeoff_time_s(length / ratio, target_s, limits, window)
+        takeoff = takeoff_time_s(length, target_s, limits, window, ratio)
         start_t = takeoff
         if abs(takeoff - vs.takeoff_s) > TIME_TOL_S or now_s == 0.0:
             adjustments.append(
@@ -463,19 +463,16 @@ def _retime(
             )
     remaining = length - s0
     site = find_loiter_site(scenario, v, vs.path, s0, radius, threats)
-    loiter_site = (
-        None
-        if site is None
-        else LoiterSite((site.s_m - s0) / ratio, radius / ratio, site.detour_m / ratio)
-    )
+    loiter_site = None if site is None else LoiterSite(site.s_m - s0, radius, site.detour_m)
     timing: Timing = time_path(
         v.id,
-        remaining / ratio,
+        remaining,
         target_s - start_t,
         limits,
         site=loiter_site,
         current_m_s=speed_now if phase in ("leg", "loiter") and speed_now > 0.0 else None,
         loiter_margin_m_s=loiter_margin_m_s,
+        tas_per_eas=ratio,
     )
     legs, loiters, arrival = _timeline(
         timing.pieces,
@@ -522,6 +519,7 @@ def _retime(
         kept_legs
         and legs
         and kept_legs[-1].speed_m_s == legs[0].speed_m_s
+        and kept_legs[-1].tas_per_eas == legs[0].tas_per_eas
         and abs(kept_legs[-1].t_end_s - legs[0].t_start_s) < TIME_TOL_S
         and abs(kept_legs[-1].s_end_m - legs[0].s_start_m) < 1e-6
     ):
@@ -582,10 +580,11 @@ def _window(
     return vehicle_window(
         v.id,
         now_s=start,
-        remaining_m=(vs.path.length_m - s0) / vs.tas_per_eas(s0),
+        remaining_m=vs.path.length_m - s0,
         limits=_limits(v, step_m_s),
         takeoff_window_s=v.takeoff_window_s if phase == "ground" else None,
         can_loiter=site is not None,
+        tas_per_eas=vs.tas_per_eas(s0),
     )
 
 

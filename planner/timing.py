@@ -83,6 +83,7 @@ def vehicle_window(
     limits: SpeedLimits,
     takeoff_window_s: tuple[float, float] | None = None,
     can_loiter: bool = False,
+    tas_per_eas: float = 1.0,
 ) -> ArrivalWindow:
     """The arrival window of one vehicle from ``now_s``.
 
@@ -100,9 +101,13 @@ def vehicle_window(
         ``(earliest, latest)`` takeoff, s, for a vehicle on the ground; None when airborne.
     can_loiter
         A buffer area on the remaining path allows holding turns: no latest arrival.
+    tas_per_eas
+        True airspeed per unit of the (equivalent) speed limits along the remaining path.
     """
     vmin, vmax = limits.speed_min_m_s, limits.speed_max_m_s
     km = remaining_m / 1000.0
+    remaining_m /= tas_per_eas
+    true = "" if tas_per_eas == 1.0 else f" (x{tas_per_eas:.3f} true)"
     if takeoff_window_s is None:
         depart_lo = depart_hi = now_s
         where = f"airborne at {now_s:.1f} s"
@@ -112,14 +117,15 @@ def vehicle_window(
         where = f"takeoff in [{depart_lo:.1f}, {depart_hi:.1f}] s"
     t_min = depart_lo + remaining_m / vmax
     min_reason = (
-        f"{vehicle_id} cannot arrive before {t_min:.1f} s ({where}, {km:.1f} km at {vmax:g} m/s)"
+        f"{vehicle_id} cannot arrive before {t_min:.1f} s ({where}, {km:.1f} km at "
+        f"{vmax:g} m/s{true})"
     )
     if can_loiter:
         return ArrivalWindow(vehicle_id, t_min, math.inf, min_reason, f"{vehicle_id} can loiter")
     t_max = depart_hi + remaining_m / vmin
     max_reason = (
-        f"{vehicle_id} cannot arrive after {t_max:.1f} s ({where}, {km:.1f} km at {vmin:g} m/s, "
-        "no buffer area to loiter in)"
+        f"{vehicle_id} cannot arrive after {t_max:.1f} s ({where}, {km:.1f} km at {vmin:g} m/s"
+        f"{true}, no buffer area to loiter in)"
     )
     return ArrivalWindow(vehicle_id, t_min, t_max, min_reason, max_reason)
 
@@ -320,6 +326,7 @@ def time_path(
     site: LoiterSite | None = None,
     current_m_s: float | None = None,
     loiter_margin_m_s: float = 0.0,
+    tas_per_eas: float = 1.0,
 ) -> Timing:
     """Speeds, and loiter turns where needed, to fly ``remaining_m`` in exactly ``duration_s``.
 
@@ -340,13 +347,17 @@ def time_path(
     loiter_margin_m_s
         Turns leave the mean speed at least this far above the minimum when they can
         (see :func:`fewest_turns`).
+    tas_per_eas
+        True airspeed per unit of speed along the path (the speeds are equivalent airspeeds):
+        the arithmetic runs on lengths divided by it, and so do the pieces returned.
 
     Returns
     -------
     Timing
-        Pieces in flying order. Without a loiter: at most two legs at adjacent grid speeds.
-        With one: the fewest turns (eq. 8); the loiter flown at the speed of the leg that leads
-        to it (ArduPlane keeps the airspeed through NAV_LOITER_TURNS).
+        Pieces in flying order, their lengths in metres / ``tas_per_eas``. Without a loiter:
+        at most two legs at adjacent grid speeds. With one: the fewest turns (eq. 8); the
+        loiter flown at the speed of the leg that leads to it (ArduPlane keeps the airspeed
+        through NAV_LOITER_TURNS).
 
     Raises
     ------
@@ -355,11 +366,18 @@ def time_path(
         message names the vehicle and the shortfall in seconds.
     """
     vmin, vmax = limits.speed_min_m_s, limits.speed_max_m_s
+    km = remaining_m / 1000.0
+    if tas_per_eas != 1.0:
+        remaining_m /= tas_per_eas
+        if site is not None:
+            site = LoiterSite(
+                site.at_m / tas_per_eas, site.radius_m / tas_per_eas, site.detour_m / tas_per_eas
+            )
     fastest = remaining_m / vmax
     slowest = remaining_m / vmin
     if duration_s < fastest - TIME_TOL_S:
         raise InfeasibleError(
-            f"vehicle {vehicle_id}: {remaining_m / 1000:.1f} km need at least {fastest:.1f} s at "
+            f"vehicle {vehicle_id}: {km:.1f} km need at least {fastest:.1f} s at "
             f"{vmax:g} m/s but only {duration_s:.1f} s are left: short by "
             f"{fastest - duration_s:.1f} s"
         )
@@ -376,7 +394,8 @@ def time_path(
         n = fewest_turns(remaining_m, duration_s, limits, site, loiter_margin_m_s)
     except ValueError:
         raise InfeasibleError(
-            f"vehicle {vehicle_id}: loiter turns of {2 * math.pi * site.radius_m:.0f} m cannot "
+            f"vehicle {vehicle_id}: loiter turns of "
+            f"{2 * math.pi * site.radius_m * tas_per_eas:.0f} m cannot "
             f"be trimmed to {duration_s:.1f} s within [{vmin:g}, {vmax:g}] m/s"
         ) from None
     loiter_m = site.detour_m + 2.0 * math.pi * site.radius_m * n
@@ -384,7 +403,7 @@ def time_path(
     if split is None:
         raise InfeasibleError(
             f"vehicle {vehicle_id}: no pair of discrete speeds flies {n} loiter turns "
-            f"and {remaining_m / 1000:.1f} km in {duration_s:.1f} s"
+            f"and {km:.1f} km in {duration_s:.1f} s"
         )
     return Timing(split, n)
 
@@ -447,8 +466,13 @@ def _loiter_split(
 
 
 def takeoff_time_s(
-    length_m: float, target_s: float, limits: SpeedLimits, window_s: tuple[float, float]
+    length_m: float,
+    target_s: float,
+    limits: SpeedLimits,
+    window_s: tuple[float, float],
+    tas_per_eas: float = 1.0,
 ) -> float:
-    """Takeoff time (s) by eq. 5: arrive at ``target_s`` at cruise speed, within the window."""
+    """Takeoff time (s) by eq. 5: arrive at ``target_s`` at cruise speed (an equivalent
+    airspeed flown at ``tas_per_eas`` times it), within the window."""
     lo, hi = window_s
-    return min(max(target_s - length_m / limits.cruise_m_s, lo), hi)
+    return min(max(target_s - length_m / (limits.cruise_m_s * tas_per_eas), lo), hi)

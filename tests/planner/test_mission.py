@@ -7,7 +7,6 @@ import math
 import struct
 from typing import Any
 
-import numpy as np
 import pytest
 from hypothesis import given
 from hypothesis import strategies as st
@@ -25,6 +24,7 @@ from planner.mission import (
     compile_mission,
     describe,
     items_equal,
+    stored_alt_m,
 )
 
 HOME = Waypoint(-35.363261, 149.165230, 584.0)
@@ -421,10 +421,10 @@ def test_compiled_mission_structure_holds_for_any_valid_route(route: dict[str, A
     # Altitudes come in the whole centimetres ArduPilot keeps (truncated towards zero).
     for it, w in zip(nav, wps, strict=True):
         want = w.alt_m - home.alt_m
-        assert abs(it.z - want) < 0.0101
-        assert abs(it.z) <= abs(want) * (1.0 + 2.0**-22) + 1e-4  # float32 above
-        cm = round(it.z * 100.0)  # z is the float32 of a whole number of centimetres
-        assert any(float(np.float32((cm + d) / 100.0)) == it.z for d in (-1, 0, 1))
+        ulp = abs(want) * 2.0**-23  # float32 steps
+        assert abs(it.z - want) < 0.0101 + 8 * ulp
+        assert abs(it.z) <= abs(want) + 8 * ulp + 1e-6
+        assert stored_alt_m(it.z) == stored_alt_m(want)  # ArduPilot keeps the same cm
     for k, it in enumerate(items):
         if it.command == SPEED:
             assert items[k + 1].command == WP

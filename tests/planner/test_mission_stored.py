@@ -32,6 +32,7 @@ from planner.mission import (
     MissionItem,
     SpeedChange,
     Waypoint,
+    ardupilot_alt_m,
     compile_mission,
     first_difference,
     items_equal,
@@ -42,6 +43,11 @@ from planner.mission import (
 
 def _f32(v: float) -> float:
     return float(struct.unpack("<f", struct.pack("<f", v))[0])
+
+
+def _centi(cm: int) -> float:
+    """ArduPilot's ``alt * 0.01f`` for a stored altitude in centimetres."""
+    return _f32(_f32(float(cm)) * _f32(0.01))
 
 
 def _item(command: int, frame: int, z: float = 0.0, **params: float) -> MissionItem:
@@ -64,15 +70,26 @@ def test_ardupilot_gives_takeoff_back_in_its_relative_frame_and_whole_centimetre
     sent = _item(MAV_CMD_NAV_TAKEOFF, MAV_FRAME_GLOBAL_RELATIVE_ALT_INT, 827.496, param1=15.0)
     back = stored_item(sent, Autopilot.ARDUPILOT)
     assert back.frame == MAV_FRAME_GLOBAL_RELATIVE_ALT
-    assert back.z == _f32(827.49)
+    assert back.z == _centi(82749)
     assert (back.x, back.y) == (sent.x, sent.y)
     assert back.param1 == 15.0
 
 
 def test_ardupilot_truncates_altitudes_towards_zero() -> None:
-    assert stored_alt_m(100.019) == _f32(100.01)
-    assert stored_alt_m(-3.337) == _f32(-3.33)
+    assert stored_alt_m(100.019) == _centi(10001)
+    assert stored_alt_m(-3.337) == _centi(-333)
     assert stored_alt_m(0.004) == 0.0
+    # float32: 612.72 * 100.0f is 61271.996, kept as 61271 cm.
+    assert stored_alt_m(612.72) == _centi(61271)
+
+
+@given(st.floats(-499.0, 19_999.0, allow_nan=False))
+def test_compiled_altitudes_are_kept_by_ardupilot_as_their_own_centimetre(z: float) -> None:
+    sent = ardupilot_alt_m(z)
+    ulp = abs(z) * 2.0**-23
+    assert abs(sent - z) < 0.0101 + 8 * ulp
+    assert stored_alt_m(sent) == pytest.approx(sent, abs=max(2e-4, 4 * ulp))
+    assert stored_alt_m(sent) == stored_alt_m(z)
 
 
 def test_ardupilot_gives_amsl_frames_back_as_global() -> None:
@@ -123,7 +140,16 @@ def test_autopilot_from_heartbeat() -> None:
     assert Autopilot.from_heartbeat(3) is Autopilot.ARDUPILOT
     assert Autopilot.from_heartbeat(12) is Autopilot.PX4
     assert Autopilot.from_heartbeat(0) is Autopilot.EXACT
-    assert Autopilot.from_heartbeat(None) is Autopilot.EXACT
+    assert Autopilot.from_heartbeat(None) is Autopilot.UNKNOWN
+
+
+def test_an_unknown_autopilot_may_give_items_back_in_any_known_form() -> None:
+    sent = _paper_like_mission()
+    got = _as_ardupilot_gives_it_back(sent)
+    assert first_difference(sent, got, autopilot=Autopilot.EXACT, compare_home=False) == 1
+    assert first_difference(sent, got, autopilot=Autopilot.UNKNOWN, compare_home=False) is None
+    got[3] = replace(got[3], z=got[3].z + 0.5)
+    assert first_difference(sent, got, autopilot=Autopilot.UNKNOWN, compare_home=False) == 3
 
 
 def _paper_like_mission() -> list[MissionItem]:
@@ -143,15 +169,18 @@ def _paper_like_mission() -> list[MissionItem]:
 
 def _as_ardupilot_gives_it_back(items: list[MissionItem]) -> list[MissionItem]:
     """An independent rendering of the ArduPilot download: frame 3 for the relative NAV
-    items, frame 0 and no position for DO items, float32 of whole centimetres."""
+    items, frame 0 and no position for DO items, float32 of whole centimetres, NAV_LAND's
+    param4 as +1."""
     out = []
     for it in items:
         if it.command == MAV_CMD_DO_CHANGE_SPEED:
             out.append(replace(it, frame=0, x=0, y=0, z=0.0, param4=0.0))
             continue
+        if it.command == MAV_CMD_NAV_LAND:
+            it = replace(it, param4=1.0)  # the deepstall direction: -1 or 1
         frame = 3 if it.frame in (3, 6) else 0
         cm = int(_f32(_f32(it.z) * 100.0))
-        out.append(replace(it, frame=frame, z=_f32(cm / 100.0)))
+        out.append(replace(it, frame=frame, z=_centi(cm)))
     return out
 
 
@@ -165,7 +194,7 @@ def test_a_compiled_mission_verifies_against_what_ardupilot_gives_back() -> None
 
 def test_compiled_altitudes_are_what_ardupilot_keeps() -> None:
     for it in _paper_like_mission():
-        assert stored_item(it, Autopilot.ARDUPILOT).z == it.z
+        assert stored_item(it, Autopilot.ARDUPILOT).z == pytest.approx(it.z, abs=2e-4)
 
 
 @pytest.mark.parametrize(
@@ -196,6 +225,6 @@ def test_first_difference_of_a_shorter_read_back_is_where_it_stops() -> None:
 @given(st.floats(-499.0, 19_999.0, allow_nan=False))
 def test_ardupilot_altitude_is_within_a_centimetre_and_never_further_from_zero(z: float) -> None:
     back = stored_alt_m(z)
-    assert abs(back - z) < 0.0101
+    assert abs(back - z) < 0.0101 + abs(z) * 2.0**-21
     assert abs(back) <= abs(z) * (1.0 + 2.0**-22) + 1e-6
     assert math.isfinite(back)
