@@ -21,7 +21,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any, Literal, overload
 
 import numpy as np
@@ -206,6 +206,7 @@ class _Remaining:
     along_m_s: FloatArray  # wind along the track
     cross2_m2_s2: FloatArray  # (wind across the track) squared
     still_air_m: float  # flown at airspeed, no wind correction (detours)
+    tas_per_eas: float = 1.0  # true airspeed flown per unit of the airspeed asked about
 
     @property
     def total_m(self) -> float:
@@ -217,7 +218,8 @@ class _Remaining:
 
     def time_and_slope(self, airspeed_m_s: float, *, slope: bool = True) -> tuple[float, float]:
         """Time (s) and its derivative with respect to airspeed (s per m/s; nan if unknown)."""
-        a = airspeed_m_s
+        ratio = self.tas_per_eas
+        a = airspeed_m_s * ratio
         if a <= 0.0:
             return (math.inf, math.nan) if self.total_m > 0.0 else (0.0, 0.0)
         time_s = self.still_air_m / a
@@ -236,7 +238,7 @@ class _Remaining:
                 if float(root.min()) <= 0.0:
                     return time_s, math.nan
                 d_time -= float((per_speed / speed * (a / root)).sum())
-        return time_s, d_time
+        return time_s, d_time * ratio
 
 
 def _wrap_rad(angle_rad: FloatArray) -> FloatArray:
@@ -778,6 +780,7 @@ class ArrivalController:
         current_level_m_s: float | None,
         loiters_done: int = 0,
         loiter_flown_m: float = 0.0,
+        tas_per_eas: float = 1.0,
     ) -> Decision:
         """Decide the airspeed level to fly from a position fix.
 
@@ -798,6 +801,11 @@ class ArrivalController:
             Number of loiters already flown.
         loiter_flown_m : float, optional
             Distance already flown in the loiter in progress, m (extension; default 0).
+        tas_per_eas : float, optional
+            True airspeed flown per unit of commanded airspeed (> 0): the limits, levels and
+            commands are the autopilot's (equivalent airspeed on ArduPlane), the route is
+            flown at this many times that (the atmosphere's EAS2TAS, times any bias learnt
+            in flight). Default 1: commands are true airspeed.
 
         Returns
         -------
@@ -808,7 +816,11 @@ class ArrivalController:
         lo, hi, step = limits.airspeed_min_m_s, limits.airspeed_max_m_s, limits.step_m_s
         now_s = _finite("now_s", now_s)
         target_s = _finite("target_s", target_s)
-        remaining = track._remaining(s_m, wind, loiters_done, loiter_flown_m)
+        if not (math.isfinite(tas_per_eas) and tas_per_eas > 0.0):
+            raise ArrivalInputError(f"tas_per_eas must be finite and > 0, got {tas_per_eas!r}")
+        remaining = replace(
+            track._remaining(s_m, wind, loiters_done, loiter_flown_m), tas_per_eas=tas_per_eas
+        )
         time_left_s = target_s - now_s
         times: dict[float, float] = {}
 

@@ -29,8 +29,10 @@ import numpy as np
 from gcs.arrival import ArrivalController, Decision, LoiterSpec, RouteTrack, SpeedLimits, Wind
 from gcs.errors import GcsError
 from gcs.missionclock import MissionClock
+from gcs.speedbias import SpeedBiasEstimator
 from gcs.truth import TruthSample, closest_approach
 from gcs.vehicle import Vehicle
+from planner.atmosphere import eas2tas
 from planner.errors import InfeasibleError, PlannerError
 from planner.mission import (
     MAV_CMD_DO_CHANGE_SPEED,
@@ -76,6 +78,10 @@ TELEMETRY_HZ: dict[str, float] = {
 message off on our link. With the heartbeat that is 6.4 messages per vehicle second: 1284 per
 wall second from one stub vehicle at 200x, against 3800 with every stream at 2 Hz (measured),
 which MAVProxy could not route fast enough for mission transfers to complete."""
+
+
+CLOCK_OFFSET_NOTE_S = 0.5
+"""A vehicle's UTC this far from the team's (or from what was said last) is reported."""
 
 
 class InfeasibleRequest(GcsError):
@@ -173,6 +179,16 @@ class Member:
     commanded: list[list[Any]] = field(default_factory=list)
     planned_paths: list[dict[str, Any]] = field(default_factory=list)
     loiter_log: list[dict[str, Any]] = field(default_factory=list)
+    clock_offset_said_s: float = 0.0
+    """The offset of its UTC from the team's last reported (s)."""
+    no_utc_said: bool = False
+    bias: SpeedBiasEstimator = field(default_factory=SpeedBiasEstimator)
+    """What the aircraft really flies for a commanded airspeed, learnt from its fixes."""
+
+    def tas_per_eas(self, s_m: float) -> float:
+        """True airspeed flown per unit commanded from ``s_m`` on: the route's atmosphere
+        (the autopilot commands equivalent airspeed) times the scale learnt in flight."""
+        return self.schedule.tas_per_eas(s_m) * self.bias.scale
 
 
 def route_track(vs: VehicleSchedule) -> RouteTrack:
@@ -259,14 +275,14 @@ class Coordinator:
             sysid = vehicle.system_id
 
             def on_msg(msg: Any, rx_s: float, sysid: int = sysid) -> None:
-                if (
-                    msg.get_type() == "SYSTEM_TIME"
-                    and msg.get_srcSystem() == sysid
-                    and msg.time_unix_usec
-                ):
+                if msg.get_type() != "SYSTEM_TIME" or msg.get_srcSystem() != sysid:
+                    return
+                if msg.time_unix_usec:
                     self.clock.observe(
                         sysid, msg.time_unix_usec * 1e-6, msg.time_boot_ms * 1e-3, rx_s
                     )
+                else:
+                    self.clock.observe_no_utc(sysid, msg.time_boot_ms * 1e-3, rx_s)
 
             self._detach.append(vehicle.link.add_listener(on_msg))
 
@@ -465,7 +481,34 @@ class Coordinator:
                     self._spawn(self._launch(m))
             for zone in self._due_popups(now):
                 await self._popup(zone)
+            self._check_clocks()
             await self.clock.sleep(1.0)
+
+    def _check_clocks(self) -> None:
+        """Say which vehicles keep a UTC of their own (they are flown on the team's)."""
+        for m in self.members.values():
+            sysid = m.vehicle.system_id
+            if sysid in self.clock.without_utc:
+                if not m.no_utc_said:
+                    m.no_utc_said = True
+                    self._emit(
+                        "clock",
+                        "reports no UTC (SYSTEM_TIME.time_unix_usec 0): its times are the "
+                        "team clock's when its messages arrive",
+                        m.vehicle_id,
+                    )
+                continue
+            offset = self.clock.offset_s(sysid)
+            if offset is None or abs(offset - m.clock_offset_said_s) < CLOCK_OFFSET_NOTE_S:
+                continue
+            m.clock_offset_said_s = offset
+            self._emit(
+                "clock",
+                f"its UTC is {offset:+.1f} s from the team's (the median of the vehicles' "
+                "clocks): its times are mapped to the team's",
+                m.vehicle_id,
+                value=round(offset, 3),
+            )
 
     def _takeoffs_s(self) -> dict[str, float]:
         """Mission time of each launch so far (pop-ups may be timed from them)."""
@@ -610,6 +653,7 @@ class Coordinator:
             return
         s, m.cross_track_m = m.track.locate(e, n, m.s_m)
         m.s_m = s
+        self._learn_bias(m, t, st)
         if m.cross_track_m <= self.config.off_route_m:
             m.joining = False
         in_loiter = (
@@ -642,7 +686,8 @@ class Coordinator:
             if it.command == MAV_CMD_NAV_LOITER_TURNS and k < seq
         )
 
-    def _wind(self, st: Any) -> Wind:
+    def _reported_wind(self, st: Any) -> Wind:
+        """The vehicle's wind estimate (WIND), else ground velocity minus true airspeed."""
         if st.wind_speed_m_s is not None and st.wind_from_deg is not None:
             return Wind.from_speed_from(st.wind_speed_m_s, st.wind_from_deg)
         if (
@@ -652,10 +697,36 @@ class Coordinator:
             and st.ve_m_s is not None
         ):
             h = math.radians(st.heading_deg)
-            return Wind(
-                st.ve_m_s - st.airspeed_m_s * math.sin(h), st.vn_m_s - st.airspeed_m_s * math.cos(h)
-            )
+            tas = st.airspeed_m_s * eas2tas(st.alt_amsl_m or 0.0)
+            return Wind(st.ve_m_s - tas * math.sin(h), st.vn_m_s - tas * math.cos(h))
         return Wind()
+
+    def _wind(self, m: Member) -> Wind:
+        """The wind to time with: the vehicle's estimate plus the error learnt in flight."""
+        return m.bias.corrected(self._reported_wind(m.vehicle.state))
+
+    def _learn_bias(self, m: Member, t: float, st: Any) -> None:
+        """Feed one fix to the airspeed-scale and wind-error estimate."""
+        if (
+            m.level_m_s is None
+            or st.ve_m_s is None
+            or st.vn_m_s is None
+            or st.heading_deg is None
+            or st.alt_amsl_m is None
+        ):
+            return
+        climb = st.climb_m_s if st.climb_m_s is not None else -(st.vd_m_s or 0.0)
+        m.bias.update(
+            t,
+            ve_m_s=st.ve_m_s,
+            vn_m_s=st.vn_m_s,
+            heading_rad=math.radians(st.heading_deg),
+            predicted_tas_m_s=m.level_m_s * eas2tas(st.alt_amsl_m),
+            wind=self._reported_wind(st),
+            airspeed_m_s=st.airspeed_m_s,
+            commanded_m_s=m.level_m_s,
+            climb_m_s=climb,
+        )
 
     def _decide(self, m: Member, t: float, s: float, st: Any) -> None:
         d = m.controller.decide(
@@ -663,9 +734,10 @@ class Coordinator:
             s_m=s,
             now_s=t,
             target_s=m.target_s,
-            wind=self._wind(st),
+            wind=self._wind(m),
             current_level_m_s=m.level_m_s,
             loiters_done=self._loiters_done(m),
+            tas_per_eas=m.tas_per_eas(s),
         )
         m.last_decision = d
         time_left = m.target_s - t
@@ -741,7 +813,9 @@ class Coordinator:
         v = self.scenario.vehicle(m.vehicle_id)
         limits = PlannerLimits(v.speed_min_m_s, v.speed_max_m_s, v.cruise_m_s, m.limits.step_m_s)
         window = (max(v.takeoff_window_s[0], t), max(v.takeoff_window_s[1], t))
-        new = takeoff_time_s(m.schedule.path.length_m, m.target_s, limits, window)
+        new = takeoff_time_s(
+            m.schedule.path.length_m, m.target_s, limits, window, m.schedule.tas_per_eas()
+        )
         if abs(new - m.takeoff_s) > 0.5:
             m.takeoff_s = new
             self._emit(
@@ -784,18 +858,21 @@ class Coordinator:
         assert s_k is not None
         t_k = t + (s_k - s) / gs
         threats = self._in_force(t)
-        # The planner's loiter arithmetic (eq. 8) is in still air; give it the surplus the
-        # wind-aware ETA found, as a still-air target from the splice waypoint. The new
-        # mission replaces the loiters after that waypoint, so their time is kept too.
+        # The planner's loiter arithmetic (eq. 8) is in still air at the ISA true airspeed;
+        # give it the surplus the wind- and bias-aware ETA found, as a still-air target from
+        # the splice waypoint. The new mission replaces the loiters after that waypoint, so
+        # their time is kept too.
         v_min = m.limits.airspeed_min_m_s
+        tas_min = v_min * m.tas_per_eas(s_k)
         surplus = m.target_s - d.eta_max_s
-        wind = self._wind(m.vehicle.state)
+        wind = self._wind(m)
         track = m.track
         before = sum(1 for lo in track.loiters if lo.s_m < s_k)
-        held_s = track.time_to_go_s(s_k, v_min, wind, before) - track.time_to_go_s(
-            s_k, v_min, wind, len(track.loiters)
+        held_s = track.time_to_go_s(s_k, tas_min, wind, before) - track.time_to_go_s(
+            s_k, tas_min, wind, len(track.loiters)
         )
-        target_still_air = t_k + (track.length_m - s_k) / v_min + held_s + surplus
+        planner_tas_min = v_min * m.schedule.tas_per_eas(s_k)
+        target_still_air = t_k + (track.length_m - s_k) / planner_tas_min + held_s + surplus
         m.busy_mission = True
         try:
             schedule = self._current_schedule()

@@ -1,0 +1,144 @@
+"""What the aircraft really flies, learnt in flight: a true-airspeed scale and a wind correction.
+
+The arrival controller predicts the groundspeed from the commanded airspeed (equivalent
+airspeed times the atmosphere's EAS2TAS) and the vehicle's wind estimate. Both can be a few
+per cent off: an airspeed sensor reading 5 % low makes the aircraft fly 5 % fast at every
+command; ArduPlane's wind estimate reads 1-1.5 m/s in still air. Left alone, such a bias runs
+the controller out of authority in the last minutes before arrival.
+
+Each position fix gives the ground velocity ``v`` and the heading ``psi`` at one instant. With
+the predicted true airspeed ``T`` and the reported wind ``w``, the air mass model is
+
+    v - w = k * T * (sin psi, cos psi) + dw
+
+with three unknowns: the airspeed scale ``k`` and the wind error ``dw`` (east, north). They are
+found by least squares over the recent fixes (exponential forgetting with
+``time_constant_s``), regularised towards ``k = 1, dw = 0`` so that a straight leg, which
+cannot separate ``k`` from the wind along it, still predicts that leg right. Fixes taken while
+the airspeed is settling after a change, or while climbing or descending (the horizontal
+speed is then ``T cos(gamma)``), are not used.
+
+Sans-IO: pure arithmetic over the samples given to :meth:`SpeedBiasEstimator.update`.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from gcs.arrival import Wind
+
+__all__ = ["BiasConfig", "SpeedBiasEstimator"]
+
+
+@dataclass(frozen=True, slots=True)
+class BiasConfig:
+    """Knobs of :class:`SpeedBiasEstimator` (mission seconds, m/s)."""
+
+    time_constant_s: float = 150.0
+    """Fixes older than this weigh 1/e of a new one."""
+    prior_fixes: float = 4.0
+    """The pull towards ``k = 1, dw = 0``, as that many fixes' worth of evidence."""
+    scale_bounds: tuple[float, float] = (0.85, 1.15)
+    """The airspeed scale is kept in this range (a larger error is a fault, not a bias)."""
+    max_wind_error_m_s: float = 4.0
+    """The wind correction is kept within this magnitude."""
+    settle_m_s: float = 0.6
+    """A fix counts only when the reported airspeed is this close to the commanded one."""
+    max_climb_m_s: float = 1.0
+    """A fix counts only when climbing or sinking slower than this."""
+
+
+class SpeedBiasEstimator:
+    """Least-squares estimate of the airspeed scale and the wind error from ground velocity."""
+
+    def __init__(self, config: BiasConfig | None = None) -> None:
+        self.config = config or BiasConfig()
+        self._info = np.zeros((3, 3))
+        self._vec = np.zeros(3)
+        self._last_t_s: float | None = None
+        self._scale = 1.0
+        self._wind_error = (0.0, 0.0)
+        self._ref_tas_m_s = 20.0
+        self.used = 0
+        self.skipped = 0
+
+    @property
+    def scale(self) -> float:
+        """True airspeed flown per unit of the predicted one (1.0 until learnt)."""
+        return self._scale
+
+    @property
+    def wind_error(self) -> Wind:
+        """What to add to the reported wind, m/s."""
+        return Wind(*self._wind_error)
+
+    def corrected(self, wind: Wind) -> Wind:
+        """The reported wind plus the learnt error."""
+        de, dn = self._wind_error
+        return Wind(wind.to_east_m_s + de, wind.to_north_m_s + dn)
+
+    def update(
+        self,
+        t_s: float,
+        *,
+        ve_m_s: float,
+        vn_m_s: float,
+        heading_rad: float,
+        predicted_tas_m_s: float,
+        wind: Wind,
+        airspeed_m_s: float | None = None,
+        commanded_m_s: float | None = None,
+        climb_m_s: float | None = None,
+    ) -> bool:
+        """Take one fix at mission time ``t_s``; True if it was used.
+
+        ``predicted_tas_m_s`` is the true airspeed the controller assumes for the commanded
+        airspeed; ``airspeed_m_s``/``commanded_m_s`` (the autopilot's reported and commanded
+        airspeed, same kind) and ``climb_m_s`` gate the fix when given.
+        """
+        cfg = self.config
+        values = (t_s, ve_m_s, vn_m_s, heading_rad, predicted_tas_m_s)
+        if not all(math.isfinite(x) for x in values) or predicted_tas_m_s <= 0.0:
+            self.skipped += 1
+            return False
+        if (
+            airspeed_m_s is not None
+            and commanded_m_s is not None
+            and abs(airspeed_m_s - commanded_m_s) > cfg.settle_m_s
+        ) or (climb_m_s is not None and abs(climb_m_s) > cfg.max_climb_m_s):
+            self.skipped += 1
+            return False
+        if self._last_t_s is not None:
+            dt = max(t_s - self._last_t_s, 0.0)
+            decay = math.exp(-dt / cfg.time_constant_s)
+            self._info *= decay
+            self._vec *= decay
+        self._last_t_s = t_s
+        self._ref_tas_m_s = predicted_tas_m_s
+        tas = predicted_tas_m_s
+        rows = np.array(
+            [[tas * math.sin(heading_rad), 1.0, 0.0], [tas * math.cos(heading_rad), 0.0, 1.0]]
+        )
+        resid = np.array([ve_m_s - wind.to_east_m_s, vn_m_s - wind.to_north_m_s])
+        self._info += rows.T @ rows
+        self._vec += rows.T @ resid
+        self.used += 1
+        self._solve()
+        return True
+
+    def _solve(self) -> None:
+        cfg = self.config
+        tas = self._ref_tas_m_s
+        prior = np.diag([cfg.prior_fixes * tas * tas, cfg.prior_fixes, cfg.prior_fixes])
+        theta0 = np.array([1.0, 0.0, 0.0])
+        theta = np.linalg.solve(self._info + prior, self._vec + prior @ theta0)
+        lo, hi = cfg.scale_bounds
+        self._scale = float(min(max(theta[0], lo), hi))
+        de, dn = float(theta[1]), float(theta[2])
+        norm = math.hypot(de, dn)
+        if norm > cfg.max_wind_error_m_s:
+            de, dn = de * cfg.max_wind_error_m_s / norm, dn * cfg.max_wind_error_m_s / norm
+        self._wind_error = (de, dn)

@@ -1,0 +1,91 @@
+"""The in-flight airspeed-scale and wind-error estimate, on synthetic fixes (no sockets)."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from gcs.arrival import Wind, groundspeed_m_s
+from gcs.speedbias import SpeedBiasEstimator
+
+
+def _fly(
+    est: SpeedBiasEstimator,
+    headings_rad: list[float],
+    *,
+    scale: float,
+    true_wind: Wind,
+    reported_wind: Wind,
+    tas_m_s: float = 22.0,
+    noise_m_s: float = 0.0,
+    t0_s: float = 0.0,
+    seed: int = 0,
+) -> float:
+    rng = np.random.default_rng(seed)
+    t = t0_s
+    for h in headings_rad:
+        ve = scale * tas_m_s * math.sin(h) + true_wind.to_east_m_s + noise_m_s * rng.normal()
+        vn = scale * tas_m_s * math.cos(h) + true_wind.to_north_m_s + noise_m_s * rng.normal()
+        est.update(
+            t, ve_m_s=ve, vn_m_s=vn, heading_rad=h, predicted_tas_m_s=tas_m_s, wind=reported_wind
+        )
+        t += 0.5
+    return t
+
+
+def test_learns_a_five_percent_fast_airframe_and_a_wind_error_over_a_turning_route() -> None:
+    est = SpeedBiasEstimator()
+    reported = Wind.from_speed_from(5.0, 270.0)
+    true = Wind(reported.to_east_m_s + 1.2, reported.to_north_m_s - 0.5)
+    headings = [math.radians(90.0 + 200.0 * math.sin(k / 60.0)) for k in range(600)]
+    _fly(est, headings, scale=1.05, true_wind=true, reported_wind=reported, noise_m_s=0.3)
+    assert est.scale == pytest.approx(1.05, abs=0.005)
+    assert est.wind_error.to_east_m_s == pytest.approx(1.2, abs=0.15)
+    assert est.wind_error.to_north_m_s == pytest.approx(-0.5, abs=0.15)
+
+
+@pytest.mark.parametrize("scale", [0.95, 1.0, 1.05])
+def test_on_one_straight_leg_the_groundspeed_of_that_leg_is_predicted_right(scale: float) -> None:
+    """A straight leg cannot tell the scale from the wind along it; what it flies is right."""
+    est = SpeedBiasEstimator()
+    reported = Wind.from_speed_from(5.0, 270.0)
+    true = Wind(reported.to_east_m_s + 0.8, reported.to_north_m_s + 0.3)
+    track = math.radians(30.0)
+    # Crab into the wind so that the ground track is `track`.
+    air = 22.0 * scale
+    cross = true.to_east_m_s * math.cos(track) - true.to_north_m_s * math.sin(track)
+    heading = track - math.asin(cross / air)
+    _fly(est, [heading] * 400, scale=scale, true_wind=true, reported_wind=reported)
+    flown = groundspeed_m_s(air, track, true)
+    predicted = groundspeed_m_s(22.0 * est.scale, track, est.corrected(reported))
+    assert predicted == pytest.approx(flown, rel=2e-3)
+
+
+def test_old_evidence_fades_when_the_bias_changes() -> None:
+    est = SpeedBiasEstimator()
+    still = Wind()
+    headings = [math.radians(3.0 * k) for k in range(600)]
+    t = _fly(est, headings, scale=1.05, true_wind=still, reported_wind=still)
+    assert est.scale == pytest.approx(1.05, abs=0.003)
+    _fly(est, headings * 2, scale=0.97, true_wind=still, reported_wind=still, t0_s=t)
+    assert est.scale == pytest.approx(0.97, abs=0.005)
+
+
+def test_fixes_while_climbing_or_settling_are_not_used() -> None:
+    est = SpeedBiasEstimator()
+    still = Wind()
+    kw = {"ve_m_s": 0.0, "vn_m_s": 30.0, "heading_rad": 0.0, "predicted_tas_m_s": 20.0}
+    assert not est.update(0.0, wind=still, climb_m_s=5.0, **kw)
+    assert not est.update(0.5, wind=still, airspeed_m_s=17.0, commanded_m_s=20.0, **kw)
+    assert not est.update(1.0, wind=still, **{**kw, "predicted_tas_m_s": math.nan})
+    assert (est.used, est.skipped, est.scale) == (0, 3, 1.0)
+
+
+def test_the_scale_is_bounded() -> None:
+    est = SpeedBiasEstimator()
+    still = Wind()
+    headings = [math.radians(5.0 * k) for k in range(300)]
+    _fly(est, headings, scale=1.6, true_wind=still, reported_wind=still)
+    assert est.scale == pytest.approx(est.config.scale_bounds[1])
