@@ -1,31 +1,40 @@
-"""The mission clock: the vehicles' UTC (SYSTEM_TIME), read through the local monotonic clock.
+"""The mission clock: the team's UTC, read through the local monotonic clock.
 
 Mission time is what the vehicles say it is: SYSTEM_TIME.time_unix_usec, GPS time on a real
 autopilot, simulated UTC on the stub (which runs ``speedup`` times faster than wall time). The
 coordinator never reads ``time.time()``; it asks :meth:`MissionClock.now_utc_s`, which maps the
-local monotonic clock onto the vehicles' UTC:
+local monotonic clock onto the team's UTC.
 
-- the rate (UTC seconds per monotonic second: 1.0 live, about 200 at 200x) is the least-squares
-  slope of UTC against receive time over the last ``window`` SYSTEM_TIMEs of all vehicles;
-- "now" extrapolates from the newest observations with that rate. Receive times carry link
-  delay, which only ever makes an observation look older than it is (at 200x, 2 ms of delay is
-  0.4 s of UTC), so of the newest :data:`ANCHOR_OBSERVATIONS` extrapolations the latest is
-  taken: one delayed packet does not drag the clock back;
+Each vehicle keeps its own clock. Real autopilots share GPS time, but simulators started at
+different moments do not, nor does an autopilot whose clock was set by hand:
+
+- a vehicle's own UTC at a monotonic instant is the latest extrapolation of its newest
+  :data:`ANCHOR_OBSERVATIONS` reports at the fitted rate (receive times carry link delay,
+  which only ever makes a report look older than it is: at 200x, 2 ms of delay is 0.4 s of
+  UTC; one delayed packet does not drag the clock back);
+- the team's UTC is the lower median of the vehicles' clocks; each vehicle's offset from it
+  (:meth:`MissionClock.offset_s`) is the median of its recent differences, so a vehicle 7 s
+  ahead is judged, commanded and timed on the team's time, not its own;
+- the rate (UTC seconds per monotonic second: 1.0 live, about 200 at 200x) is the
+  least-squares slope of team UTC against receive time over the last ``window`` reports;
 - what :meth:`now_utc_s` returns never decreases.
 
 Each vehicle's boot -> UTC offset (``utc - time_boot``) converts the boot-time stamps of its
-other messages (GLOBAL_POSITION_INT.time_boot_ms, ...) to UTC exactly, whatever the link
-delay: :meth:`MissionClock.utc_of_boot`.
+other messages (GLOBAL_POSITION_INT.time_boot_ms, ...) to team UTC exactly, whatever the link
+delay: :meth:`MissionClock.utc_of_boot`. A vehicle that reports no UTC
+(:meth:`MissionClock.observe_no_utc`) has its boot time mapped to the team's UTC at the least
+delayed reception; :attr:`MissionClock.without_utc` names it.
 """
 
 from __future__ import annotations
 
 import asyncio
 import math
+import statistics
 import time
 from collections import deque
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 from gcs.errors import GcsError
 
@@ -35,6 +44,8 @@ JUMP_BACK_S = 1.0
 """A vehicle's UTC going back by more than this resets that vehicle (a new timeline)."""
 MIN_FIT_SPAN_S = 0.002
 """The rate is re-fitted only when the window spans at least this much monotonic time."""
+OFFSET_SAMPLES = 15
+"""A vehicle's offset from the team's UTC is the median of this many recent samples."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -42,6 +53,20 @@ class _Observation:
     rx_mono_s: float
     utc_s: float
     system_id: int
+
+
+@dataclass
+class _VehicleClock:
+    """One vehicle's own UTC, as it reports it."""
+
+    boot_offset_s: float
+    """Its UTC minus its boot time (or, with no UTC, team UTC minus boot time)."""
+    last_utc_s: float
+    recent: deque[_Observation] = field(default_factory=lambda: deque(maxlen=ANCHOR_OBSERVATIONS))
+    offset_samples: deque[float] = field(default_factory=lambda: deque(maxlen=OFFSET_SAMPLES))
+    offset_s: float = 0.0
+    """Its UTC minus the team's (median of the samples)."""
+    has_utc: bool = True
 
 
 class MissionClock:
@@ -52,9 +77,8 @@ class MissionClock:
             raise ValueError(f"window must be at least 2 observations, got {window}")
         self._monotonic = monotonic
         self.window = window
-        self._obs: deque[_Observation] = deque(maxlen=window)
-        self._offset_s: dict[int, float] = {}  # per vehicle: utc - time_boot
-        self._last_utc_s: dict[int, float] = {}  # per vehicle: newest accepted UTC
+        self._obs: deque[_Observation] = deque(maxlen=window)  # UTC in team time
+        self._vehicles: dict[int, _VehicleClock] = {}
         self._rate = 1.0
         self._max_returned_s = -math.inf
         self.accepted = 0
@@ -67,12 +91,12 @@ class MissionClock:
         """One SYSTEM_TIME of vehicle ``system_id``, received at ``rx_mono_s`` (monotonic).
 
         Rejected (counted in :attr:`rejected`): non-finite values, ``utc_s <= 0`` (no GPS time
-        yet), a negative boot time, and a UTC not later than that vehicle's last one (a
-        duplicate or a reordered packet). A UTC more than :data:`JUMP_BACK_S` behind the
-        vehicle's last one with a different boot offset (the vehicle rebooted or its time was
-        reset; a late packet keeps its offset) also resets the vehicle (counted in
-        :attr:`resets`): its older observations leave the rate fit and its timeline starts
-        again from this one.
+        yet: see :meth:`observe_no_utc`), a negative boot time, and a UTC not later than that
+        vehicle's last one (a duplicate or a reordered packet). A UTC more than
+        :data:`JUMP_BACK_S` behind the vehicle's last one with a different boot offset (the
+        vehicle rebooted or its time was reset; a late packet keeps its offset) also resets
+        the vehicle (counted in :attr:`resets`): its older observations leave the rate fit and
+        its timeline starts again from this one.
         """
         if not (
             math.isfinite(utc_s)
@@ -83,24 +107,80 @@ class MissionClock:
         ):
             self.rejected += 1
             return
-        offset = utc_s - time_boot_s
-        last = self._last_utc_s.get(system_id)
-        if last is not None and utc_s <= last:
+        boot_offset = utc_s - time_boot_s
+        vc = self._vehicles.get(system_id)
+        if vc is not None and vc.has_utc and utc_s <= vc.last_utc_s:
             self.rejected += 1
-            if utc_s < last - JUMP_BACK_S and abs(offset - self._offset_s[system_id]) > JUMP_BACK_S:
+            if utc_s < vc.last_utc_s - JUMP_BACK_S and abs(boot_offset - vc.boot_offset_s) > (
+                JUMP_BACK_S
+            ):
                 self.resets += 1
                 kept = [o for o in self._obs if o.system_id != system_id]
                 self._obs = deque(kept, maxlen=self.window)
-                self._accept(system_id, utc_s, offset, rx_mono_s)
+                del self._vehicles[system_id]
+                self._accept(system_id, utc_s, boot_offset, rx_mono_s)
             return
+        if vc is not None and not vc.has_utc:
+            del self._vehicles[system_id]  # it has UTC now
         self.accepted += 1
-        self._accept(system_id, utc_s, offset, rx_mono_s)
+        self._accept(system_id, utc_s, boot_offset, rx_mono_s)
 
-    def _accept(self, system_id: int, utc_s: float, offset_s: float, rx_mono_s: float) -> None:
-        self._offset_s[system_id] = offset_s
-        self._last_utc_s[system_id] = utc_s
-        self._obs.append(_Observation(rx_mono_s, utc_s, system_id))
+    def observe_no_utc(self, system_id: int, time_boot_s: float, rx_mono_s: float) -> None:
+        """A SYSTEM_TIME with no UTC (``time_unix_usec`` 0): the vehicle's boot time is mapped
+        to the team's UTC at reception (the least delayed reception wins). Ignored before the
+        clock is synced or once the vehicle has reported UTC."""
+        if not (math.isfinite(time_boot_s) and math.isfinite(rx_mono_s)) or not self._obs:
+            self.rejected += 1
+            return
+        vc = self._vehicles.get(system_id)
+        if vc is not None and vc.has_utc:
+            self.rejected += 1
+            return
+        team_utc = self._team_at(rx_mono_s)
+        boot_offset = team_utc - time_boot_s
+        if vc is None:
+            self._vehicles[system_id] = _VehicleClock(boot_offset, team_utc, has_utc=False)
+        elif boot_offset < vc.boot_offset_s or abs(boot_offset - vc.boot_offset_s) > JUMP_BACK_S:
+            vc.boot_offset_s = boot_offset  # less delayed, or a reboot
+        self.accepted += 1
+
+    def _accept(self, system_id: int, utc_s: float, boot_offset_s: float, rx_mono_s: float) -> None:
+        vc = self._vehicles.get(system_id)
+        if vc is None:
+            vc = self._vehicles[system_id] = _VehicleClock(boot_offset_s, utc_s)
+        vc.boot_offset_s = boot_offset_s
+        vc.last_utc_s = utc_s
+        obs = _Observation(rx_mono_s, utc_s, system_id)
+        vc.recent.append(obs)
+        self._update_offsets(rx_mono_s)
+        self._obs.append(_Observation(rx_mono_s, utc_s - vc.offset_s, system_id))
         self._fit()
+
+    def _update_offsets(self, mono_s: float) -> None:
+        """Each vehicle's UTC against the team's (the lower median of the vehicles' UTC now),
+        once the rate is fitted; the median of the recent samples is kept."""
+        clocks = [vc for vc in self._vehicles.values() if vc.has_utc and vc.recent]
+        if len(clocks) < 2 or len(self._obs) < ANCHOR_OBSERVATIONS:
+            return
+        own = [self._vehicle_at(vc, mono_s) for vc in clocks]
+        reference = sorted(own)[(len(own) - 1) // 2]
+        for vc, utc in zip(clocks, own, strict=True):
+            vc.offset_samples.append(utc - reference)
+            vc.offset_s = statistics.median(vc.offset_samples)
+
+    def _vehicle_at(self, vc: _VehicleClock, mono_s: float) -> float:
+        """A vehicle's own UTC at ``mono_s``: the latest extrapolation of its newest reports."""
+        rate = self._rate
+        return max(o.utc_s + rate * (mono_s - o.rx_mono_s) for o in vc.recent)
+
+    def _team_at(self, mono_s: float) -> float:
+        """Team UTC at ``mono_s``: the lower median of the vehicles' UTC less their offsets."""
+        estimates = sorted(
+            self._vehicle_at(vc, mono_s) - vc.offset_s
+            for vc in self._vehicles.values()
+            if vc.has_utc and vc.recent
+        )
+        return estimates[(len(estimates) - 1) // 2]
 
     def _fit(self) -> None:
         """Least-squares slope of UTC on receive time over the window (kept if ill-posed)."""
@@ -133,11 +213,11 @@ class MissionClock:
 
     @property
     def synced(self) -> bool:
-        """At least one SYSTEM_TIME has been accepted."""
+        """At least one SYSTEM_TIME with UTC has been accepted."""
         return bool(self._obs)
 
     def now_utc_s(self) -> float:
-        """Mission UTC now: never less than a value returned before.
+        """Team UTC now: never less than a value returned before.
 
         Raises
         ------
@@ -146,27 +226,30 @@ class MissionClock:
         """
         if not self._obs:
             raise GcsError("mission clock: no SYSTEM_TIME received yet (not synced)")
-        mono = self._monotonic()
-        rate = self._rate
-        obs = self._obs
-        est = -math.inf
-        for k in range(1, min(ANCHOR_OBSERVATIONS, len(obs)) + 1):
-            o = obs[-k]
-            e = o.utc_s + rate * (mono - o.rx_mono_s)
-            if e > est:
-                est = e
+        est = self._team_at(self._monotonic())
         if est < self._max_returned_s:
             return self._max_returned_s
         self._max_returned_s = est
         return est
 
     def utc_of_boot(self, system_id: int, time_boot_s: float) -> float | None:
-        """UTC of a vehicle boot-time stamp (e.g. GLOBAL_POSITION_INT.time_boot_ms / 1000).
+        """Team UTC of a vehicle boot-time stamp (e.g. GLOBAL_POSITION_INT.time_boot_ms / 1000).
 
-        None before that vehicle's first SYSTEM_TIME.
+        The vehicle's own UTC less its offset from the team's. None before that vehicle's
+        first SYSTEM_TIME.
         """
-        offset = self._offset_s.get(system_id)
-        return None if offset is None else offset + time_boot_s
+        vc = self._vehicles.get(system_id)
+        return None if vc is None else vc.boot_offset_s + time_boot_s - vc.offset_s
+
+    def offset_s(self, system_id: int) -> float | None:
+        """How far a vehicle's UTC is ahead of the team's, s (None: unknown or no UTC)."""
+        vc = self._vehicles.get(system_id)
+        return None if vc is None or not vc.has_utc else vc.offset_s
+
+    @property
+    def without_utc(self) -> frozenset[int]:
+        """Vehicles that report no UTC (their times are mapped at reception)."""
+        return frozenset(sid for sid, vc in self._vehicles.items() if not vc.has_utc)
 
     # -- waiting -------------------------------------------------------------------------------
 

@@ -260,3 +260,60 @@ async def test_sleep_until_with_an_advancing_fake_clock() -> None:
         await clock.sleep_until(UTC0)
     finally:
         task.cancel()
+
+
+def _feed_offsets(
+    clock: MissionClock,
+    mono: FakeMono,
+    *,
+    rate: float,
+    n: int,
+    offsets_s: dict[int, float],
+    delays_s: np.ndarray,
+) -> None:
+    """Like :func:`feed`, each vehicle reporting true UTC plus its own offset."""
+    k = 0
+    for j in range(n):
+        utc = UTC0 + j
+        sent = 1000.0 + (utc - UTC0) / rate
+        for sid, off in offsets_s.items():
+            mono.t = max(mono.t, sent + float(delays_s[k]))
+            clock.observe(sid, utc + off, float(j), sent + float(delays_s[k]))
+            k += 1
+
+
+def test_vehicles_with_their_own_utc_are_mapped_to_the_team_clock() -> None:
+    """Simulators started apart: +7 s and -4 s. The team clock is the median vehicle's, each
+    vehicle's stamps are mapped to it, and each offset is reported."""
+    mono = FakeMono()
+    clock = MissionClock(mono)
+    rate = 200.0
+    offsets = {1: 0.0, 2: 7.0, 3: -4.0}
+    delays = np.random.default_rng(3).uniform(0.0002, 0.003, 3 * 120)
+    _feed_offsets(clock, mono, rate=rate, n=120, offsets_s=offsets, delays_s=delays)
+    for sid, off in offsets.items():
+        got = clock.offset_s(sid)
+        assert got is not None and got == pytest.approx(off, abs=0.25)
+        # GLOBAL_POSITION_INT at boot 100.5 s is true UTC0 + 100.5 on the team clock
+        assert clock.utc_of_boot(sid, 100.5) == pytest.approx(UTC0 + 100.5, abs=0.25)
+    assert clock.now_utc_s() == pytest.approx(truth(mono, rate), abs=0.6)
+    assert clock.rate == pytest.approx(rate, rel=0.05)
+
+
+def test_a_vehicle_without_utc_is_named_and_mapped_at_reception() -> None:
+    mono = FakeMono()
+    clock = MissionClock(mono)
+    clock.observe_no_utc(4, 3.0, 1000.0)  # before any UTC: nothing to map to
+    assert clock.rejected == 1 and clock.without_utc == frozenset()
+    feed(clock, mono, rate=1.0, n=10)
+    # Vehicle 4 booted at true UTC0 + 2 (its boot 0); its reports arrive 0.1-0.3 s late.
+    for j, delay in enumerate((0.3, 0.1, 0.2)):
+        boot = 5.0 + j
+        clock.observe_no_utc(4, boot, 1000.0 + 2.0 + boot + delay)
+    assert clock.without_utc == frozenset({4})
+    assert clock.offset_s(4) is None
+    got = clock.utc_of_boot(4, 8.0)
+    assert got is not None and got == pytest.approx(UTC0 + 10.0 + 0.1, abs=1e-6)
+    # Once it reports UTC it is an ordinary vehicle.
+    clock.observe(4, UTC0 + 9.5, 7.5, 1009.6)
+    assert clock.without_utc == frozenset()
