@@ -8,6 +8,7 @@
     python -m gcs rehearse SCENARIO [--speedup S] [--wind SPEED_M_S,FROM_DEG] [--loss P]
         [--seed N] [--connect CONN ...] [--json OUT] [--report DIR] [--arrival-s T]
         [--blackout VEHICLE,START_S,DURATION_S] [--threats-from FILE]
+        [--speed-bias VEHICLE,FRACTION] [--utc-offset VEHICLE,SECONDS]
 
 Common options: ``--vehicle SYSID`` (default: the first vehicle heard), ``--wait S`` (how long
 to wait for it), ``--timeout S`` and ``--retries N`` per protocol exchange, ``--signing-key HEX``
@@ -21,6 +22,7 @@ from __future__ import annotations
 import argparse
 import asyncio
 import contextlib
+import math
 import signal
 import sys
 import time
@@ -250,6 +252,18 @@ def parser() -> argparse.ArgumentParser:
         default=[],
         help="VEHICLE,START_S,DURATION_S: that vehicle's link goes dark (mission time)",
     )
+    rh.add_argument(
+        "--speed-bias",
+        action="append",
+        default=[],
+        help="VEHICLE,FRACTION: that stub vehicle flies (1 + FRACTION) x its true airspeed",
+    )
+    rh.add_argument(
+        "--utc-offset",
+        action="append",
+        default=[],
+        help="VEHICLE,SECONDS: that stub vehicle's UTC runs this far ahead of the true UTC",
+    )
     rh.add_argument("--threats-from", help="file to watch for pop-up threats (JSON lines)")
     rh.add_argument("--tolerance", type=float, default=1.0, help="pass mark for arrivals (s)")
     rh.add_argument("--quiet", action="store_true", help="no progress lines")
@@ -294,8 +308,13 @@ def _rehearsal_options(args: argparse.Namespace) -> object:
         if start < 0 or dur <= 0:
             raise UsageError(f"--blackout {text}: start must be >= 0 and duration > 0")
         blackouts.append(Blackout(vid, start, dur))
-    if args.connect and (blackouts or args.wind or args.loss):
-        raise UsageError("--blackout, --wind and --loss apply to the stub, not to --connect")
+    speed_bias = _per_vehicle(args.speed_bias, "--speed-bias", "FRACTION", ids, (-0.5, 0.5))
+    utc_offsets = _per_vehicle(args.utc_offset, "--utc-offset", "SECONDS", ids, (-1e6, 1e6))
+    if args.connect and (blackouts or args.wind or args.loss or speed_bias or utc_offsets):
+        raise UsageError(
+            "--blackout, --wind, --loss, --speed-bias and --utc-offset apply to the stub, "
+            "not to --connect"
+        )
     if args.truth and not args.connect:
         raise UsageError("--truth reads a connected simulator's log; it needs --connect")
     if args.truth and not Path(args.truth).resolve().parent.is_dir():
@@ -313,10 +332,31 @@ def _rehearsal_options(args: argparse.Namespace) -> object:
         report_dir=Path(args.report) if args.report else None,
         required_arrival_s=args.arrival_s,
         blackouts=blackouts,
+        speed_bias=speed_bias,
+        utc_offsets_s=utc_offsets,
         threats_from=Path(args.threats_from) if args.threats_from else None,
         quiet=args.quiet,
         config=CoordinatorConfig(seed=args.seed),
     )
+
+
+def _per_vehicle(
+    texts: list[str], option: str, what: str, ids: list[str], bounds: tuple[float, float]
+) -> dict[str, float]:
+    """``VEHICLE,VALUE`` options: one value per named scenario vehicle."""
+    out: dict[str, float] = {}
+    for text in texts:
+        vid, _, value_text = text.partition(",")
+        try:
+            value = float(value_text)
+        except ValueError:
+            raise UsageError(f"{option}: expected VEHICLE,{what}, got {text!r}") from None
+        if vid not in ids:
+            raise UsageError(f"{option}: no vehicle {vid!r} in the scenario ({', '.join(ids)})")
+        if not (math.isfinite(value) and bounds[0] <= value <= bounds[1]):
+            raise UsageError(f"{option} {text}: {what} must be in [{bounds[0]:g}, {bounds[1]:g}]")
+        out[vid] = value
+    return out
 
 
 async def rehearse_cmd(args: argparse.Namespace) -> str:

@@ -65,6 +65,10 @@ class RehearsalOptions:
     report_dir: Path | None = None
     required_arrival_s: float | None = None
     blackouts: Sequence[Blackout] = ()
+    speed_bias: Mapping[str, float] = field(default_factory=dict)
+    """Vehicle id -> fraction: the stub vehicle flies (1 + f) x the true airspeed it should."""
+    utc_offsets_s: Mapping[str, float] = field(default_factory=dict)
+    """Vehicle id -> seconds: the stub vehicle's UTC is the true UTC plus this."""
     threats_from: Path | None = None
     quiet: bool = False
     config: CoordinatorConfig = field(default_factory=CoordinatorConfig)
@@ -140,6 +144,11 @@ def _stub_command(
         cmd += ["--airspeed", f"{v.speed_min_m_s:g},{v.cruise_m_s:g},{v.speed_max_m_s:g}"]
     if opts.wind is not None:
         cmd += ["--wind", f"{opts.wind[0]:g},{opts.wind[1]:g}"]
+    ids = [v.id for v in scenario.vehicles]
+    for vid, fraction in opts.speed_bias.items():
+        cmd += ["--speed-bias", f"{ids.index(vid)},{fraction!r}"]
+    for vid, offset in opts.utc_offsets_s.items():
+        cmd += ["--utc-offset", f"{ids.index(vid)},{offset!r}"]
     if opts.blackouts:
         cmd += ["--control-stdin"]
     return cmd

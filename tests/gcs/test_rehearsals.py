@@ -28,6 +28,8 @@ from planner.scenario import load_scenario
 from tests.gcs.conftest import free_udp_port
 from tests.sitl_stub.conftest import free_port_base, mavproxy_router
 
+pytestmark = pytest.mark.slow  # about 35 s of wall time each
+
 SCENARIOS = Path(__file__).resolve().parents[2] / "scenarios"
 PAPER = SCENARIOS / "paper_three_uav.yaml"
 SPACED = SCENARIOS / "paper_spaced_60s.yaml"
@@ -37,21 +39,24 @@ def _errors(record: dict[str, Any]) -> dict[str, float]:
     return {v["id"]: v["error_s"] for v in record["vehicles"]}
 
 
+def _demo_run(**stub: Any) -> RehearsalOptions:
+    """The demo's flight (paper scenario, 200x, wind 5 m/s from 270, 10 % loss), quiet, with
+    more stub options."""
+    return RehearsalOptions(
+        scenario_path=PAPER,
+        scenario=load_scenario(PAPER),
+        speedup=200.0,
+        wind=(5.0, 270.0),
+        loss=0.1,
+        quiet=True,
+        **stub,
+    )
+
+
 async def test_paper_rehearsal_holds_the_arrival_time(tmp_path: Path) -> None:
     """The must-show run: 200x, wind 5 m/s from 270, 10% loss, the pop-up threat."""
     out = tmp_path / "flight.json"
-    record = await rehearse(
-        RehearsalOptions(
-            scenario_path=PAPER,
-            scenario=load_scenario(PAPER),
-            speedup=200.0,
-            wind=(5.0, 270.0),
-            loss=0.1,
-            seed=1,
-            json_out=out,
-            quiet=True,
-        )
-    )
+    record = await rehearse(_demo_run(seed=1, json_out=out))
     assert json.loads(out.read_text()) == record
     assert record["arrival_source"] == "simulator"
     errors = _errors(record)
@@ -70,6 +75,30 @@ async def test_paper_rehearsal_holds_the_arrival_time(tmp_path: Path) -> None:
     loiterers = {v["id"] for v in record["vehicles"] if v["loiters"]}
     assert loiterers == {"UAV3"}
     assert math.isfinite(record["wall_s"]) and record["wall_s"] < 180.0
+
+
+async def test_paper_rehearsal_absorbs_airspeed_errors_of_five_percent_either_way() -> None:
+    """UAV2 (the one that sets the team time, at its top speed) flies 5 % faster than its
+    airspeed sensor says, UAV1 5 % slower: the loop learns each scale from the fixes and every
+    vehicle still arrives within 1 s. Wind 5 m/s from 270 and 10 % loss, as the demo."""
+    record = await rehearse(_demo_run(seed=2, speed_bias={"UAV2": 0.05, "UAV1": -0.05}))
+    assert record["arrival_source"] == "simulator"
+    errors = _errors(record)
+    assert all(e is not None and abs(e) <= 1.0 for e in errors.values()), errors
+    assert record["min_separation_m"] >= record["separation_m"]
+
+
+async def test_paper_rehearsal_on_vehicles_whose_clocks_are_7_s_ahead_and_4_s_behind() -> None:
+    """Simulators started apart: UAV2's UTC runs 7 s ahead, UAV3's 4 s behind. Both offsets
+    are found and said; the arrivals, judged on true UTC from the simulator's truth log, are
+    within 1 s of the team time."""
+    record = await rehearse(_demo_run(seed=3, utc_offsets_s={"UAV2": 7.0, "UAV3": -4.0}))
+    errors = _errors(record)
+    assert all(e is not None and abs(e) <= 1.0 for e in errors.values()), errors
+    said = {e["vehicle"]: e["value"] for e in record["events"] if e["kind"] == "clock"}
+    assert said.keys() == {"UAV2", "UAV3"}, said
+    assert said["UAV2"] == pytest.approx(7.0, abs=0.3)
+    assert said["UAV3"] == pytest.approx(-4.0, abs=0.3)
 
 
 async def test_spaced_rehearsal_meets_each_60_s_slot_with_an_operator_threat(
@@ -160,10 +189,12 @@ def test_blackout_rehearsal_from_the_cli_recovers_and_arrives(
 
 async def _start_stub(scenario: Path, base: int, truth: Path) -> asyncio.subprocess.Process:
     """``python -m sitl_stub --scenario`` as an operator would start it: on its own, homes
-    from the scenario (nose toward the goal), the scenario's airspeeds, default timeouts."""
+    from the scenario (nose toward the goal), the scenario's airspeeds, default timeouts, one
+    TCP client per port as ArduPilot's SITL serves."""
     proc = await asyncio.create_subprocess_exec(
         sys.executable, "-m", "sitl_stub", "--scenario", str(scenario), "--vehicles", "3",
         "--tcp-base", str(base), "--speedup", "200", "--truth", str(truth),
+        "--one-client-per-port",
         stdout=asyncio.subprocess.PIPE, stderr=asyncio.subprocess.PIPE,
     )  # fmt: skip
     assert proc.stdout is not None
