@@ -34,9 +34,9 @@ class RetryPolicy:
     """Longest resend timeout: the MAVLink mission service's fixed one."""
     initial_rto_s: float = 0.5
     """Timeout before the first round trip was measured (unless the link measured one)."""
-    silence_s: float = 5.0
+    silence_s: float = 10.0
     """Nothing heard from the vehicle (no reply, no heartbeat, no telemetry) this long: gone."""
-    stall_s: float = 10.0
+    stall_s: float = 20.0
     """No progress (no new item requested or received, no final answer) this long: failed."""
     quiet_s: float = 1.0
     """Resends back off (doubling up to ``max_rto_s``) once the vehicle was silent this long."""

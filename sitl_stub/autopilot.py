@@ -1,7 +1,7 @@
 """ArduPlane-like autopilot logic over the point-mass model: modes, mission execution, L1 nav.
 
-INTERFACE CHANGES (relative to the brief given to the wire engineer)
---------------------------------------------------------------------
+Interface notes:
+
 - ``set_guided_target(lat_deg, lon_deg, alt_m) -> bool``: ``alt_m`` is AMSL; returns False
   (target ignored) unless the mode is GUIDED, as ArduPlane's guided request handler.
 - ``change_speed``: an airspeed outside [airspeed_min_m_s, airspeed_max_m_s] is REFUSED
@@ -17,11 +17,7 @@ INTERFACE CHANGES (relative to the brief given to the wire engineer)
 - At mission end (last item done, no land) the mode changes to RTL with "Mission complete,
   changing mode to RTL", which is what ArduPlane does (``exit_mission_callback``), not loiter at
   the last waypoint.
-- Additions (no change to what was promised): ``Autopilot.guided_target`` property;
-  ``SIMULATED_MODES``; in ``model``: ``NormalStream`` (batched normal draws from a Generator),
-  ``step_scalar`` (``step`` without a Controls object, the hot path), ``offset_ne_m``,
-  ``displace_deg``, ``radii_of_curvature_m``; ``Wind`` has a 4th field
-  ``gust_time_constant_s`` (default 3 s) and every Wind field has a default.
+- ``Autopilot.guided_target`` gives the GUIDED point; ``SIMULATED_MODES`` the modes flown.
 
 Behaviour modelled on ArduPlane 4.x (``commands_logic.cpp``, ``AP_Mission``, ``AP_L1_Control``):
 

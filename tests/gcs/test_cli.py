@@ -8,7 +8,7 @@ from pathlib import Path
 
 from pymavlink.dialects.v20 import ardupilotmega as mavlink2
 
-from planner.mission import MissionItem, items_equal
+from planner.mission import Autopilot, MissionItem, items_equal
 from planner.missionfile import read_mission_file, to_wpl
 from sitl_stub.api import Home, SimTeam
 from sitl_stub.model import displace_deg
@@ -51,11 +51,11 @@ async def test_upload_verify_then_download_round_trips_200_items(tmp_path: Path)
         assert code == 0, err
         assert "uploaded 200 mission items to vehicle 1" in out and "verified" in out
         stored = team.vehicles[0].mission.items()
-        assert items_equal(list(stored[1:]), items[1:])
+        assert items_equal(items[1:], list(stored[1:]), autopilot=Autopilot.ARDUPILOT)
         code, out, err = await gcs("mission", "download", conn, "--out", str(tmp_path / "d.plan"))
         assert code == 0, err
         back = read_mission_file(tmp_path / "d.plan")
-        assert len(back) == 200 and items_equal(back[1:], items[1:])
+        assert len(back) == 200 and items_equal(items[1:], back[1:], autopilot=Autopilot.ARDUPILOT)
 
 
 async def test_rejected_item_exits_1_naming_the_item_and_reason(tmp_path: Path) -> None:

@@ -3,6 +3,7 @@ and the rehearsal CLI's input checks. Whole rehearsals are in ``test_rehearsals.
 
 from __future__ import annotations
 
+import re
 from dataclasses import replace
 from pathlib import Path
 
@@ -12,6 +13,7 @@ import pytest
 from gcs.__main__ import main
 from gcs.coordinator import Coordinator, InfeasibleRequest
 from gcs.missionclock import MissionClock
+from planner.atmosphere import eas2tas
 from planner.errors import PlannerError
 from planner.mission import MAV_CMD_DO_CHANGE_SPEED, MAV_CMD_NAV_LOITER_TURNS, MAV_CMD_NAV_WAYPOINT
 from planner.plan import World, build_world, plan
@@ -135,7 +137,12 @@ async def test_infeasible_request_is_refused_before_launch_naming_time_and_vehic
         await coord.prepare()
     text = str(err.value)
     assert "refused before launch" in text and "5000.0 s cannot be met" in text
-    assert "earliest feasible 5478.0 s" in text and "UAV2" in text
+    # UAV2's path at its top speed, 30 m/s equivalent airspeed: true airspeed at 435-1600 m.
+    found = re.search(r"earliest feasible ([\d.]+) s .*UAV2 .*, ([\d.]+) km at 30 m/s", text)
+    assert found, text
+    earliest_s, km = float(found[1]), float(found[2])
+    assert km * 1000.0 / (30.0 * eas2tas(1600.0)) <= earliest_s
+    assert earliest_s <= km * 1000.0 / (30.0 * eas2tas(435.0))
     assert not coord.members  # nothing was compiled or uploaded
 
 
@@ -192,7 +199,8 @@ def test_long_legs_are_split_into_waypoints_no_farther_apart_than_asked(
         lat, lon = frame.to_geodetic(pose.east_m, pose.north_m)
         it = split.items[k]
         assert (it.x, it.y) == (round(float(lat) * 1e7), round(float(lon) * 1e7))
-        assert it.z == pytest.approx(vs.alt_at(s) - split.items[0].z, abs=0.01)  # above home
+        # above home, both in ArduPilot's whole centimetres
+        assert it.z == pytest.approx(vs.alt_at(s) - split.items[0].z, abs=0.021)
 
     def speeds(pm: object) -> list[float]:
         items = pm.items  # type: ignore[attr-defined]
@@ -235,8 +243,10 @@ def test_popup_anchor_time_is_when_the_vehicle_reaches_the_splice_point(
     untimed_short = []
     for vid, (s_m, _) in where.items():
         v = scenario.vehicle(vid)
-        path_m = timed.schedule.vehicle(vid).path.length_m
-        earliest = t_p + ahead_s + (path_m - s_m) / v.speed_max_m_s
+        vs = timed.schedule.vehicle(vid)
+        path_m = vs.path.length_m
+        fastest_m_s = v.speed_max_m_s * eas2tas(float(vs.wp_alt_m.max()))  # true airspeed
+        earliest = t_p + ahead_s + (path_m - s_m) / fastest_m_s
         assert timed.schedule.vehicle(vid).arrival_s >= earliest - 1e-3, vid
         if untimed.schedule.vehicle(vid).arrival_s < earliest - 60.0:
             untimed_short.append(vid)
@@ -245,3 +255,5 @@ def test_popup_anchor_time_is_when_the_vehicle_reaches_the_splice_point(
         legs = timed.schedule.vehicle(vid).legs
         first_new = next(leg for leg in legs if leg.s_start_m >= s_m - 1e-6)
         assert first_new.t_start_s == pytest.approx(t_p + ahead_s)
+        _, s_then, _ = timed.schedule.vehicle(vid).state_at(t_p + ahead_s)
+        assert s_then == pytest.approx(s_m, abs=1e-3)

@@ -34,6 +34,7 @@ from planner.mission import (
     MAV_CMD_NAV_WAYPOINT,
     MAV_FRAME_GLOBAL,
     MAV_FRAME_GLOBAL_RELATIVE_ALT_INT,
+    Autopilot,
     MissionItem,
     Waypoint,
     compile_mission,
@@ -176,7 +177,7 @@ async def test_upload_then_download_over_a_memory_link_reports_progress() -> Non
     assert seen[-1] == (30, 30) and all(t == 30 for _, t in seen)
     assert [d for d, _ in seen] == sorted(d for d, _ in seen)
     down = await download_mission(link, 1)
-    assert items_equal(down, items)
+    assert items_equal(items, down, autopilot=Autopilot.ARDUPILOT)
     assert link.sent[-1].get_type() == "MISSION_ACK"  # the download's closing ACK
 
 
@@ -293,9 +294,9 @@ async def test_200_item_mission_round_trips_unchanged(loss: float) -> None:
     async with stub_and_link(mission_timeout_s=0.03) as (team, link), asyncio.timeout(40):
         team.vehicles[0].link.faults(loss=loss)
         await upload_mission(link, 1, items, timeout_s=0.01, retries=50)
-        assert items_equal(stored(team), items)
+        assert items_equal(items, stored(team), autopilot=Autopilot.ARDUPILOT)
         down = await download_mission(link, 1, timeout_s=0.01, retries=50)
-        assert items_equal(down, items)
+        assert items_equal(items, down, autopilot=Autopilot.ARDUPILOT)
         if loss:
             assert team.vehicles[0].link.inbound.lost > 10
             assert team.vehicles[0].link.outbound.lost > 10
@@ -315,7 +316,7 @@ async def test_upload_outlasting_a_5_s_blackout_completes() -> None:
         await upload_mission(link, 1, items, progress=black_out_midway)
         assert loop.time() - t0 >= 4.5
         assert team.vehicles[0].link.inbound.blacked_out > 0
-        assert items_equal(stored(team), items)
+        assert items_equal(items, stored(team), autopilot=Autopilot.ARDUPILOT)
 
 
 async def test_upload_into_a_blackout_with_short_timeouts_raises_mission_timeout() -> None:
@@ -347,8 +348,8 @@ async def test_legacy_mission_request_flow_round_trips() -> None:
         up = Upload(items, target_system=1, own_system=GCS_SYS, own_component=GCS_COMP)
         await run_transfer(link, up)
         assert up.counters["legacy_requests"] >= 50  # the vehicle asked with MISSION_REQUEST
-        assert items_equal(stored(team), items)
-        assert items_equal(await download_mission(link, 1), items)
+        assert items_equal(items, stored(team), autopilot=Autopilot.ARDUPILOT)
+        assert items_equal(items, await download_mission(link, 1), autopilot=Autopilot.ARDUPILOT)
 
 
 async def test_download_gives_the_vehicles_home_at_item_zero() -> None:
@@ -363,8 +364,8 @@ async def test_download_gives_the_vehicles_home_at_item_zero() -> None:
     assert down[0].x == round(HOME.lat_deg * 1e7) and down[0].y == round(HOME.lon_deg * 1e7)
     assert down[0].z == pytest.approx(HOME.alt_m)
     assert down[0].frame == MAV_FRAME_GLOBAL
-    assert items_equal(down, compiled, compare_home=False)
-    assert not items_equal(down, compiled)
+    assert items_equal(compiled, down, compare_home=False, autopilot=Autopilot.ARDUPILOT)
+    assert not items_equal(compiled, down, autopilot=Autopilot.ARDUPILOT)
 
 
 async def test_unsupported_command_is_refused_naming_the_item() -> None:
@@ -379,7 +380,9 @@ async def test_unsupported_command_is_refused_naming_the_item() -> None:
             "(command not supported)"
         )
         assert (e.value.seq, e.value.result, e.value.vehicle) == (37, 3, 1)
-        assert items_equal(stored(team), waypoints(5))  # the stored mission is kept
+        assert items_equal(
+            waypoints(5), stored(team), autopilot=Autopilot.ARDUPILOT
+        )  # the stored mission is kept
 
 
 @pytest.mark.parametrize(("mission_type", "command"), [(1, FENCE_VERTEX), (2, RALLY_POINT)])
@@ -390,8 +393,14 @@ async def test_fence_and_rally_round_trip_beside_the_mission(
     async with stub_and_link() as (team, link), asyncio.timeout(20):
         await upload_mission(link, 1, waypoints(4))
         await upload_mission(link, 1, items, mission_type=mission_type, verify=True)
-        assert items_equal(await download_mission(link, 1, mission_type=mission_type), items)
-        assert items_equal(stored(team), waypoints(4))  # the flown mission is untouched
+        assert items_equal(
+            items,
+            await download_mission(link, 1, mission_type=mission_type),
+            autopilot=Autopilot.ARDUPILOT,
+        )
+        assert items_equal(
+            waypoints(4), stored(team), autopilot=Autopilot.ARDUPILOT
+        )  # the flown mission is untouched
         await clear_mission(link, 1, mission_type=mission_type)
         assert await download_mission(link, 1, mission_type=mission_type) == []
         assert len(stored(team)) == 4

@@ -18,12 +18,14 @@ from gcs.mission_client import download_mission, upload_mission
 from gcs.telemetry import TrackSample
 from gcs.vehicle import Vehicle
 from planner.mission import (
+    Autopilot,
     Loiter,
     MissionItem,
     SpeedChange,
     Waypoint,
     compile_mission,
     items_equal,
+    stored_item,
 )
 from sitl_stub.api import Home, SimTeam
 from tests.gcs.conftest import HOME, free_udp_port
@@ -135,8 +137,9 @@ async def test_mavsdk_reads_back_our_200_item_upload_field_for_field() -> None:
     assert len(got) == len(items)
     assert got[0].seq == 0
     assert (got[0].x, got[0].y) == HOME_E7  # the vehicle's home, not our item 0
-    for ours, theirs in zip(items[1:], got[1:], strict=True):
-        where = f"item {ours.seq}"
+    for sent, theirs in zip(items[1:], got[1:], strict=True):
+        where = f"item {sent.seq}"
+        ours = stored_item(sent, Autopilot.ARDUPILOT)  # the stub keeps items as ArduPilot
         assert (theirs.seq, theirs.frame, theirs.command) == (
             ours.seq, ours.frame, ours.command,
         ), where  # fmt: skip
@@ -167,7 +170,10 @@ async def test_our_download_reads_back_a_mavsdk_upload_unchanged() -> None:
     expected = [from_mavsdk(to_mavsdk(it)) for it in sent]
     assert expected[0].current == 1
     assert len(got) == len(expected)
-    assert items_equal(got, expected, compare_home=False), (got, expected)
+    assert items_equal(expected, got, compare_home=False, autopilot=Autopilot.ARDUPILOT), (
+        got,
+        expected,
+    )
     assert (got[0].x, got[0].y) == HOME_E7
 
 
@@ -260,7 +266,8 @@ async def test_mavproxy_lists_the_mission_we_uploaded(tmp_path: Path) -> None:
         for cmd, frame, x, y, z, p1, p2, p3, p4, _cur, auto in rows
     ]  # fmt: skip
     assert listed[0][2:4] == HOME_E7
-    for ours, row in zip(items[1:], listed[1:], strict=True):
+    for sent, row in zip(items[1:], listed[1:], strict=True):
+        ours = stored_item(sent, Autopilot.ARDUPILOT)  # the stub keeps items as ArduPilot
         assert row[:4] == (ours.command, ours.frame, ours.x, ours.y), (ours, row)
         assert row[4] == pytest.approx(ours.z, abs=1e-4), (ours, row)
         # MAVProxy prints params with one decimal; ours have at most one.
@@ -285,6 +292,6 @@ async def test_50_item_upload_and_download_through_mavproxy_router(tmp_path: Pat
         (it.command, it.x, it.y) for it in items[1:]
     ]
     assert len(got) == len(items)
-    assert items_equal(got, items, compare_home=False)
+    assert items_equal(items, got, compare_home=False, autopilot=Autopilot.ARDUPILOT)
     assert (got[0].x, got[0].y) == HOME_E7
     assert link.counters.crc_errors == 0

@@ -493,7 +493,11 @@ async def test_loopback_state_matches_stub_true_state() -> None:
     async with (
         asyncio.timeout(30.0),
         SimTeam.start(
-            homes=[Home(-35.36, 149.16, 584.0, 30.0)], tcp_base=0, speedup=20, wind=wind
+            homes=[Home(-35.36, 149.16, 584.0, 30.0)],
+            tcp_base=0,
+            speedup=20,
+            wind=wind,
+            wind_estimate_error=False,  # WIND is then the true wind, to check it against
         ) as team,
         Link.open(f"tcp:127.0.0.1:{team.ports[0]}", system_id=255, component_id=190) as link,
     ):

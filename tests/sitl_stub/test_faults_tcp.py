@@ -78,9 +78,15 @@ async def answer_requests(c: Client, items: list[Any], *, first: Any, retry_s: f
 
 @pytest.fixture
 async def team() -> AsyncIterator[SimTeam]:
-    # A short re-request timeout: a reordered item costs 0.3 s, not 1.5 s.
+    # A short re-request timeout: a reordered item costs 0.3 s, not 1.5 s. These tests are
+    # about the link: items are kept exactly as sent (test_storage.py has ArduPilot's form).
     async with SimTeam.start(
-        homes=[HOME], tcp_base=0, speedup=5.0, seed=11, mission_timeout_s=0.3
+        homes=[HOME],
+        tcp_base=0,
+        speedup=5.0,
+        seed=11,
+        mission_timeout_s=0.3,
+        ardupilot_mission_storage=False,
     ) as t:
         yield t
 
