@@ -9,14 +9,17 @@ Each vehicle keeps its own clock. Real autopilots share GPS time, but simulators
 different moments do not, nor does an autopilot whose clock was set by hand:
 
 - a vehicle's own UTC at a monotonic instant is the latest extrapolation of its newest
-  :data:`ANCHOR_OBSERVATIONS` reports at the fitted rate (receive times carry link delay,
-  which only ever makes a report look older than it is: at 200x, 2 ms of delay is 0.4 s of
-  UTC; one delayed packet does not drag the clock back);
+  reports at the fitted rate (receive times carry link delay, which only ever makes a report
+  look older than it is: at 200x, 2 ms of delay is 0.4 s of UTC; one delayed packet does not
+  drag the clock back);
 - the team's UTC is the lower median of the vehicles' clocks; each vehicle's offset from it
-  (:meth:`MissionClock.offset_s`) is the median of its recent differences, so a vehicle 7 s
-  ahead is judged, commanded and timed on the team's time, not its own;
-- the rate (UTC seconds per monotonic second: 1.0 live, about 200 at 200x) is the
-  least-squares slope of team UTC against receive time over the last ``window`` reports;
+  (:meth:`MissionClock.offset_s`) is the median of its recent differences, each taken from
+  the least delayed of its last :data:`OFFSET_WINDOW` reports, and a difference far from the
+  offset is set aside unless it persists: a vehicle 7 s ahead is judged, commanded and timed
+  on the team's time, and a burst of delayed reports does not move it;
+- the rate (UTC seconds per monotonic second: 1.0 live, about 200 at 200x) is the median of
+  the vehicles' own rates, each a least-squares slope of its UTC against receive time over its
+  last ``window`` reports, fitted again on the least delayed half;
 - what :meth:`now_utc_s` returns never decreases.
 
 Each vehicle's boot -> UTC offset (``utc - time_boot``) converts the boot-time stamps of its
@@ -46,6 +49,13 @@ MIN_FIT_SPAN_S = 0.002
 """The rate is re-fitted only when the window spans at least this much monotonic time."""
 OFFSET_SAMPLES = 15
 """A vehicle's offset from the team's UTC is the median of this many recent samples."""
+OFFSET_JUMP_S = 0.25
+"""Once a vehicle's offset is known, a sample farther than this from it is set aside; as many
+in a row as :data:`OFFSET_SAMPLES` replace it (the vehicle's clock did move)."""
+OFFSET_WINDOW = 64
+"""Each offset sample compares the least delayed of a vehicle's last this many reports: a
+stretch of delayed reports from one vehicle (its link queued, 70 ms of wall time is 14 s of
+UTC at 200x) does not move its offset unless it lasts longer than that."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -62,11 +72,15 @@ class _VehicleClock:
     boot_offset_s: float
     """Its UTC minus its boot time (or, with no UTC, team UTC minus boot time)."""
     last_utc_s: float
-    recent: deque[_Observation] = field(default_factory=lambda: deque(maxlen=ANCHOR_OBSERVATIONS))
+    recent: deque[_Observation] = field(default_factory=lambda: deque(maxlen=OFFSET_WINDOW))
     offset_samples: deque[float] = field(default_factory=lambda: deque(maxlen=OFFSET_SAMPLES))
     offset_s: float = 0.0
     """Its UTC minus the team's (median of the samples)."""
     has_utc: bool = True
+    rate: float | None = None
+    """Its UTC seconds per monotonic second, fitted on its own reports."""
+    outliers: list[float] = field(default_factory=list)
+    """Offset samples in a row too far from its offset to be taken (yet)."""
 
 
 class MissionClock:
@@ -77,7 +91,7 @@ class MissionClock:
             raise ValueError(f"window must be at least 2 observations, got {window}")
         self._monotonic = monotonic
         self.window = window
-        self._obs: deque[_Observation] = deque(maxlen=window)  # UTC in team time
+        self._accepted_utc = False
         self._vehicles: dict[int, _VehicleClock] = {}
         self._rate = 1.0
         self._max_returned_s = -math.inf
@@ -115,8 +129,6 @@ class MissionClock:
                 JUMP_BACK_S
             ):
                 self.resets += 1
-                kept = [o for o in self._obs if o.system_id != system_id]
-                self._obs = deque(kept, maxlen=self.window)
                 del self._vehicles[system_id]
                 self._accept(system_id, utc_s, boot_offset, rx_mono_s)
             return
@@ -129,7 +141,7 @@ class MissionClock:
         """A SYSTEM_TIME with no UTC (``time_unix_usec`` 0): the vehicle's boot time is mapped
         to the team's UTC at reception (the least delayed reception wins). Ignored before the
         clock is synced or once the vehicle has reported UTC."""
-        if not (math.isfinite(time_boot_s) and math.isfinite(rx_mono_s)) or not self._obs:
+        if not (math.isfinite(time_boot_s) and math.isfinite(rx_mono_s)) or not self.synced:
             self.rejected += 1
             return
         vc = self._vehicles.get(system_id)
@@ -153,25 +165,45 @@ class MissionClock:
         obs = _Observation(rx_mono_s, utc_s, system_id)
         vc.recent.append(obs)
         self._update_offsets(rx_mono_s)
-        self._obs.append(_Observation(rx_mono_s, utc_s - vc.offset_s, system_id))
-        self._fit()
+        self._accepted_utc = True
+        self._fit(vc)
 
     def _update_offsets(self, mono_s: float) -> None:
         """Each vehicle's UTC against the team's (the lower median of the vehicles' UTC now),
         once the rate is fitted; the median of the recent samples is kept."""
         clocks = [vc for vc in self._vehicles.values() if vc.has_utc and vc.recent]
-        if len(clocks) < 2 or len(self._obs) < ANCHOR_OBSERVATIONS:
+        if len(clocks) < 2 or any(vc.rate is None for vc in clocks):
             return
-        own = [self._vehicle_at(vc, mono_s) for vc in clocks]
+        own = [self._vehicle_at(vc, mono_s, OFFSET_WINDOW) for vc in clocks]
         reference = sorted(own)[(len(own) - 1) // 2]
         for vc, utc in zip(clocks, own, strict=True):
-            vc.offset_samples.append(utc - reference)
+            sample = utc - reference
+            full = len(vc.offset_samples) == OFFSET_SAMPLES
+            if full and abs(sample - vc.offset_s) > OFFSET_JUMP_S:
+                # An outlier (a burst of delayed reports, the rate re-fitting after a stall),
+                # unless the samples keep saying so: then the clock really moved.
+                vc.outliers.append(sample)
+                if len(vc.outliers) < OFFSET_SAMPLES:
+                    continue
+                vc.offset_samples.clear()
+                vc.offset_samples.extend(vc.outliers)
+            else:
+                vc.offset_samples.append(sample)
+            vc.outliers.clear()
             vc.offset_s = statistics.median(vc.offset_samples)
 
-    def _vehicle_at(self, vc: _VehicleClock, mono_s: float) -> float:
-        """A vehicle's own UTC at ``mono_s``: the latest extrapolation of its newest reports."""
+    def _vehicle_at(
+        self, vc: _VehicleClock, mono_s: float, reports: int = ANCHOR_OBSERVATIONS
+    ) -> float:
+        """A vehicle's own UTC at ``mono_s``: the latest extrapolation of its newest
+        ``reports`` reports (the least delayed one wins)."""
         rate = self._rate
-        return max(o.utc_s + rate * (mono_s - o.rx_mono_s) for o in vc.recent)
+        recent = vc.recent
+        first = max(len(recent) - reports, 0)
+        return max(
+            recent[k].utc_s + rate * (mono_s - recent[k].rx_mono_s)
+            for k in range(first, len(recent))
+        )
 
     def _team_at(self, mono_s: float) -> float:
         """Team UTC at ``mono_s``: the lower median of the vehicles' UTC less their offsets."""
@@ -182,27 +214,30 @@ class MissionClock:
         )
         return estimates[(len(estimates) - 1) // 2]
 
-    def _fit(self) -> None:
-        """Least-squares slope of UTC on receive time over the window (kept if ill-posed)."""
-        obs = self._obs
-        n = len(obs)
-        if n < 2:
+    def _fit(self, vc: _VehicleClock) -> None:
+        """The team's rate: the median of the vehicles' own rates, each the slope of its UTC
+        on receive time over its last ``window`` reports, robust to delayed reports (a least
+        squares fit, then again on the least delayed half: a delayed report lies below the
+        line). One vehicle's queued link bends only its own slope."""
+        recent = list(vc.recent)[-self.window :]
+        if len(recent) < 2:
             return
-        m0 = obs[0].rx_mono_s
-        u0 = obs[0].utc_s
-        xs = [o.rx_mono_s - m0 for o in obs]
-        if max(xs) - min(xs) < MIN_FIT_SPAN_S:
+        m0, u0 = recent[0].rx_mono_s, recent[0].utc_s
+        xs = [o.rx_mono_s - m0 for o in recent]
+        ys = [o.utc_s - u0 for o in recent]
+        line = _least_squares(xs, ys)
+        if line is None:
             return
-        ys = [o.utc_s - u0 for o in obs]
-        mx = sum(xs) / n
-        my = sum(ys) / n
-        sxx = sum((x - mx) * (x - mx) for x in xs)
-        sxy = sum((x - mx) * (y - my) for x, y in zip(xs, ys, strict=True))
-        if sxx <= 0.0:
-            return
-        slope = sxy / sxx
-        if math.isfinite(slope) and slope > 0.0:
-            self._rate = slope
+        if len(recent) >= 8:
+            slope, icpt = line
+            ranked = sorted(range(len(xs)), key=lambda k: ys[k] - (icpt + slope * xs[k]))
+            keep = ranked[len(ranked) // 2 :]
+            line = _least_squares([xs[k] for k in keep], [ys[k] for k in keep]) or line
+        if math.isfinite(line[0]) and line[0] > 0.0:
+            vc.rate = line[0]
+        rates = sorted(v.rate for v in self._vehicles.values() if v.rate is not None)
+        if rates:
+            self._rate = rates[(len(rates) - 1) // 2]
 
     # -- queries -------------------------------------------------------------------------------
 
@@ -214,7 +249,7 @@ class MissionClock:
     @property
     def synced(self) -> bool:
         """At least one SYSTEM_TIME with UTC has been accepted."""
-        return bool(self._obs)
+        return self._accepted_utc
 
     def now_utc_s(self) -> float:
         """Team UTC now: never less than a value returned before.
@@ -224,7 +259,7 @@ class MissionClock:
         GcsError
             Before the first SYSTEM_TIME (:attr:`synced` is False).
         """
-        if not self._obs:
+        if not self._accepted_utc:
             raise GcsError("mission clock: no SYSTEM_TIME received yet (not synced)")
         est = self._team_at(self._monotonic())
         if est < self._max_returned_s:
@@ -284,3 +319,17 @@ class MissionClock:
         if mission_s <= 0.0:
             return
         await self.sleep_until(self.now_utc_s() + mission_s)
+
+
+def _least_squares(xs: list[float], ys: list[float]) -> tuple[float, float] | None:
+    """(slope, intercept) of y on x; None when x spans less than :data:`MIN_FIT_SPAN_S`."""
+    n = len(xs)
+    if n < 2 or max(xs) - min(xs) < MIN_FIT_SPAN_S:
+        return None
+    mx = sum(xs) / n
+    my = sum(ys) / n
+    sxx = sum((x - mx) * (x - mx) for x in xs)
+    if sxx <= 0.0:
+        return None
+    slope = sum((x - mx) * (y - my) for x, y in zip(xs, ys, strict=True)) / sxx
+    return slope, my - slope * mx

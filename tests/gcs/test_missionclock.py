@@ -317,3 +317,52 @@ def test_a_vehicle_without_utc_is_named_and_mapped_at_reception() -> None:
     # Once it reports UTC it is an ordinary vehicle.
     clock.observe(4, UTC0 + 9.5, 7.5, 1009.6)
     assert clock.without_utc == frozenset()
+
+
+def test_offsets_hold_through_a_queued_link_and_a_stalled_loop_at_200x() -> None:
+    """One vehicle's reports arrive 70 ms late for 30 s of UTC (its link queued), later
+    everyone's for 20 s (the ground station's loop stalled): 14 s of UTC at 200x. Offsets
+    stay within 0.1 s, so no vehicle's fixes are dated seconds off."""
+    mono = FakeMono()
+    clock = MissionClock(mono)
+    rate = 200.0
+    offsets = {1: 0.0, 2: 7.0, 3: -4.0}
+    rng = np.random.default_rng(1)
+    worst = 0.0
+    for j in range(2400):
+        utc = UTC0 + j
+        sent = 1000.0 + j / rate
+        for sid, off in offsets.items():
+            delay = float(rng.uniform(0.0002, 0.002))
+            if 1000 < j < 1030 and sid == 3:
+                delay += 0.07
+            if 2000 < j < 2020:
+                delay += 0.07
+            if rng.random() < 0.1:
+                continue  # lost
+            mono.t = max(mono.t, sent + delay)
+            clock.observe(sid, utc + off, float(j), sent + delay)
+        if j > 100:
+            for sid, off in offsets.items():
+                got = clock.offset_s(sid)
+                assert got is not None
+                worst = max(worst, abs(got - off))
+    assert worst < 0.1
+    assert clock.rate == pytest.approx(rate, rel=0.02)
+
+
+def test_a_clock_that_really_steps_forward_is_followed() -> None:
+    mono = FakeMono()
+    clock = MissionClock(mono)
+    delays = np.full(3 * 200, 0.0005)
+    _feed_offsets(clock, mono, rate=200.0, n=100, offsets_s={1: 0.0, 2: 0.0, 3: 0.0},
+                  delays_s=delays)  # fmt: skip
+    assert clock.offset_s(3) == pytest.approx(0.0, abs=0.05)
+    # Vehicle 3's clock is set 3 s ahead (forward: not a reset); the others run on.
+    for j in range(100, 200):
+        utc = UTC0 + j
+        sent = 1000.0 + j / 200.0
+        for sid in (1, 2, 3):
+            mono.t = max(mono.t, sent + 0.0005)
+            clock.observe(sid, utc + (3.0 if sid == 3 else 0.0), float(j), sent + 0.0005)
+    assert clock.offset_s(3) == pytest.approx(3.0, abs=0.05)
