@@ -27,6 +27,8 @@ from typing import Any, Literal
 import numpy as np
 
 from gcs.arrival import ArrivalController, Decision, LoiterSpec, RouteTrack, SpeedLimits, Wind
+from gcs.coordination.bus import EventBus
+from gcs.coordination.events import EventKind, FlightEvent
 from gcs.errors import GcsError
 from gcs.missionclock import MissionClock
 from gcs.speedbias import SpeedBiasEstimator
@@ -129,19 +131,6 @@ class CoordinatorConfig:
     """Give up this long after the latest target if a vehicle has not arrived."""
 
 
-@dataclass(frozen=True)
-class CoordEvent:
-    """One decision or observation: mission time, vehicle, kind, strategy, value, reason."""
-
-    utc_s: float
-    t_s: float
-    vehicle: str | None
-    kind: str
-    reason: str
-    strategy: str | None = None
-    value: float | None = None
-
-
 @dataclass
 class Member:
     """One vehicle of the team in flight."""
@@ -229,7 +218,8 @@ class Coordinator:
         clock: MissionClock,
         *,
         config: CoordinatorConfig | None = None,
-        on_event: Callable[[CoordEvent], None] | None = None,
+        on_event: Callable[[FlightEvent], None] | None = None,
+        bus: EventBus | None = None,
         required_arrival_s: float | None = None,
     ) -> None:
         self.scenario = scenario
@@ -240,8 +230,10 @@ class Coordinator:
         self.requested_arrival_s = required_arrival_s
         self.rng = np.random.default_rng(self.config.seed)
         self.frame = scenario.frame()
-        self.events: list[CoordEvent] = []
-        self.adjustments: list[CoordEvent] = []
+        self.bus = bus if bus is not None else EventBus()
+        """Every event is published here (numbered); subscribers cannot slow the loop."""
+        self.events: list[FlightEvent] = []
+        self.adjustments: list[FlightEvent] = []
         self.members: dict[str, Member] = {}
         self.schedule: Schedule | None = None
         self.world: World | None = None
@@ -298,16 +290,19 @@ class Coordinator:
 
     def _emit(
         self,
-        kind: str,
+        kind: EventKind | str,
         reason: str,
         vehicle: str | None = None,
         strategy: str | None = None,
         value: float | None = None,
         t_s: float | None = None,
-    ) -> CoordEvent:
+    ) -> FlightEvent:
+        """Publish one event (a kind that is not an :class:`EventKind` is a ValueError)."""
         utc = self.clock.now_utc_s() if self.clock.synced else math.nan
         t = t_s if t_s is not None else (utc - self.start_utc_s if self.start_utc_s else 0.0)
-        ev = CoordEvent(utc, t, vehicle, kind, reason, strategy, value)
+        ev = self.bus.publish(
+            FlightEvent(utc, t, vehicle, EventKind(kind), reason, strategy, value)
+        )
         self.events.append(ev)
         if strategy is not None:
             self.adjustments.append(ev)

@@ -30,7 +30,9 @@ from typing import Any
 
 import numpy as np
 
-from gcs.coordinator import CoordEvent, Coordinator, CoordinatorConfig, Member
+from gcs.coordination.bus import EventBus, Subscription
+from gcs.coordination.events import EventKind, FlightEvent
+from gcs.coordinator import Coordinator, CoordinatorConfig, Member
 from gcs.errors import GcsError
 from gcs.link import Link
 from gcs.missionclock import MissionClock
@@ -72,6 +74,8 @@ class RehearsalOptions:
     threats_from: Path | None = None
     quiet: bool = False
     config: CoordinatorConfig = field(default_factory=CoordinatorConfig)
+    bus: EventBus | None = None
+    """The flight's event bus (a new one if None): other subscribers may listen in."""
 
 
 def _free_tcp_base(n: int) -> int:
@@ -175,11 +179,16 @@ class Progress:
         self.coord = coord
         self.quiet = quiet
 
-    def event(self, ev: CoordEvent) -> None:
-        if self.quiet or ev.kind in ("upload",):
+    def event(self, ev: FlightEvent) -> None:
+        if self.quiet or ev.kind is EventKind.UPLOAD:
             return
         who = f"{ev.vehicle:>6}" if ev.vehicle else "  team"
         print(f"{ev.t_s:9.1f} s {who} {ev.kind:<8} {ev.reason}", flush=True)
+
+    async def follow(self, events: Subscription) -> None:
+        """Print each event of the flight as it comes (a subscriber of the flight's bus)."""
+        async for ev in events:
+            self.event(ev)
 
     async def run(self, every_wall_s: float = 5.0) -> None:
         while True:
@@ -244,11 +253,21 @@ async def rehearse(opts: RehearsalOptions) -> dict[str, Any]:
     wall0 = time.perf_counter()
     clock = MissionClock()
     coord = Coordinator(
-        opts.scenario, clock, config=opts.config, required_arrival_s=opts.required_arrival_s
+        opts.scenario,
+        clock,
+        config=opts.config,
+        required_arrival_s=opts.required_arrival_s,
+        bus=opts.bus,
     )
     progress = Progress(coord, opts.quiet)
-    coord.on_event = progress.event
-    await coord.prepare()
+    printed = coord.bus.subscribe(maxsize=100_000)
+    printer = asyncio.create_task(progress.follow(printed))
+    try:
+        await coord.prepare()
+    except BaseException:
+        printed.close()
+        await printer
+        raise
     if not opts.quiet:
         print(
             f"rehearse: planned {len(opts.scenario.vehicles)} vehicles in "
@@ -314,6 +333,8 @@ async def rehearse(opts: RehearsalOptions) -> dict[str, Any]:
             await _await_truth(truth_path, coord)
         record = flight_record(coord, opts, truth_path, time.perf_counter() - wall0)
     finally:
+        printed.close()  # the printer drains what is queued, then ends
+        await printer
         if proc is not None:
             await _stop(proc)
         tmp.cleanup()
@@ -367,13 +388,14 @@ async def _stop(proc: asyncio.subprocess.Process) -> None:
             await proc.wait()
 
 
-def _ev_json(ev: CoordEvent, start_utc_s: float) -> dict[str, Any]:
+def _ev_json(ev: FlightEvent, start_utc_s: float) -> dict[str, Any]:
     utc = start_utc_s + ev.t_s if math.isnan(ev.utc_s) else ev.utc_s
     return {
+        "seq": ev.seq,
         "utc_s": round(utc, 3),
         "t_s": round(ev.t_s, 3),
         "vehicle": ev.vehicle,
-        "kind": ev.kind,
+        "kind": str(ev.kind),
         "strategy": ev.strategy,
         "value": ev.value,
         "reason": ev.reason,

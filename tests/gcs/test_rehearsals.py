@@ -23,6 +23,7 @@ from typing import Any
 import pytest
 
 from gcs.__main__ import main
+from gcs.coordination.bus import EventBus
 from gcs.rehearse import RehearsalOptions, passed, rehearse
 from planner.scenario import load_scenario
 from tests.gcs.conftest import free_udp_port
@@ -88,11 +89,16 @@ async def test_paper_rehearsal_absorbs_airspeed_errors_of_five_percent_either_wa
     assert record["min_separation_m"] >= record["separation_m"]
 
 
-async def test_paper_rehearsal_on_vehicles_whose_clocks_are_7_s_ahead_and_4_s_behind() -> None:
+async def test_paper_rehearsal_on_clocks_7_s_ahead_and_4_s_behind_with_a_stalled_reader() -> None:
     """Simulators started apart: UAV2's UTC runs 7 s ahead, UAV3's 4 s behind. Both offsets
     are found and said; the arrivals, judged on true UTC from the simulator's truth log, are
-    within 1 s of the team time."""
-    record = await rehearse(_demo_run(seed=3, utc_offsets_s={"UAV2": 7.0, "UAV3": -4.0}))
+    within 1 s of the team time. An event subscriber that never reads rides along: its drops
+    are counted and the loop does not wait for it."""
+    bus = EventBus()
+    stalled = bus.subscribe(maxsize=5)
+    record = await rehearse(_demo_run(seed=3, utc_offsets_s={"UAV2": 7.0, "UAV3": -4.0}, bus=bus))
+    assert stalled.dropped == bus.published - 5 > 100
+    assert [e["seq"] for e in record["events"]] == list(range(1, bus.published + 1))
     errors = _errors(record)
     assert all(e is not None and abs(e) <= 1.0 for e in errors.values()), errors
     said = {e["vehicle"]: e["value"] for e in record["events"] if e["kind"] == "clock"}

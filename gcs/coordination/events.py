@@ -1,0 +1,69 @@
+"""Typed flight events: what the coordinator decided or saw, in order.
+
+Every event has a kind from :class:`EventKind`, a sequence number within its flight (assigned
+by the :class:`~gcs.coordination.bus.EventBus` it is published on), mission time and UTC, the
+vehicle it concerns (None: the team), and for a time adjustment its strategy and value. The
+store, the stream, the progress printer and the flight record read the same record.
+"""
+
+from __future__ import annotations
+
+import enum
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from typing import Any
+
+__all__ = ["EventKind", "FlightEvent"]
+
+
+class EventKind(enum.StrEnum):
+    """What an event is about (the string is what the flight record and the store keep)."""
+
+    PLAN = "plan"
+    """The schedule's own decisions before launch (takeoff delays, speeds, loiters)."""
+    START = "start"
+    """The mission starts: its UTC and the team arrival."""
+    UPLOAD = "upload"
+    """A mission was uploaded to a vehicle."""
+    LAUNCH = "launch"
+    """A vehicle was armed and put in AUTO (or failed to be)."""
+    ROUTE = "route"
+    """A vehicle finished its climb-out and is timed on its route."""
+    SPEED = "speed"
+    """An airspeed command (or its failure)."""
+    LOITER = "loiter"
+    """Loiter turns inserted (or not possible)."""
+    TAKEOFF = "takeoff"
+    """A vehicle on the ground got a new takeoff time."""
+    ARRIVAL = "arrival"
+    """The team arrival time moved, or a vehicle is late while joining its route."""
+    ARRIVED = "arrived"
+    """A vehicle passed its goal."""
+    POPUP = "popup"
+    """A threat appeared, and what it touches."""
+    REPLAN = "replan"
+    """Vehicles re-planned around a threat."""
+    LINK = "link"
+    """A vehicle's telemetry stopped or came back."""
+    CLOCK = "clock"
+    """A vehicle keeps a UTC of its own, or none."""
+    ABORT = "abort"
+    """The loop stopped before every vehicle arrived."""
+
+
+@dataclass(frozen=True)
+class FlightEvent:
+    """One decision or observation of a flight (times in s; ``seq`` from the bus, 0 before)."""
+
+    utc_s: float
+    t_s: float
+    vehicle: str | None
+    kind: EventKind
+    reason: str
+    strategy: str | None = None
+    value: float | None = None
+    seq: int = 0
+    payload: Mapping[str, Any] = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "kind", EventKind(self.kind))
