@@ -1,0 +1,419 @@
+"""The store's operations: scenarios by content hash, flights and their state, events in
+sequence, the missions uploaded; and a bus subscriber that writes a flight's events as they
+happen.
+
+Every operation is one transaction. Sans-asyncio: :class:`EventWriter` runs the writes in a
+worker thread so that a slow database never holds up the control loop.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import dataclasses
+import hashlib
+import time
+import uuid
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, TypeVar
+
+from alembic import command
+from alembic.config import Config
+from sqlalchemy import Engine, create_engine, select
+from sqlalchemy.exc import IntegrityError, OperationalError
+from sqlalchemy.orm import Session
+
+from gcs.coordination.bus import Subscription
+from gcs.coordination.events import FlightEvent
+from gcs.errors import GcsError
+from gcs.store.models import EventRow, FlightRow, FlightVehicleRow, ScenarioRow, UploadRow
+from planner.mission import MissionItem
+
+__all__ = [
+    "FLIGHT_STATES",
+    "VEHICLE_PHASES",
+    "EventWriter",
+    "FlightRecordRow",
+    "Store",
+    "StoreConflict",
+    "StoreError",
+    "StoreNotFound",
+]
+
+FLIGHT_STATES = ("planned", "uploading", "ready", "running", "completed", "aborted", "failed")
+VEHICLE_PHASES = (
+    "waiting",
+    "climbing",
+    "joining",
+    "on_route",
+    "loitering",
+    "link_silent",
+    "arrived",
+    "aborted",
+)
+_MIGRATIONS = Path(__file__).with_name("migrations")
+
+
+class StoreError(GcsError):
+    """The store refused an operation or could not be reached; the message says which."""
+
+
+class StoreNotFound(StoreError, KeyError):
+    """No such scenario or flight."""
+
+    def __str__(self) -> str:
+        return str(self.args[0]) if self.args else ""
+
+
+class StoreConflict(StoreError):
+    """An update made on a stale version, or a second flight for a vehicle."""
+
+
+@dataclass(frozen=True)
+class FlightRecordRow:
+    """What the store holds of one flight."""
+
+    id: str
+    scenario_id: str
+    state: str
+    team_time_s: float | None
+    version: int
+    start_utc_s: float | None
+    resume: Mapping[str, Any] | None
+    vehicles: Mapping[str, tuple[str, str | None, int | None]]
+    """Vehicle id -> (phase, connection, system id)."""
+
+
+def _item_json(it: MissionItem) -> dict[str, Any]:
+    return dataclasses.asdict(it)
+
+
+_Row = TypeVar("_Row", ScenarioRow, FlightRow, FlightVehicleRow)
+
+
+def _get(session: Session, model: type[_Row], key: Any, what: str, *, lock: bool = False) -> _Row:
+    """The row with this primary key, or StoreNotFound naming ``what``."""
+    row = session.get(model, key, with_for_update=lock)
+    if row is None:
+        raise StoreNotFound(f"no {what}")
+    return row
+
+
+class Store:
+    """Scenarios, flights, events and uploads in one SQL database (see the package)."""
+
+    def __init__(self, engine: Engine) -> None:
+        self.engine = engine
+
+    @classmethod
+    def open(cls, url: str, *, migrate: bool = True) -> Store:
+        """Connect to ``url`` (e.g. ``sqlite:///tcgcs.db``,
+        ``postgresql+psycopg://user@host/db``) and bring the schema to the latest revision."""
+        kwargs: dict[str, Any] = {}
+        if url.startswith("sqlite"):
+            kwargs["connect_args"] = {"check_same_thread": False}
+        try:
+            engine = create_engine(url, **kwargs)
+        except Exception as err:  # a malformed URL or a missing driver
+            raise StoreError(f"database URL {url!r}: {err}") from None
+        store = cls(engine)
+        if migrate:
+            store.upgrade()
+        return store
+
+    def upgrade(self) -> None:
+        """Run the migrations up to head (Alembic)."""
+        cfg = Config()
+        cfg.set_main_option("script_location", str(_MIGRATIONS))
+        try:
+            with self.engine.begin() as connection:
+                cfg.attributes["connection"] = connection
+                command.upgrade(cfg, "head")
+        except OperationalError as err:
+            raise StoreError(f"database {self.engine.url!r} unreachable: {err.orig}") from None
+
+    def close(self) -> None:
+        self.engine.dispose()
+
+    # -- scenarios ----------------------------------------------------------------------------
+
+    def save_scenario(self, body: str, *, name: str, media_type: str = "application/yaml") -> str:
+        """Keep a scenario's text; its id is the SHA-256 of the text (the same text, the same
+        id; a scenario is never changed)."""
+        sid = hashlib.sha256(body.encode("utf-8")).hexdigest()
+        with Session(self.engine) as session, session.begin():
+            if session.get(ScenarioRow, sid) is None:
+                session.add(
+                    ScenarioRow(
+                        id=sid,
+                        name=name,
+                        media_type=media_type,
+                        body=body,
+                        created_utc_s=time.time(),
+                    )
+                )
+        return sid
+
+    def scenario(self, scenario_id: str) -> ScenarioRow:
+        with Session(self.engine) as session:
+            row = _get(session, ScenarioRow, scenario_id, f"scenario {scenario_id!r}")
+            session.expunge(row)
+            return row
+
+    # -- flights ------------------------------------------------------------------------------
+
+    def create_flight(
+        self,
+        scenario_id: str,
+        vehicles: Mapping[str, str | None],
+        *,
+        flight_id: str | None = None,
+    ) -> str:
+        """A new flight in state ``planned`` flying ``vehicles`` (id -> connection string).
+
+        Raises
+        ------
+        StoreNotFound
+            No such scenario.
+        StoreConflict
+            A connection is already in a flight that has not ended (named).
+        """
+        fid = flight_id or uuid.uuid4().hex
+        now = time.time()
+        with Session(self.engine) as session, session.begin():
+            _get(session, ScenarioRow, scenario_id, f"scenario {scenario_id!r}")
+            conns = [c for c in vehicles.values() if c is not None]
+            if conns:
+                busy = session.execute(
+                    select(FlightVehicleRow.connection, FlightRow.id)
+                    .join(FlightRow, FlightRow.id == FlightVehicleRow.flight_id)
+                    .where(FlightVehicleRow.connection.in_(conns))
+                    .where(FlightRow.state.not_in(("completed", "aborted", "failed")))
+                ).first()
+                if busy is not None:
+                    raise StoreConflict(f"vehicle {busy[0]} is already in flight {busy[1]}")
+            session.add(
+                FlightRow(
+                    id=fid,
+                    scenario_id=scenario_id,
+                    state="planned",
+                    version=1,
+                    created_utc_s=now,
+                    updated_utc_s=now,
+                )
+            )
+            session.flush()
+            for vid, conn in vehicles.items():
+                session.add(
+                    FlightVehicleRow(
+                        flight_id=fid, vehicle_id=vid, connection=conn, phase="waiting"
+                    )
+                )
+        return fid
+
+    def flight(self, flight_id: str) -> FlightRecordRow:
+        with Session(self.engine) as session:
+            row = _get(session, FlightRow, flight_id, f"flight {flight_id!r}")
+            vehicles = session.scalars(
+                select(FlightVehicleRow).where(FlightVehicleRow.flight_id == flight_id)
+            ).all()
+            return FlightRecordRow(
+                id=row.id,
+                scenario_id=row.scenario_id,
+                state=row.state,
+                team_time_s=row.team_time_s,
+                version=row.version,
+                start_utc_s=row.start_utc_s,
+                resume=row.resume,
+                vehicles={v.vehicle_id: (v.phase, v.connection, v.system_id) for v in vehicles},
+            )
+
+    def update_flight(
+        self,
+        flight_id: str,
+        *,
+        expected_version: int | None = None,
+        state: str | None = None,
+        team_time_s: float | None = None,
+        start_utc_s: float | None = None,
+        resume: Mapping[str, Any] | None = None,
+    ) -> int:
+        """Change a flight; returns its new version.
+
+        Raises
+        ------
+        StoreNotFound
+            No such flight.
+        StoreConflict
+            ``expected_version`` is not the flight's version (someone changed it first).
+        StoreError
+            ``state`` is not one of :data:`FLIGHT_STATES`.
+        """
+        if state is not None and state not in FLIGHT_STATES:
+            raise StoreError(f"flight state {state!r} is not one of {', '.join(FLIGHT_STATES)}")
+        with Session(self.engine) as session, session.begin():
+            row = _get(session, FlightRow, flight_id, f"flight {flight_id!r}", lock=True)
+            if expected_version is not None and row.version != expected_version:
+                raise StoreConflict(
+                    f"flight {flight_id}: version {expected_version} is stale (now {row.version})"
+                )
+            if state is not None:
+                row.state = state
+            if team_time_s is not None:
+                row.team_time_s = team_time_s
+            if start_utc_s is not None:
+                row.start_utc_s = start_utc_s
+            if resume is not None:
+                row.resume = dict(resume)
+            row.version += 1
+            row.updated_utc_s = time.time()
+            return row.version
+
+    def set_vehicle(
+        self,
+        flight_id: str,
+        vehicle_id: str,
+        *,
+        phase: str | None = None,
+        system_id: int | None = None,
+    ) -> None:
+        if phase is not None and phase not in VEHICLE_PHASES:
+            raise StoreError(f"vehicle phase {phase!r} is not one of {', '.join(VEHICLE_PHASES)}")
+        with Session(self.engine) as session, session.begin():
+            row = _get(
+                session,
+                FlightVehicleRow,
+                (flight_id, vehicle_id),
+                f"vehicle {vehicle_id!r} in flight {flight_id!r}",
+            )
+            if phase is not None:
+                row.phase = phase
+            if system_id is not None:
+                row.system_id = system_id
+
+    # -- events -------------------------------------------------------------------------------
+
+    def add_events(self, flight_id: str, events: Sequence[FlightEvent]) -> int:
+        """Keep events (by their ``seq``); one already kept is not written again. Returns how
+        many were new."""
+        if not events:
+            return 0
+        seqs = [e.seq for e in events]
+        with Session(self.engine) as session, session.begin():
+            have = set(
+                session.scalars(
+                    select(EventRow.seq)
+                    .where(EventRow.flight_id == flight_id)
+                    .where(EventRow.seq.in_(seqs))
+                )
+            )
+            new = [e for e in events if e.seq not in have]
+            session.add_all(
+                EventRow(
+                    flight_id=flight_id,
+                    seq=e.seq,
+                    kind=str(e.kind),
+                    utc_s=None if e.utc_s != e.utc_s else e.utc_s,  # NaN: no clock yet
+                    t_s=e.t_s,
+                    vehicle=e.vehicle,
+                    strategy=e.strategy,
+                    value=e.value,
+                    reason=e.reason,
+                    payload=dict(e.payload) or None,
+                )
+                for e in new
+            )
+            try:
+                session.flush()
+            except IntegrityError as err:
+                raise StoreError(f"flight {flight_id}: events not kept: {err.orig}") from None
+        return len(new)
+
+    def events(
+        self, flight_id: str, *, after_seq: int = 0, limit: int | None = None
+    ) -> list[FlightEvent]:
+        """A flight's events after ``after_seq``, in order (at most ``limit``)."""
+        query = (
+            select(EventRow)
+            .where(EventRow.flight_id == flight_id)
+            .where(EventRow.seq > after_seq)
+            .order_by(EventRow.seq)
+        )
+        if limit is not None:
+            query = query.limit(limit)
+        with Session(self.engine) as session:
+            return [
+                FlightEvent(
+                    utc_s=float("nan") if r.utc_s is None else r.utc_s,
+                    t_s=r.t_s,
+                    vehicle=r.vehicle,
+                    kind=r.kind,  # type: ignore[arg-type]  # FlightEvent makes it an EventKind
+                    reason=r.reason,
+                    strategy=r.strategy,
+                    value=r.value,
+                    seq=r.seq,
+                    payload=r.payload or {},
+                )
+                for r in session.scalars(query)
+            ]
+
+    # -- uploads ------------------------------------------------------------------------------
+
+    def record_upload(
+        self,
+        flight_id: str,
+        vehicle_id: str,
+        items: Sequence[MissionItem],
+        *,
+        what: str,
+        utc_s: float | None = None,
+    ) -> None:
+        """Keep the mission items uploaded to a vehicle."""
+        with Session(self.engine) as session, session.begin():
+            session.add(
+                UploadRow(
+                    flight_id=flight_id,
+                    vehicle_id=vehicle_id,
+                    utc_s=utc_s,
+                    what=what,
+                    items=[_item_json(it) for it in items],
+                )
+            )
+
+    def last_upload(self, flight_id: str, vehicle_id: str) -> list[MissionItem] | None:
+        """The items last uploaded to a vehicle of a flight (None: none yet)."""
+        with Session(self.engine) as session:
+            row = session.scalars(
+                select(UploadRow)
+                .where(UploadRow.flight_id == flight_id)
+                .where(UploadRow.vehicle_id == vehicle_id)
+                .order_by(UploadRow.id.desc())
+                .limit(1)
+            ).first()
+            return None if row is None else [MissionItem(**it) for it in row.items]
+
+    def upload_count(self, flight_id: str) -> int:
+        with Session(self.engine) as session:
+            return len(
+                session.scalars(select(UploadRow.id).where(UploadRow.flight_id == flight_id)).all()
+            )
+
+
+class EventWriter:
+    """Writes a flight's events from its bus subscription to the store, in batches, in a
+    worker thread: the control loop never waits for the database."""
+
+    def __init__(self, store: Store, flight_id: str, *, batch: int = 200) -> None:
+        self.store = store
+        self.flight_id = flight_id
+        self.batch = batch
+        self.written = 0
+
+    async def run(self, events: Subscription) -> None:
+        """Until the subscription is closed and drained."""
+        while (first := await events.get()) is not None:
+            pending = [first]
+            while len(pending) < self.batch and (more := events.get_nowait()) is not None:
+                pending.append(more)
+            self.written += await asyncio.to_thread(self.store.add_events, self.flight_id, pending)

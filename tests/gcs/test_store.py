@@ -1,0 +1,166 @@
+"""The store on SQLite (a file) and on the PostgreSQL server these machines run, over TCP.
+
+In CI (``CI`` set) a PostgreSQL that cannot be reached is a failure, not a skip.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import math
+import os
+import uuid
+from collections.abc import Iterator
+from pathlib import Path
+
+import pytest
+from sqlalchemy import create_engine, text
+
+from gcs.coordination.bus import EventBus
+from gcs.coordination.events import EventKind, FlightEvent
+from gcs.store.repository import EventWriter, Store, StoreConflict, StoreError, StoreNotFound
+from planner.mission import Waypoint, compile_mission
+
+PG_ADMIN = "postgresql+psycopg://postgres@127.0.0.1:5432/test"
+SCENARIO = "name: demo\nvehicles: []\n"
+
+
+def _postgres_schema() -> Iterator[str]:
+    """A fresh schema on the local PostgreSQL, dropped afterwards; its store URL."""
+    try:
+        admin = create_engine(PG_ADMIN)
+        with admin.connect() as conn:
+            conn.execute(text("select 1"))
+    except Exception as err:
+        if os.environ.get("CI"):
+            pytest.fail(f"PostgreSQL at 127.0.0.1:5432 is required in CI: {err}")
+        pytest.skip(f"no PostgreSQL at 127.0.0.1:5432: {err}")
+    schema = f"t_{uuid.uuid4().hex[:12]}"
+    with admin.begin() as conn:
+        conn.execute(text(f"create schema {schema}"))
+    try:
+        yield f"{PG_ADMIN}?options=-csearch_path%3D{schema}"
+    finally:
+        with admin.begin() as conn:
+            conn.execute(text(f"drop schema {schema} cascade"))
+        admin.dispose()
+
+
+@pytest.fixture(params=["sqlite", "postgresql"])
+def store_url(request: pytest.FixtureRequest, tmp_path: Path) -> Iterator[str]:
+    if request.param == "sqlite":
+        yield f"sqlite:///{tmp_path / 'tcgcs.db'}"
+    else:
+        yield from _postgres_schema()
+
+
+@pytest.fixture
+def store(store_url: str) -> Iterator[Store]:
+    s = Store.open(store_url)
+    try:
+        yield s
+    finally:
+        s.close()
+
+
+def _event(
+    seq: int, kind: EventKind = EventKind.SPEED, vehicle: str | None = "UAV1"
+) -> FlightEvent:
+    return FlightEvent(1.7e9 + seq, float(seq), vehicle, kind, f"event {seq}", "speed", 21.5, seq)
+
+
+def test_scenarios_are_kept_by_content_hash_and_never_changed(store: Store) -> None:
+    a = store.save_scenario(SCENARIO, name="demo")
+    assert store.save_scenario(SCENARIO, name="another name") == a  # same text, same id
+    b = store.save_scenario(SCENARIO + "# changed\n", name="demo")
+    assert a != b and len(a) == 64
+    row = store.scenario(a)
+    assert (row.name, row.body) == ("demo", SCENARIO)
+    with pytest.raises(StoreNotFound, match="no scenario 'nope'"):
+        store.scenario("nope")
+
+
+def test_flight_state_and_team_time_move_with_a_version(store: Store) -> None:
+    sid = store.save_scenario(SCENARIO, name="demo")
+    fid = store.create_flight(sid, {"UAV1": "tcp:127.0.0.1:5760", "UAV2": None})
+    f = store.flight(fid)
+    assert (f.state, f.version, f.vehicles["UAV1"]) == (
+        "planned",
+        1,
+        ("waiting", "tcp:127.0.0.1:5760", None),
+    )
+    v2 = store.update_flight(fid, expected_version=1, state="running", team_time_s=5234.1)
+    assert v2 == 2 and store.flight(fid).team_time_s == 5234.1
+    with pytest.raises(StoreConflict, match="version 1 is stale"):
+        store.update_flight(fid, expected_version=1, team_time_s=6000.0)
+    assert store.flight(fid).team_time_s == 5234.1  # the refused change changed nothing
+    with pytest.raises(StoreError, match="'flying' is not one of"):
+        store.update_flight(fid, state="flying")
+    store.set_vehicle(fid, "UAV1", phase="on_route", system_id=1)
+    assert store.flight(fid).vehicles["UAV1"] == ("on_route", "tcp:127.0.0.1:5760", 1)
+    with pytest.raises(StoreNotFound):
+        store.update_flight("nope", state="running")
+
+
+def test_a_vehicle_is_in_one_flight_at_a_time(store: Store) -> None:
+    sid = store.save_scenario(SCENARIO, name="demo")
+    first = store.create_flight(sid, {"UAV1": "tcp:127.0.0.1:5760"})
+    with pytest.raises(StoreConflict, match=f"tcp:127.0.0.1:5760 is already in flight {first}"):
+        store.create_flight(sid, {"UAV9": "tcp:127.0.0.1:5760"})
+    store.update_flight(first, state="completed")
+    store.create_flight(sid, {"UAV1": "tcp:127.0.0.1:5760"})  # free again
+
+
+def test_events_are_kept_once_in_sequence(store: Store) -> None:
+    sid = store.save_scenario(SCENARIO, name="demo")
+    fid = store.create_flight(sid, {"UAV1": None})
+    assert store.add_events(fid, [_event(k) for k in range(1, 6)]) == 5
+    assert store.add_events(fid, [_event(k) for k in range(4, 9)]) == 3  # 4, 5 already kept
+    got = store.events(fid)
+    assert [e.seq for e in got] == list(range(1, 9))
+    assert got[0] == _event(1)
+    assert [e.seq for e in store.events(fid, after_seq=6)] == [7, 8]
+    assert [e.seq for e in store.events(fid, after_seq=2, limit=2)] == [3, 4]
+    no_clock = FlightEvent(math.nan, 0.0, None, EventKind.PLAN, "before the clock", seq=9)
+    store.add_events(fid, [no_clock])
+    assert math.isnan(store.events(fid, after_seq=8)[0].utc_s)
+
+
+def test_uploaded_missions_come_back_item_for_item(store: Store) -> None:
+    sid = store.save_scenario(SCENARIO, name="demo")
+    fid = store.create_flight(sid, {"UAV1": None})
+    home = Waypoint(-35.36, 149.16, 584.0)
+    first = compile_mission(
+        home=home, waypoints=[Waypoint(-35.35, 149.17, 700.5)], takeoff_alt_m=80.0
+    )
+    second = compile_mission(
+        home=home, waypoints=[Waypoint(-35.34, 149.18, 650.25)], takeoff_alt_m=80.0
+    )
+    assert store.last_upload(fid, "UAV1") is None
+    store.record_upload(fid, "UAV1", first, what="initial mission", utc_s=1.7e9)
+    store.record_upload(fid, "UAV1", second, what="loiter inserted", utc_s=1.7e9 + 60)
+    assert store.last_upload(fid, "UAV1") == second
+    assert store.upload_count(fid) == 2
+
+
+async def test_the_event_writer_keeps_every_event_of_a_bus(store: Store) -> None:
+    sid = store.save_scenario(SCENARIO, name="demo")
+    fid = store.create_flight(sid, {"UAV1": None})
+    bus = EventBus()
+    writer = EventWriter(store, fid, batch=7)
+    sub = bus.subscribe(maxsize=10_000)
+    task = asyncio.create_task(writer.run(sub))
+    for k in range(50):
+        bus.publish(FlightEvent(1.7e9 + k, float(k), "UAV1", EventKind.SPEED, f"e{k}"))
+        if k % 10 == 0:
+            await asyncio.sleep(0)
+    sub.close()
+    await task
+    assert writer.written == 50
+    assert [e.seq for e in store.events(fid)] == list(range(1, 51))
+
+
+def test_a_bad_url_or_an_unreachable_server_is_one_clear_error() -> None:
+    with pytest.raises(StoreError, match="database URL 'nosuch://x'"):
+        Store.open("nosuch://x")
+    with pytest.raises(StoreError, match="unreachable"):
+        Store.open("postgresql+psycopg://postgres@127.0.0.1:1/test?connect_timeout=2")
