@@ -5,7 +5,7 @@ PY := $(VENV)/bin/python
 STAMP := $(VENV)/.installed
 OUT ?= out
 
-.PHONY: test lint typecheck pytest demo bench clean
+.PHONY: test test-quick lint typecheck pytest demo bench clean
 
 $(PY):
 	$(PYTHON) -m venv $(VENV)
@@ -26,6 +26,10 @@ typecheck: $(STAMP)
 
 pytest: $(STAMP)
 	$(VENV)/bin/pytest -q
+
+# Everything but the whole rehearsals (marked slow): a few minutes less.
+test-quick: $(STAMP) lint typecheck
+	$(VENV)/bin/pytest -q -m "not slow"
 
 demo: $(STAMP)
 	mkdir -p $(OUT)
