@@ -26,7 +26,7 @@ from typing import TYPE_CHECKING, Any, Final
 from gcs.mission_errors import MissionMismatch, MissionTimeout
 from gcs.mission_protocol import Clear, Download, SetCurrent, Transfer, Upload
 from gcs.modes import AUTOPILOT_PX4
-from gcs.retry import DEFAULT_POLICY, RetryPolicy
+from gcs.retry import DEFAULT_POLICY, RetryPolicy, remember_rtt, rtt_hint_s
 from planner.mission import (
     Autopilot,
     MissionItem,
@@ -55,15 +55,14 @@ DEFAULT_RETRIES: Final = 5
 """The MAVLink mission service's fixed timeout and retry count: what ``timeout_s=`` and
 ``retries=`` gave by default before the adaptive policy (:mod:`gcs.retry`) replaced them."""
 DEFAULT_WINDOW: Final = 8
-"""Item requests outstanding in a download from a vehicle that answers any request."""
+"""Item requests outstanding in a download, and items sent ahead of the requests in an upload,
+with a vehicle that answers any request and takes items in order ahead of its requests."""
 
 Progress = Callable[[int, int], None]
 """Called with (done, total) items whenever a transfer moves on."""
 
 # One lock per (link, vehicle): transfers with one vehicle on one link take turns.
 _locks: weakref.WeakKeyDictionary[Any, dict[int, asyncio.Lock]] = weakref.WeakKeyDictionary()
-# The smoothed round trip the last transfer measured, per (link, vehicle): the next one's start.
-_srtt_s: weakref.WeakKeyDictionary[Any, dict[int, float]] = weakref.WeakKeyDictionary()
 
 
 def _lock(link: Link, target_system: int) -> asyncio.Lock:
@@ -152,8 +151,7 @@ async def run_transfer(link: Link, transfer: Transfer, *, progress: Progress | N
             await driver.run()
         finally:
             remove()
-            if transfer.rtt.samples and transfer.rtt.srtt_s is not None:
-                _srtt_s.setdefault(link, {})[transfer.target_system] = transfer.rtt.srtt_s
+            remember_rtt(link, transfer.target_system, transfer.rtt)
             # Cancelled from outside, or the watchdog fired: tell the vehicle.
             for out in transfer.cancel(driver.loop.time()):
                 link.send(out)
@@ -176,9 +174,6 @@ def _options(
     The last transfer's round trip with this vehicle, else the link's TIMESYNC round trip,
     seeds the adaptive timeout.
     """
-    rtt_hint_s = _srtt_s.get(link, {}).get(target_system)
-    if rtt_hint_s is None:
-        rtt_hint_s = getattr(getattr(link, "counters", None), "rtt_s", None)
     return {
         "target_system": target_system,
         "target_component": target_component,
@@ -187,7 +182,7 @@ def _options(
         "own_system": getattr(link, "system_id", None),
         "own_component": getattr(link, "component_id", None),
         "policy": policy or DEFAULT_POLICY,
-        "rtt_hint_s": rtt_hint_s,
+        "rtt_hint_s": rtt_hint_s(link, target_system),
         "within_s": within_s,
     }
 
@@ -212,6 +207,7 @@ async def upload_mission(
     policy: RetryPolicy | None = None,
     within_s: float | None = None,
     autopilot: Autopilot | None = None,
+    window: int | None = None,
 ) -> None:
     """Upload ``items`` (seq = index, all of ``mission_type``) to vehicle ``target_system``.
 
@@ -228,7 +224,10 @@ async def upload_mission(
     upload has not advanced for ``policy.stall_s`` (:mod:`gcs.retry`). ``timeout_s`` fixes
     the resend timeout instead; ``retries`` limits the resends of one exchange. ``within_s``
     bounds the upload itself: a transfer still going then is cancelled (``MissionTimeout``)
-    and the vehicle keeps the mission it had.
+    and the vehicle keeps the mission it had. ``window``: items sent ahead of the vehicle's
+    requests, in order (default: :data:`DEFAULT_WINDOW` to a vehicle known not to be PX4,
+    else 1: each item when it is asked for). The verify download runs with the same
+    ``policy`` and the time left of ``within_s``.
 
     Raises
     ------
@@ -240,7 +239,9 @@ async def upload_mission(
     """
     opts = _options(link, target_system, target_component, timeout_s, retries, policy, within_s)
     ahead = _answers_any_request(link, target_system)
-    upload = Upload(items, mission_type=mission_type, send_ahead=ahead, **opts)
+    if window is None:
+        window = DEFAULT_WINDOW if ahead else 1
+    upload = Upload(items, mission_type=mission_type, send_ahead=ahead, window=window, **opts)
     await run_transfer(link, upload, progress=progress)
     if not verify:
         return

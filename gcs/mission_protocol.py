@@ -547,12 +547,22 @@ class Upload(Transfer):
     message_types = frozenset({"MISSION_REQUEST_INT", "MISSION_REQUEST", "MISSION_ACK"})
 
     def __init__(
-        self, items: Sequence[MissionItem], *, send_ahead: bool = False, **kwargs: Any
+        self,
+        items: Sequence[MissionItem],
+        *,
+        send_ahead: bool = False,
+        window: int = 1,
+        **kwargs: Any,
     ) -> None:
         super().__init__(**kwargs)
         _check_items(items, self.mission_type, self.target_system)
+        if isinstance(window, bool) or not isinstance(window, int) or window < 1:
+            raise ValueError(f"window must be an integer >= 1, got {window!r}")
+        if window > 1 and not send_ahead:
+            raise ValueError("an upload window needs send_ahead (a vehicle that takes items ahead)")
         self.items = tuple(items)
         self.send_ahead = send_ahead
+        self.window = window
         self.highest_requested = -1
         """Highest seq the vehicle asked for: it holds every item below."""
         self.counters.update(
@@ -560,6 +570,8 @@ class Upload(Transfer):
         )
         self._messages: list[Any | None] = [None] * len(self.items)
         self._highest_sent = -1
+        self._frontier = -1  # highest item sent since the last resend: in flight or taken
+        self._sent_s: list[float | None] = [None] * len(self.items)  # None: sent twice
 
     @property
     def progress(self) -> tuple[int, int]:
@@ -576,8 +588,13 @@ class Upload(Transfer):
             self.target_system, self.target_component, len(self.items), self.mission_type
         )
 
-    def _item(self, seq: int) -> Any:
+    def _item(self, seq: int, now_s: float | None = None) -> Any:
+        if seq <= self._highest_sent:
+            self._sent_s[seq] = None  # sent again: its answer gives no round-trip sample
+        else:
+            self._sent_s[seq] = now_s
         self._highest_sent = max(self._highest_sent, seq)
+        self._frontier = max(self._frontier, seq)
         msg = self._messages[seq]
         if msg is None:
             msg = self._messages[seq] = item_message(
@@ -610,11 +627,16 @@ class Upload(Transfer):
         self.step = Step.SEND_ITEMS
         if seq > self.highest_requested:
             # The answer to our last item (or to the COUNT): the vehicle moved on.
-            self._answered(now_s)
+            if self.window == 1 or seq == 0:
+                self._answered(now_s)
+            else:
+                sent_s = self._sent_s[seq - 1]
+                if sent_s is not None:
+                    self._sample(now_s - sent_s)
             self.highest_requested = seq
             self._progressed(now_s)
             self._new_exchange(now_s)
-            return [self._item(seq)]
+            return self._fill_window(seq, now_s)
         if seq < self.highest_requested:
             # Asked again for an item it had moved past: a late copy of an old request, so an
             # earlier resend of ours was needless (or the link duplicates).
@@ -629,7 +651,20 @@ class Upload(Transfer):
         self.retries_done = 0
         self._clean = False
         self._deadline_s = now_s + self._wait_s(now_s)
-        return [self._item(seq)]
+        if seq == self.highest_requested:
+            # It still misses this one, so it ignored what we sent after it: send that again.
+            self._frontier = seq
+        return [self._item(seq, now_s)]
+
+    def _fill_window(self, seq: int, now_s: float) -> list[Any]:
+        """Item ``seq`` unless already in flight, and the items after it the window allows.
+
+        A vehicle that takes items ahead of its requests holds them only in order, so items
+        go out in order and each once per pass; a timeout starts a new pass (see _resend).
+        """
+        top = min(len(self.items) - 1, seq + self.window - 1)
+        first = max(seq, self._frontier + 1) if self.window > 1 else seq
+        return [self._item(k, now_s) for k in range(first, top + 1)]
 
     def _on_ack(self, result: int, now_s: float) -> None:
         n = len(self.items)
@@ -656,6 +691,9 @@ class Upload(Transfer):
         if self.step is Step.SEND_COUNT:
             return [self._count()]
         h = self.highest_requested
+        # What was sent beyond what goes again now was dropped or ignored (the vehicle takes
+        # items only in order): the next requests send it again.
+        self._frontier = h
         if not self.send_ahead:
             return [self._item(h)]
         # The vehicle needs an item from h to one past the highest sent: h and the newest few

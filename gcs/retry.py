@@ -18,10 +18,11 @@ there but not taking part). While the vehicle is silent the resends back off to
 from __future__ import annotations
 
 import math
+import weakref
 from dataclasses import dataclass
-from typing import Final
+from typing import Any, Final
 
-__all__ = ["DEFAULT_POLICY", "RetryPolicy", "RttEstimator"]
+__all__ = ["DEFAULT_POLICY", "RetryPolicy", "RttEstimator", "remember_rtt", "rtt_hint_s"]
 
 
 @dataclass(frozen=True, slots=True)
@@ -102,3 +103,22 @@ class RttEstimator:
         if silent_s < self.policy.quiet_s or resends == 0:
             return rto
         return min(self.policy.max_rto_s, rto * 2.0 ** min(resends, 16))
+
+
+# The smoothed round trip the last exchange measured, per (link, vehicle): the next one's start.
+_srtt_s: weakref.WeakKeyDictionary[Any, dict[int, float]] = weakref.WeakKeyDictionary()
+
+
+def rtt_hint_s(link: Any, system_id: int) -> float | None:
+    """Where a new transfer's timer starts: the round trip last measured with this vehicle on
+    this link (by a mission transfer or a command), else the link's TIMESYNC round trip."""
+    hint = _srtt_s.get(link, {}).get(system_id)
+    if hint is None:
+        hint = getattr(getattr(link, "counters", None), "rtt_s", None)
+    return hint
+
+
+def remember_rtt(link: Any, system_id: int, rtt: RttEstimator) -> None:
+    """Keep what ``rtt`` measured (if anything) for the next exchange with this vehicle."""
+    if rtt.samples and rtt.srtt_s is not None:
+        _srtt_s.setdefault(link, {})[system_id] = rtt.srtt_s

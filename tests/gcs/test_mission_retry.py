@@ -154,6 +154,30 @@ def test_send_ahead_offers_the_next_items_after_a_timeout() -> None:
     assert [m.seq for m in up.tick(t)] == [1, 2, 3]
 
 
+def test_windowed_upload_streams_items_ahead_once_and_again_after_a_timeout() -> None:
+    up = Upload(mission(10), send_ahead=True, window=3, **OURS)
+    up.start(0.0)
+    assert [m.seq for m in up.handle(req(0), 0.01)] == [0, 1, 2]
+    assert [m.seq for m in up.handle(req(1), 0.02)] == [3]  # 1 and 2 are in flight
+    assert [m.seq for m in up.handle(req(2), 0.03)] == [4]
+    assert up.rtt.samples == 3  # the COUNT's answer, then item 0's and item 1's
+    # Item 3 was lost: the vehicle ignores 4 and asks for nothing more. The timeout sends 2
+    # and 3 again; what was sent beyond goes again with the next requests.
+    t = up.next_deadline()
+    assert t is not None
+    assert [m.seq for m in up.tick(t)] == [2, 3]
+    assert [m.seq for m in up.handle(req(3), t + 0.01)] == [4, 5]
+    # The vehicle asks again for an item it still misses: what followed it goes again too.
+    assert [m.seq for m in up.handle(req(4), t + 0.02)] == [6]
+    assert [m.seq for m in up.handle(req(4), t + 0.5)] == [4]
+    assert [m.seq for m in up.handle(req(5), t + 0.51)] == [5, 6, 7]
+
+
+def test_an_upload_window_needs_a_vehicle_that_takes_items_ahead() -> None:
+    with pytest.raises(ValueError, match="send_ahead"):
+        Upload(mission(3), window=4, **OURS)
+
+
 def test_windowed_download_requests_ahead_and_assembles_in_order() -> None:
     from tests.gcs.test_mission_protocol import count_msg, item_int_msg
 
@@ -181,7 +205,7 @@ def _default_round_trip(seed: int, loss: float) -> tuple[bool, float, float]:
     old = mission(5)
     server.store(tuple(stub_items.MissionItem(**_fields(it)) for it in old))
     items = mission(200)
-    up = Upload(items, send_ahead=True, rtt_hint_s=LINK_RTT_S, **OURS)
+    up = Upload(items, send_ahead=True, window=DEFAULT_WINDOW, rtt_hint_s=LINK_RTT_S, **OURS)
     t_up = run(up, server, channel, heartbeat_s=1.0)
     stored = as_planner(server.items(0))
     if up.result is not Result.SUCCESS:
