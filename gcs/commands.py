@@ -2,12 +2,17 @@
 
 The transaction (:class:`CommandTransaction`) follows the MAVLink command protocol as MAVSDK's
 ``MavlinkCommandSender`` does: send COMMAND_LONG (or COMMAND_INT), wait for the COMMAND_ACK of
-that command from the target, resend on timeout (COMMAND_LONG with ``confirmation`` + 1),
-give up after ``retries`` resends. ``MAV_RESULT_IN_PROGRESS`` stops the resends and pushes the
+that command from the target, resend on timeout (COMMAND_LONG with ``confirmation`` + 1).
+When to resend and when to give up is the mission transfers' policy (:mod:`gcs.retry`): by
+default the resend timeout follows the measured round trip (an ACK to a command sent once is a
+sample), and the command fails when nothing has been heard from the vehicle for
+``policy.silence_s`` or no answer came for ``policy.stall_s``, not after a count of resends.
+``timeout_s`` fixes the timeout and ``retries`` bounds the resends (the MAVLink service's
+1.5 s and 5 when both are given). ``MAV_RESULT_IN_PROGRESS`` stops the resends and pushes the
 deadline out by ``in_progress_timeout_s`` on every progress report; the final ACK ends it. If
 progress reports stop, the transaction times out without resending (a resend could restart a
-long-running operation). It is driven by ``start``/``handle``/``tick`` with the caller's clock
-and returns the messages to send: no sockets, no clock, no asyncio.
+long-running operation). It is driven by ``start``/``handle``/``heard``/``tick`` with the
+caller's clock and returns the messages to send: no sockets, no clock, no asyncio.
 
 :func:`command_long` / :func:`command_int` run a transaction over a :class:`gcs.link.Link`
 and return a :class:`CommandAck` or raise a :class:`CommandError` subclass.
@@ -26,12 +31,15 @@ from pymavlink.dialects.v20 import ardupilotmega as mavlink2
 
 from gcs.errors import GcsError
 from gcs.modes import AUTOPILOT_PX4, mode_number, px4_main_sub
+from gcs.retry import DEFAULT_POLICY, RetryPolicy, RttEstimator, remember_rtt, rtt_hint_s
 
 if TYPE_CHECKING:
     from gcs.link import Link
 
 DEFAULT_TIMEOUT_S: Final = 1.5
 DEFAULT_RETRIES: Final = 5
+"""The MAVLink command service's fixed timeout and resend count: what ``timeout_s=`` and
+``retries=`` gave by default before the adaptive policy (:mod:`gcs.retry`) replaced them."""
 DEFAULT_IN_PROGRESS_TIMEOUT_S: Final = 5.0
 FORCE_ARM_MAGIC: Final = 21196.0  # ArduPilot/PX4: param2 of ARM_DISARM bypasses checks
 
@@ -205,9 +213,14 @@ class CommandTransaction:
     """One command and its acknowledgement, as a sans-IO state machine.
 
     ``start(now_s)`` returns the first message to send; ``handle(msg, now_s)`` takes every
-    received message (non-matching ones are ignored); ``tick(now_s)`` handles deadlines and
-    returns resends. ``done``, ``result``, ``ack`` and ``progress`` tell how it went;
-    ``deadline_s`` is when ``tick`` next has work to do.
+    received message (non-matching ones are ignored); ``heard(now_s)`` says something else
+    arrived from the vehicle (it is there); ``tick(now_s)`` handles deadlines and returns
+    resends. ``done``, ``result``, ``ack`` and ``progress`` tell how it went; ``deadline_s``
+    is when ``tick`` next has work to do.
+
+    ``timeout_s`` None: resend after the adaptive timeout (``rtt_hint_s`` seeds it);
+    ``retries`` None: fail after ``policy.silence_s`` without hearing the vehicle or
+    ``policy.stall_s`` without an answer, else after ``retries`` resends.
     """
 
     def __init__(
@@ -220,21 +233,23 @@ class CommandTransaction:
         position: IntPosition | None = None,
         own_system: int | None = None,
         own_component: int | None = None,
-        timeout_s: float = DEFAULT_TIMEOUT_S,
-        retries: int = DEFAULT_RETRIES,
+        timeout_s: float | None = None,
+        retries: int | None = None,
         in_progress_timeout_s: float = DEFAULT_IN_PROGRESS_TIMEOUT_S,
+        policy: RetryPolicy = DEFAULT_POLICY,
+        rtt_hint_s: float | None = None,
     ) -> None:
         n_params = 4 if position is not None else 7
         if len(params) > n_params:
             kind = "COMMAND_INT" if position is not None else "COMMAND_LONG"
             raise ValueError(f"{kind} takes at most {n_params} params, got {len(params)}")
-        if not (math.isfinite(timeout_s) and timeout_s > 0):
+        if timeout_s is not None and not (math.isfinite(timeout_s) and timeout_s > 0):
             raise ValueError(f"timeout_s must be a positive number of seconds, got {timeout_s!r}")
         if not (math.isfinite(in_progress_timeout_s) and in_progress_timeout_s > 0):
             raise ValueError(
                 f"in_progress_timeout_s must be a positive number, got {in_progress_timeout_s!r}"
             )
-        if retries < 0:
+        if retries is not None and retries < 0:
             raise ValueError(f"retries must be >= 0, got {retries}")
         if not (0 <= target_system <= 255 and 0 <= target_component <= 255):
             raise ValueError(f"target {target_system}/{target_component} outside 0..255")
@@ -248,8 +263,12 @@ class CommandTransaction:
         self.own_system = own_system
         self.own_component = own_component
         self.timeout_s = timeout_s
+        """A fixed resend timeout (None: adaptive, from the measured round trip)."""
         self.retries = retries
+        """Resends before giving up (None: the policy's silence and stall bounds decide)."""
         self.in_progress_timeout_s = in_progress_timeout_s
+        self.policy = policy
+        self.rtt = RttEstimator(policy, rtt_hint_s)
         self.step = Step.IDLE
         self.result: Result | None = None
         self.ack: CommandAck | None = None
@@ -258,6 +277,11 @@ class CommandTransaction:
         self.deadline_s = math.inf
         self.started_s: float | None = None
         self.finished_s: float | None = None
+        self.timed_out_because = ""
+        """Why a timeout ended it (the silence or stall bound; empty for the others)."""
+        self._sent_s = 0.0  # the last send
+        self._resend_s = math.inf  # when the next resend is due
+        self._last_heard_s = 0.0
 
     # -- driving ---------------------------------------------------------------------------
 
@@ -269,16 +293,29 @@ class CommandTransaction:
         """Begin: the first COMMAND_LONG / COMMAND_INT to send."""
         if self.step is not Step.IDLE:
             raise RuntimeError("transaction already started")
-        self.started_s = now_s
+        self.started_s = self._last_heard_s = now_s
         self.step = Step.AWAITING_ACK
         return [self._send(now_s)]
 
+    def heard(self, now_s: float) -> None:
+        """Something (a heartbeat, telemetry) arrived from the vehicle: it is there."""
+        self._last_heard_s = max(self._last_heard_s, now_s)
+        if self.step is Step.AWAITING_ACK:
+            self._set_deadline()
+
     def handle(self, msg: Any, now_s: float) -> list[Any]:
         """Take a received message; a matching COMMAND_ACK advances the transaction."""
-        if self.step is Step.IDLE or self.step is Step.DONE or not self._is_our_ack(msg):
+        if self.step is Step.IDLE or self.step is Step.DONE:
             return []
+        if not self._is_our_ack(msg):
+            if self.target_system in (0, msg.get_srcSystem()):
+                self.heard(now_s)
+            return []
+        self._last_heard_s = now_s
         result = int(msg.result)
         self.ack = self._make_ack(msg)
+        if self.attempts == 1 and self.step is Step.AWAITING_ACK:
+            self.rtt.sample(now_s - self._sent_s)  # sent once: the ACK answers that copy
         if result == MAV_RESULT_IN_PROGRESS:
             self.progress = self.ack.progress
             self.step = Step.IN_PROGRESS
@@ -289,14 +326,33 @@ class CommandTransaction:
         return []
 
     def tick(self, now_s: float) -> list[Any]:
-        """Handle an expired deadline: resend, or time out after the last retry."""
+        """Handle an expired deadline: resend, or time out (progress reports stopped, the
+        last retry, or the policy's silence or stall bound)."""
         if self.step is Step.IDLE or self.step is Step.DONE or now_s < self.deadline_s:
             return []
-        if self.step is Step.IN_PROGRESS or self.attempts > self.retries:
-            self.result = Result.TIMEOUT
-            self._finish(now_s)
+        if self.step is Step.IN_PROGRESS:
+            return self._time_out(now_s, "")
+        if self.retries is None:
+            assert self.started_s is not None
+            silent_s = now_s - self._last_heard_s
+            if silent_s >= self.policy.silence_s:
+                return self._time_out(now_s, f"nothing heard from the vehicle for {silent_s:.1f} s")
+            if now_s - self.started_s >= self.policy.stall_s:
+                return self._time_out(
+                    now_s,
+                    f"no answer for {now_s - self.started_s:.1f} s though the vehicle is heard",
+                )
+        elif self.attempts > self.retries:
+            return self._time_out(now_s, "")
+        if now_s < self._resend_s:
+            self._set_deadline()
             return []
         return [self._send(now_s)]
+
+    @property
+    def timeout_now_s(self) -> float:
+        """The resend timeout in force (fixed, or adaptive from the round trips so far)."""
+        return self.timeout_s if self.timeout_s is not None else self.rtt.rto_s
 
     # -- outcome ----------------------------------------------------------------------------
 
@@ -315,6 +371,8 @@ class CommandTransaction:
                 text = f"{who}: {cmd} stopped reporting progress{pct} (timeout{waited})"
             else:
                 text = f"{who}: {cmd} not acknowledged after {self.attempts} attempts{waited}"
+                if self.timed_out_because:
+                    text += f" ({self.timed_out_because})"
             return CommandTimeout(
                 text, command=self.command, result=None, vehicle=self.target_system, ack=self.ack
             )
@@ -342,10 +400,31 @@ class CommandTransaction:
         self.deadline_s = math.inf
         self.finished_s = now_s
 
+    def _time_out(self, now_s: float, why: str) -> list[Any]:
+        self.result = Result.TIMEOUT
+        self.timed_out_because = why
+        self._finish(now_s)
+        return []
+
+    def _set_deadline(self) -> None:
+        """The next of: the resend, and (without a retry count) the silence and stall bounds."""
+        t = self._resend_s
+        if self.retries is None and self.started_s is not None:
+            p = self.policy
+            t = min(t, self._last_heard_s + p.silence_s, self.started_s + p.stall_s)
+        self.deadline_s = t
+
     def _send(self, now_s: float) -> Any:
         confirmation = min(self.attempts, 255)
+        resends = self.attempts
         self.attempts += 1
-        self.deadline_s = now_s + self.timeout_s
+        self._sent_s = now_s
+        if self.timeout_s is not None:
+            wait_s = self.timeout_s
+        else:
+            wait_s = self.rtt.wait_s(resends, now_s - self._last_heard_s)
+        self._resend_s = now_s + wait_s
+        self._set_deadline()
         p = self.params
         pos = self.position
         if pos is None:
@@ -403,20 +482,32 @@ async def run_transaction(link: Link, tx: CommandTransaction) -> CommandAck:
     """Run ``tx`` over ``link``: the final ACK, or the typed error raised.
 
     Subscribes before sending; every wait is bounded by the transaction's own deadline.
+    Anything else heard from the vehicle meanwhile tells the transaction it is there.
     """
     loop = asyncio.get_running_loop()
     system_filter = tx.target_system if tx.target_system != 0 else None
-    with link.subscribe(types={"COMMAND_ACK"}, system_id=system_filter) as sub:
-        for out in tx.start(loop.time()):
-            link.send(out)
-        while not tx.done:
-            wait_s = max(0.0, tx.deadline_s - loop.time())
-            msg = await sub.get(timeout_s=wait_s)
-            now = loop.time()
-            outgoing = tx.handle(msg, now) if msg is not None else []
-            outgoing += tx.tick(now)
-            for out in outgoing:
+
+    def on_message(msg: Any, _rx_s: float) -> None:
+        if system_filter in (None, msg.get_srcSystem()):
+            tx.heard(loop.time())
+
+    remove = link.add_listener(on_message)
+    try:
+        with link.subscribe(types={"COMMAND_ACK"}, system_id=system_filter) as sub:
+            for out in tx.start(loop.time()):
                 link.send(out)
+            while not tx.done:
+                wait_s = max(0.0, tx.deadline_s - loop.time())
+                msg = await sub.get(timeout_s=wait_s)
+                now = loop.time()
+                outgoing = tx.handle(msg, now) if msg is not None else []
+                outgoing += tx.tick(now)
+                for out in outgoing:
+                    link.send(out)
+    finally:
+        remove()
+        if system_filter is not None:
+            remember_rtt(link, system_filter, tx.rtt)
     err = tx.error()
     if err is not None:
         raise err
@@ -435,11 +526,14 @@ async def command_long(
     params: Sequence[float] = (0.0,) * 7,
     *,
     target_component: int = 1,
-    timeout_s: float = DEFAULT_TIMEOUT_S,
-    retries: int = DEFAULT_RETRIES,
+    timeout_s: float | None = None,
+    retries: int | None = None,
     in_progress_timeout_s: float = DEFAULT_IN_PROGRESS_TIMEOUT_S,
+    policy: RetryPolicy | None = None,
 ) -> CommandAck:
-    """Send COMMAND_LONG and wait for its final ACK; raises a CommandError subclass."""
+    """Send COMMAND_LONG and wait for its final ACK; raises a CommandError subclass.
+
+    Timeouts as :class:`CommandTransaction` (default: adaptive, :mod:`gcs.retry`)."""
     own_sys, own_comp = _own_ids(link)
     tx = CommandTransaction(
         target_system,
@@ -451,6 +545,8 @@ async def command_long(
         timeout_s=timeout_s,
         retries=retries,
         in_progress_timeout_s=in_progress_timeout_s,
+        policy=policy or DEFAULT_POLICY,
+        rtt_hint_s=rtt_hint_s(link, target_system),
     )
     return await run_transaction(link, tx)
 
@@ -466,9 +562,10 @@ async def command_int(
     y: int = 0,
     z: float = 0.0,
     target_component: int = 1,
-    timeout_s: float = DEFAULT_TIMEOUT_S,
-    retries: int = DEFAULT_RETRIES,
+    timeout_s: float | None = None,
+    retries: int | None = None,
     in_progress_timeout_s: float = DEFAULT_IN_PROGRESS_TIMEOUT_S,
+    policy: RetryPolicy | None = None,
 ) -> CommandAck:
     """Send COMMAND_INT (params 1-4, frame, x, y, z) and wait for its final ACK."""
     own_sys, own_comp = _own_ids(link)
@@ -483,6 +580,8 @@ async def command_int(
         timeout_s=timeout_s,
         retries=retries,
         in_progress_timeout_s=in_progress_timeout_s,
+        policy=policy or DEFAULT_POLICY,
+        rtt_hint_s=rtt_hint_s(link, target_system),
     )
     return await run_transaction(link, tx)
 
@@ -496,8 +595,8 @@ async def _arm_disarm(
     arm: bool,
     force: bool,
     target_component: int,
-    timeout_s: float,
-    retries: int,
+    timeout_s: float | None,
+    retries: int | None,
 ) -> CommandAck:
     return await command_long(
         link,
@@ -516,8 +615,8 @@ async def arm(
     *,
     force: bool = False,
     target_component: int = 1,
-    timeout_s: float = DEFAULT_TIMEOUT_S,
-    retries: int = DEFAULT_RETRIES,
+    timeout_s: float | None = None,
+    retries: int | None = None,
 ) -> CommandAck:
     """MAV_CMD_COMPONENT_ARM_DISARM arm (``force`` skips pre-arm checks)."""
     return await _arm_disarm(link, sysid, True, force, target_component, timeout_s, retries)
@@ -529,8 +628,8 @@ async def disarm(
     *,
     force: bool = False,
     target_component: int = 1,
-    timeout_s: float = DEFAULT_TIMEOUT_S,
-    retries: int = DEFAULT_RETRIES,
+    timeout_s: float | None = None,
+    retries: int | None = None,
 ) -> CommandAck:
     """MAV_CMD_COMPONENT_ARM_DISARM disarm (``force`` disarms in flight: the aircraft falls)."""
     return await _arm_disarm(link, sysid, False, force, target_component, timeout_s, retries)
@@ -553,8 +652,8 @@ async def set_mode(
     *,
     autopilot: int | None = None,
     target_component: int = 1,
-    timeout_s: float = DEFAULT_TIMEOUT_S,
-    retries: int = DEFAULT_RETRIES,
+    timeout_s: float | None = None,
+    retries: int | None = None,
 ) -> CommandAck:
     """MAV_CMD_DO_SET_MODE to a named custom mode (ArduPlane or PX4 names).
 
@@ -586,8 +685,8 @@ async def start_mission(
     last: int = 0,
     *,
     target_component: int = 1,
-    timeout_s: float = DEFAULT_TIMEOUT_S,
-    retries: int = DEFAULT_RETRIES,
+    timeout_s: float | None = None,
+    retries: int | None = None,
 ) -> CommandAck:
     """MAV_CMD_MISSION_START from item ``first`` to ``last`` (0, 0: the whole mission)."""
     if first < 0 or last < 0:
@@ -622,8 +721,8 @@ async def change_speed(
     airspeed: bool = True,
     throttle_pct: float = -1,
     target_component: int = 1,
-    timeout_s: float = DEFAULT_TIMEOUT_S,
-    retries: int = DEFAULT_RETRIES,
+    timeout_s: float | None = None,
+    retries: int | None = None,
 ) -> CommandAck:
     """MAV_CMD_DO_CHANGE_SPEED: airspeed (or groundspeed with ``airspeed=False``) in m/s."""
     params = change_speed_params(speed_m_s, airspeed=airspeed, throttle_pct=throttle_pct)
@@ -671,8 +770,8 @@ async def set_message_interval(
     interval_s: float,
     *,
     target_component: int = 1,
-    timeout_s: float = DEFAULT_TIMEOUT_S,
-    retries: int = DEFAULT_RETRIES,
+    timeout_s: float | None = None,
+    retries: int | None = None,
 ) -> CommandAck:
     """MAV_CMD_SET_MESSAGE_INTERVAL: stream ``message`` every ``interval_s`` (-1 off, 0 default)."""
     params = (float(message_id_of(message)), message_interval_us(interval_s))
@@ -693,8 +792,8 @@ async def request_message(
     msg_id: str | int,
     *,
     target_component: int = 1,
-    timeout_s: float = DEFAULT_TIMEOUT_S,
-    retries: int = DEFAULT_RETRIES,
+    timeout_s: float | None = None,
+    retries: int | None = None,
 ) -> CommandAck:
     """MAV_CMD_REQUEST_MESSAGE: ask for one message now (it arrives separately)."""
     return await command_long(

@@ -38,6 +38,7 @@ from gcs.commands import (
 )
 from gcs.errors import GcsError
 from gcs.link import Link
+from gcs.retry import RetryPolicy
 from sitl_stub.api import Home, SimTeam
 from sitl_stub.autopilot import Mode
 from sitl_stub.items import MissionItem
@@ -49,6 +50,7 @@ CMD_SPEED = int(mavlink2.MAV_CMD_DO_CHANGE_SPEED)
 ACCEPTED = int(mavlink2.MAV_RESULT_ACCEPTED)
 IN_PROGRESS = int(mavlink2.MAV_RESULT_IN_PROGRESS)
 DENIED = int(mavlink2.MAV_RESULT_DENIED)
+POLICY = RetryPolicy()
 
 
 def wire(msg: Any, src: tuple[int, int] = (1, 1)) -> Any:
@@ -94,7 +96,7 @@ def test_command_sends_command_long_with_params_and_zero_confirmation() -> None:
     params = [getattr(msg, f"param{i}") for i in range(1, 8)]
     assert params == [1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0]
     assert tx.step is Step.AWAITING_ACK
-    assert tx.deadline_s == pytest.approx(101.5)
+    assert tx.deadline_s == pytest.approx(100.0 + POLICY.initial_rto_s)  # nothing measured yet
 
 
 def test_command_resends_with_incremented_confirmation() -> None:
@@ -179,6 +181,83 @@ def test_command_succeeds_on_accepted_ack() -> None:
     )
     assert tx.elapsed_s == pytest.approx(1.6)
     assert tx.tick(10.0) == []
+
+
+# -- sans-IO: the adaptive defaults (gcs.retry) ------------------------------------------
+
+
+def test_command_with_defaults_resends_after_the_measured_round_trip() -> None:
+    tx = tx_for(rtt_hint_s=0.004)  # the link's TIMESYNC round trip
+    tx.start(0.0)
+    assert tx.deadline_s == pytest.approx(tx.rtt.rto_s) and tx.rtt.rto_s < 0.05
+    (again,) = tx.tick(tx.deadline_s)
+    assert again.confirmation == 1
+
+
+def test_an_ack_to_a_command_sent_once_is_a_round_trip_sample_and_a_resent_one_not() -> None:
+    once = tx_for()
+    once.start(0.0)
+    once.handle(ack(CMD_ARM, ACCEPTED), 0.03)
+    assert once.rtt.samples == 1 and once.rtt.srtt_s == pytest.approx(0.03)
+    twice = tx_for()
+    twice.start(0.0)
+    twice.tick(twice.deadline_s)
+    twice.handle(ack(CMD_ARM, ACCEPTED), 0.6)  # either copy's answer (Karn's rule)
+    assert twice.done and twice.rtt.samples == 0
+
+
+def test_command_with_defaults_keeps_resending_while_the_vehicle_is_heard() -> None:
+    """No fixed count: it ends at the stall bound, long after five resends."""
+    tx = tx_for(rtt_hint_s=0.01)
+    tx.start(0.0)
+    now, sent = 0.0, 1
+    while not tx.done:
+        now = tx.deadline_s
+        tx.heard(now)  # heartbeats keep coming
+        sent += len(tx.tick(now))
+    assert now == pytest.approx(POLICY.stall_s)
+    assert sent > 100 and tx.result is Result.TIMEOUT
+    err = tx.error()
+    assert isinstance(err, CommandTimeout)
+    assert f"no answer for {POLICY.stall_s:.1f} s" in str(err)
+
+
+def run_to_the_end_unanswered(tx: CommandTransaction) -> float:
+    """Start ``tx`` at 0 and tick it at each deadline until it ends; returns when it did."""
+    tx.start(0.0)
+    now = 0.0
+    while not tx.done:
+        now = tx.deadline_s
+        tx.tick(now)
+    return now
+
+
+def test_command_with_defaults_fails_when_the_vehicle_is_silent_for_the_bound() -> None:
+    tx = tx_for(rtt_hint_s=0.01)
+    assert run_to_the_end_unanswered(tx) == pytest.approx(POLICY.silence_s)
+    assert f"nothing heard from the vehicle for {POLICY.silence_s:.1f} s" in str(tx.error())
+    # Silent for more than quiet_s: the resends backed off (doubling up to max_rto_s), far
+    # fewer than one every timeout.
+    assert tx.attempts < POLICY.silence_s / tx.rtt.rto_s / 5
+
+
+def test_in_progress_keeps_a_default_command_alive_past_the_stall_bound() -> None:
+    tx = tx_for(rtt_hint_s=0.01, in_progress_timeout_s=5.0)
+    tx.start(0.0)
+    now = 0.0
+    for pct in range(0, 100, 10):
+        now += 4.0
+        tx.handle(ack(CMD_ARM, IN_PROGRESS, progress=pct), now)
+        assert tx.tick(now) == [] and not tx.done
+    assert now > POLICY.stall_s
+    tx.handle(ack(CMD_ARM, ACCEPTED, progress=100), now + 1.0)
+    assert tx.result is Result.SUCCESS and tx.attempts == 1
+
+
+def test_a_fixed_timeout_without_a_count_is_bounded_by_silence() -> None:
+    tx = tx_for(timeout_s=1.0)
+    assert run_to_the_end_unanswered(tx) == pytest.approx(POLICY.silence_s)
+    assert tx.attempts == int(POLICY.silence_s / 1.0)  # one a second until the bound
 
 
 # -- sans-IO: in progress ------------------------------------------------------------------
@@ -367,6 +446,9 @@ class FakeLink:
         self.subs: list[FakeSubscription] = []
         self.vehicles: dict[int, FakePeer] = {}
 
+    def add_listener(self, callback: Callable[[Any, float], None]) -> Callable[[], None]:
+        return lambda: None
+
     def subscribe(
         self, types: Collection[str] | None = None, system_id: int | None = None
     ) -> FakeSubscription:
@@ -403,6 +485,20 @@ async def test_runner_returns_final_ack() -> None:
     assert result.result == ACCEPTED and result.attempts == 2
     assert [m.confirmation for m in link.sent] == [0, 1]
     assert link.subs == []  # unsubscribed
+
+
+async def test_runner_with_defaults_resends_and_seeds_the_next_command_with_its_round_trip() -> (
+    None
+):
+    link = FakeLink(replying(ACCEPTED, after=1))
+    first = await command_long(link, 1, CMD_ARM, (1.0,))
+    assert first.attempts == 2  # resent after the initial timeout, nothing measured
+    second = await command_long(link, 1, CMD_ARM, (1.0,))
+    assert second.attempts == 1
+    from gcs.retry import rtt_hint_s
+
+    hint = rtt_hint_s(link, 1)
+    assert hint is not None and hint < POLICY.initial_rto_s  # the second ACK's round trip
 
 
 async def test_runner_raises_typed_error() -> None:
