@@ -8,7 +8,7 @@
     python -m gcs rehearse SCENARIO [--speedup S] [--wind SPEED_M_S,FROM_DEG] [--loss P]
         [--seed N] [--connect CONN ...] [--json OUT] [--report DIR] [--arrival-s T]
         [--blackout VEHICLE,START_S,DURATION_S] [--threats-from FILE]
-        [--speed-bias VEHICLE,FRACTION] [--utc-offset VEHICLE,SECONDS]
+        [--speed-bias VEHICLE,FRACTION] [--utc-offset VEHICLE,SECONDS] [--db URL]
 
 Common options: ``--vehicle SYSID`` (default: the first vehicle heard), ``--wait S`` (how long
 to wait for it), ``--timeout S`` and ``--retries N`` per protocol exchange, ``--signing-key HEX``
@@ -265,6 +265,11 @@ def parser() -> argparse.ArgumentParser:
         help="VEHICLE,SECONDS: that stub vehicle's UTC runs this far ahead of the true UTC",
     )
     rh.add_argument("--threats-from", help="file to watch for pop-up threats (JSON lines)")
+    rh.add_argument(
+        "--db",
+        help="keep the flight in this database as it happens (SQLAlchemy URL, e.g. "
+        "sqlite:///out/tcgcs.db or postgresql+psycopg://user@host/db)",
+    )
     rh.add_argument("--tolerance", type=float, default=1.0, help="pass mark for arrivals (s)")
     rh.add_argument("--quiet", action="store_true", help="no progress lines")
     rh.set_defaults(fn=rehearse_cmd)
@@ -337,6 +342,7 @@ def _rehearsal_options(args: argparse.Namespace) -> object:
         threats_from=Path(args.threats_from) if args.threats_from else None,
         quiet=args.quiet,
         config=CoordinatorConfig(seed=args.seed),
+        db_url=args.db,
     )
 
 
@@ -368,7 +374,7 @@ async def rehearse_cmd(args: argparse.Namespace) -> str:
     record = await rehearse(opts)
     print(arrival_table(record), flush=True)
     if opts.report_dir is not None:
-        written = write_report(record, opts.report_dir, scenario_path=opts.scenario_path)
+        written = write_report(record, opts.report_dir)  # the record carries its world
         print(f"gcs: report in {opts.report_dir} ({', '.join(p.name for p in written)})")
     if not passed(record, args.tolerance):
         raise GcsError(

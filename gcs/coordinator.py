@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import dataclasses
 import logging
 import math
 import time
@@ -296,12 +297,13 @@ class Coordinator:
         strategy: str | None = None,
         value: float | None = None,
         t_s: float | None = None,
+        payload: Mapping[str, Any] | None = None,
     ) -> FlightEvent:
         """Publish one event (a kind that is not an :class:`EventKind` is a ValueError)."""
         utc = self.clock.now_utc_s() if self.clock.synced else math.nan
         t = t_s if t_s is not None else (utc - self.start_utc_s if self.start_utc_s else 0.0)
         ev = self.bus.publish(
-            FlightEvent(utc, t, vehicle, EventKind(kind), reason, strategy, value)
+            FlightEvent(utc, t, vehicle, EventKind(kind), reason, strategy, value, 0, payload or {})
         )
         self.events.append(ev)
         if strategy is not None:
@@ -405,10 +407,19 @@ class Coordinator:
                 if attempt == 2:
                     raise
                 log.info("%s: %s upload failed (%s); starting it again", m.vehicle_id, what, err)
-        if self.start_utc_s is not None:
-            self._emit("upload", f"{what}: {len(pm.items)} items", m.vehicle_id)
+        self._emit(
+            "upload",
+            f"{what}: {len(pm.items)} items",
+            m.vehicle_id,
+            payload={"what": what, "items": [dataclasses.asdict(it) for it in pm.items]},
+        )
 
     # -- the flight ------------------------------------------------------------------------
+
+    @property
+    def operator_threats(self) -> tuple[Threat, ...]:
+        """The threats added in flight (:meth:`add_threat`), with the time they appear."""
+        return tuple(self._extra_threats)
 
     def add_threat(self, threat: Threat, at_s: float | None = None) -> None:
         """A threat for the mission in flight: re-planned around when it appears.
@@ -541,7 +552,9 @@ class Coordinator:
             await v.arm(timeout_s=timeout, retries=retries)
             await v.set_mode("AUTO", timeout_s=timeout, retries=retries)
         except GcsError as err:
-            self._emit("launch", f"launch failed: {err}; retrying", m.vehicle_id)
+            self._emit(
+                "launch", f"launch failed: {err}; retrying", m.vehicle_id, payload={"ok": False}
+            )
             m.phase = "ground"
             return
         m.launched_utc_s = self.clock.now_utc_s()
@@ -550,6 +563,7 @@ class Coordinator:
             "launch",
             f"armed and AUTO at {t:.1f} s (scheduled takeoff {m.takeoff_s:.1f} s)",
             m.vehicle_id,
+            payload={"ok": True},
         )
 
     # -- per-vehicle loop --------------------------------------------------------------------
@@ -701,14 +715,24 @@ class Coordinator:
         return m.bias.corrected(self._reported_wind(m.vehicle.state))
 
     def _learn_bias(self, m: Member, t: float, st: Any) -> None:
-        """Feed one fix to the airspeed-scale and wind-error estimate."""
+        """Feed one fix to the airspeed-scale and wind-error estimate.
+
+        The prediction is from the airspeed the autopilot reports (VFR_HUD: the equivalent
+        airspeed it believes it flies) and only with a VFR_HUD of the same moment as the fix
+        (within 1.5 s of mission time): a stale one, or one taken while a new speed settles,
+        would teach a bias that is not there.
+        """
         if (
             m.level_m_s is None
             or st.ve_m_s is None
             or st.vn_m_s is None
             or st.heading_deg is None
             or st.alt_amsl_m is None
+            or st.airspeed_m_s is None
         ):
+            return
+        fix_rx, hud_rx = st.rx_times.get("GLOBAL_POSITION_INT"), st.rx_times.get("VFR_HUD")
+        if fix_rx is None or hud_rx is None or abs(fix_rx - hud_rx) * self.clock.rate > 1.5:
             return
         climb = st.climb_m_s if st.climb_m_s is not None else -(st.vd_m_s or 0.0)
         m.bias.update(
@@ -716,7 +740,7 @@ class Coordinator:
             ve_m_s=st.ve_m_s,
             vn_m_s=st.vn_m_s,
             heading_rad=math.radians(st.heading_deg),
-            predicted_tas_m_s=m.level_m_s * eas2tas(st.alt_amsl_m),
+            predicted_tas_m_s=st.airspeed_m_s * eas2tas(st.alt_amsl_m),
             wind=self._reported_wind(st),
             airspeed_m_s=st.airspeed_m_s,
             commanded_m_s=m.level_m_s,
@@ -1027,9 +1051,11 @@ class Coordinator:
             self._emit("popup", f"re-plan around {zone.id} failed: {err}", t_s=t)
             return
         self.plan_wall_s = max(self.plan_wall_s, time.perf_counter() - t0)
-        for ev in outcome.events:
-            self._emit(ev.kind, ev.text, t_s=t)
         new_ref = outcome.schedule.required_arrival_s
+        for ev in outcome.events:
+            # The re-timed team arrival is said with its time (the store keeps it).
+            value = new_ref if ev.kind == EventKind.ARRIVAL else None
+            self._emit(ev.kind, ev.text, value=value, t_s=t)
         if (
             new_ref is not None
             and self.team_ref_s is not None

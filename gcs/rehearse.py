@@ -36,6 +36,7 @@ from gcs.coordinator import Coordinator, CoordinatorConfig, Member
 from gcs.errors import GcsError
 from gcs.link import Link
 from gcs.missionclock import MissionClock
+from gcs.store.repository import EventWriter, Store
 from gcs.truth import TruthSample, closest_approach, min_separation, read_truth
 from gcs.vehicle import Vehicle
 from planner.plan import build_terrain
@@ -76,6 +77,9 @@ class RehearsalOptions:
     config: CoordinatorConfig = field(default_factory=CoordinatorConfig)
     bus: EventBus | None = None
     """The flight's event bus (a new one if None): other subscribers may listen in."""
+    db_url: str | None = None
+    """Keep the flight in this database (SQLAlchemy URL) as it happens: scenario, flight and
+    its state, every event, every mission uploaded."""
 
 
 def _free_tcp_base(n: int) -> int:
@@ -310,11 +314,15 @@ async def rehearse(opts: RehearsalOptions) -> dict[str, Any]:
                 peer = await link.wait_vehicle(sysid, timeout_s=15.0)
                 vehicles[v.id] = Vehicle(link, peer.system_id, peer.component_id)
             coord.bind(vehicles)
+            kept = _Kept.start(opts, coord, dict(zip(vehicles, conns, strict=True)))
+            stack.push_async_callback(kept.finish, coord)
             async with asyncio.timeout(15.0):
                 while not clock.synced:
                     await asyncio.sleep(0.02)
+            kept.state("uploading")
             await coord.upload_all()
             mission_start = clock.now_utc_s() + max(10.0, 1.0 * clock.rate)
+            kept.state("running", start_utc_s=mission_start, team_time_s=coord.team_ref_s)
             if proc is not None and opts.blackouts:
                 _send_blackouts(proc, opts, stub_start, mission_start)
             tasks = [asyncio.create_task(progress.run())]
@@ -332,6 +340,8 @@ async def rehearse(opts: RehearsalOptions) -> dict[str, Any]:
         elif truth_path is not None:
             await _await_truth(truth_path, coord)
         record = flight_record(coord, opts, truth_path, time.perf_counter() - wall0)
+        if kept.flight_id is not None:
+            record["flight_id"] = kept.flight_id
     finally:
         printed.close()  # the printer drains what is queued, then ends
         await printer
@@ -342,6 +352,49 @@ async def rehearse(opts: RehearsalOptions) -> dict[str, Any]:
         opts.json_out.parent.mkdir(parents=True, exist_ok=True)
         opts.json_out.write_text(json.dumps(record, indent=1) + "\n", encoding="utf-8")
     return record
+
+
+@dataclass
+class _Kept:
+    """The flight in the store (``--db``), or nothing."""
+
+    store: Store | None = None
+    flight_id: str | None = None
+    writer: asyncio.Task[None] | None = None
+    events: Subscription | None = None
+
+    @classmethod
+    def start(cls, opts: RehearsalOptions, coord: Coordinator, conns: Mapping[str, str]) -> _Kept:
+        if opts.db_url is None:
+            return cls()
+        store = Store.open(opts.db_url)
+        suffix = opts.scenario_path.suffix.lower()
+        scenario_id = store.save_scenario(
+            opts.scenario_path.read_text(encoding="utf-8"),
+            name=opts.scenario.name,
+            media_type="application/json" if suffix == ".json" else "application/yaml",
+        )
+        flight_id = store.create_flight(scenario_id, conns)
+        events = coord.bus.subscribe(maxsize=1_000_000, after_seq=0)
+        writer = asyncio.create_task(EventWriter(store, flight_id).run(events))
+        if not opts.quiet:
+            print(f"rehearse: flight {flight_id} kept in {store.engine.url!r}", flush=True)
+        return cls(store, flight_id, writer, events)
+
+    def state(self, state: str, **fields: Any) -> None:
+        if self.store is not None and self.flight_id is not None:
+            self.store.update_flight(self.flight_id, state=state, **fields)
+
+    async def finish(self, coord: Coordinator) -> None:
+        """The last events written, then the final state (completed, or failed when a
+        vehicle did not arrive)."""
+        if self.store is None or self.events is None or self.writer is None:
+            return
+        self.events.close()
+        await self.writer
+        arrived = all(m.arrival_utc_s is not None for m in coord.members.values())
+        self.state("completed" if arrived and coord.members else "failed")
+        self.store.close()
 
 
 async def _await_truth(path: Path, coord: Coordinator, timeout_s: float = 5.0) -> None:
@@ -515,6 +568,12 @@ def flight_record(
         "adjustments": [_ev_json(ev, start) for ev in coord.adjustments],
         "threats_appeared": [
             {"id": t["id"], "utc_s": round(t["utc_s"], 3)} for t in coord.threats_appeared
+        ],
+        # The world as flown, for the report: the scenario (with any requested arrival) and
+        # the threats the operator added in flight.
+        "scenario": coord.scenario.model_dump(mode="json", exclude_none=True),
+        "operator_threats": [
+            t.model_dump(mode="json", exclude_none=True) for t in coord.operator_threats
         ],
     }
 

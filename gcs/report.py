@@ -37,7 +37,7 @@ from planner.errors import PlannerError
 from planner.geo import FloatArray
 from planner.plan import World, build_world
 from planner.plot import draw_world
-from planner.scenario import Scenario, load_scenario
+from planner.scenario import Scenario, load_scenario, parse_scenario
 
 __all__ = ["FLIGHT_FORMAT", "arrival_table", "write_report"]
 
@@ -843,6 +843,19 @@ def _world(path: Path) -> tuple[Scenario, World]:
         raise GcsError(f"scenario: {err}") from None
 
 
+def _recorded_world(record: Mapping[str, Any]) -> tuple[Scenario, World]:
+    """The scenario a record carries, with the operator's threats, and its world."""
+    extra = _opt_list(record, "operator_threats", "")
+    try:
+        scenario = parse_scenario(record["scenario"], "scenario")
+        if extra:
+            threats = [*record["scenario"].get("threats", []), *extra]
+            scenario = parse_scenario({**record["scenario"], "threats": threats}, "scenario")
+        return scenario, build_world(scenario)
+    except PlannerError as err:
+        raise GcsError(f"flight record: {err}") from None
+
+
 def _write_text(path: Path, text: str) -> None:
     try:
         path.write_text(text, encoding="utf-8")
@@ -856,15 +869,20 @@ def write_report(
     """Write paths.png, speeds.png, timeline.png, arrivals.md and index.html into ``out_dir``
     and return the paths written.
 
-    The scenario is ``scenario_path`` when given, else the record's ``scenario_file``: as is
-    (absolute, or relative to the working directory), else relative to ``out_dir``'s parent.
+    The scenario is ``scenario_path`` when given, else the one the record carries
+    (``scenario``, with the threats the operator added: ``operator_threats``), else, for a
+    record without it, the record's ``scenario_file``: as is (absolute, or relative to the
+    working directory), else relative to ``out_dir``'s parent.
     A malformed record raises one :class:`GcsError` naming the missing or bad field, before
     anything is written.
     """
     parsed = _parse(flight)
     out_dir = Path(out_dir)
-    path = scenario_path if scenario_path is not None else _scenario_file(flight, out_dir)
-    scenario, world = _world(path)
+    if scenario_path is None and "scenario" in flight:
+        scenario, world = _recorded_world(flight)
+    else:
+        path = scenario_path if scenario_path is not None else _scenario_file(flight, out_dir)
+        scenario, world = _world(path)
     title = scenario.name
     try:
         out_dir.mkdir(parents=True, exist_ok=True)

@@ -11,6 +11,7 @@ from __future__ import annotations
 import asyncio
 import dataclasses
 import hashlib
+import math
 import time
 import uuid
 from collections.abc import Mapping, Sequence
@@ -25,7 +26,7 @@ from sqlalchemy.exc import IntegrityError, OperationalError
 from sqlalchemy.orm import Session
 
 from gcs.coordination.bus import Subscription
-from gcs.coordination.events import FlightEvent
+from gcs.coordination.events import EventKind, FlightEvent
 from gcs.errors import GcsError
 from gcs.store.models import EventRow, FlightRow, FlightVehicleRow, ScenarioRow, UploadRow
 from planner.mission import MissionItem
@@ -314,7 +315,7 @@ class Store:
                     flight_id=flight_id,
                     seq=e.seq,
                     kind=str(e.kind),
-                    utc_s=None if e.utc_s != e.utc_s else e.utc_s,  # NaN: no clock yet
+                    utc_s=None if math.isnan(e.utc_s) else e.utc_s,  # NaN: no clock yet
                     t_s=e.t_s,
                     vehicle=e.vehicle,
                     strategy=e.strategy,
@@ -400,6 +401,13 @@ class Store:
             )
 
 
+_PHASE_OF = {
+    EventKind.LAUNCH: "climbing",
+    EventKind.ROUTE: "on_route",
+    EventKind.ARRIVED: "arrived",
+}
+
+
 class EventWriter:
     """Writes a flight's events from its bus subscription to the store, in batches, in a
     worker thread: the control loop never waits for the database."""
@@ -416,4 +424,34 @@ class EventWriter:
             pending = [first]
             while len(pending) < self.batch and (more := events.get_nowait()) is not None:
                 pending.append(more)
-            self.written += await asyncio.to_thread(self.store.add_events, self.flight_id, pending)
+            self.written += await asyncio.to_thread(self._write, pending)
+
+    def _write(self, events: list[FlightEvent]) -> int:
+        """Keep the events; an upload event's mission items go to the uploads table."""
+        kept = []
+        for e in events:
+            items = e.payload.get("items") if e.kind is EventKind.UPLOAD else None
+            if items is not None and e.vehicle is not None:
+                self.store.record_upload(
+                    self.flight_id,
+                    e.vehicle,
+                    [MissionItem(**it) for it in items],
+                    what=str(e.payload.get("what", e.reason)),
+                    utc_s=None if math.isnan(e.utc_s) else e.utc_s,
+                )
+                e = dataclasses.replace(
+                    e, payload={k: v for k, v in e.payload.items() if k != "items"}
+                )
+            kept.append(e)
+            self._follow(e)
+        return self.store.add_events(self.flight_id, kept)
+
+    def _follow(self, e: FlightEvent) -> None:
+        """What an event changes in the flight's row: the team time, a vehicle's phase."""
+        if e.kind is EventKind.ARRIVAL and e.value is not None:
+            self.store.update_flight(self.flight_id, team_time_s=e.value)
+        phase = _PHASE_OF.get(e.kind)
+        if phase is not None and e.vehicle is not None:
+            if e.kind is EventKind.LAUNCH and not e.payload.get("ok", True):
+                return  # still on the ground
+            self.store.set_vehicle(self.flight_id, e.vehicle, phase=phase)

@@ -3,12 +3,83 @@
 from __future__ import annotations
 
 import asyncio
+import os
 import socket
+import uuid
+from collections.abc import Iterator
+from pathlib import Path
 from typing import Any
 
+import pytest
 from pymavlink.dialects.v20 import ardupilotmega as mavlink2
+from sqlalchemy import create_engine, text
+
+from gcs.store.repository import Store
+
+PG_ADMIN = "postgresql+psycopg://postgres@127.0.0.1:5432/test"
 
 HOME = (-35.363261, 149.165230, 584.0)
+
+
+def postgres_schema() -> Iterator[str]:
+    """A fresh schema on the local PostgreSQL (127.0.0.1:5432, database ``test``), dropped
+    afterwards: yields its store URL. Skipped without the server, a failure in CI."""
+    try:
+        admin = create_engine(PG_ADMIN)
+        with admin.connect() as conn:
+            conn.execute(text("select 1"))
+    except Exception as err:
+        if os.environ.get("CI"):
+            pytest.fail(f"PostgreSQL at 127.0.0.1:5432 is required in CI: {err}")
+        pytest.skip(f"no PostgreSQL at 127.0.0.1:5432: {err}")
+    schema = f"t_{uuid.uuid4().hex[:12]}"
+    with admin.begin() as conn:
+        conn.execute(text(f"create schema {schema}"))
+    try:
+        yield f"{PG_ADMIN}?options=-csearch_path%3D{schema}"
+    finally:
+        with admin.begin() as conn:
+            conn.execute(text(f"drop schema {schema} cascade"))
+        admin.dispose()
+
+
+@pytest.fixture
+def pg_url() -> Iterator[str]:
+    yield from postgres_schema()
+
+
+@pytest.fixture(params=["sqlite", "postgresql"])
+def store_url(request: pytest.FixtureRequest, tmp_path: Path) -> Iterator[str]:
+    """A store URL on SQLite (a file) and on PostgreSQL."""
+    if request.param == "sqlite":
+        yield f"sqlite:///{tmp_path / 'tcgcs.db'}"
+    else:
+        yield from postgres_schema()
+
+
+def assert_flight_kept(url: str, record: dict[str, Any]) -> None:
+    """The store holds the flight of a rehearsal record as it was flown: every event in
+    order, every upload, the final state and team time."""
+    store = Store.open(url, migrate=False)
+    try:
+        flight = store.flight(record["flight_id"])
+        assert flight.state == "completed"
+        assert flight.team_time_s is not None and record["required_arrival_s"] is not None
+        assert abs(flight.team_time_s - record["required_arrival_s"]) < 1e-3
+        assert {vid for vid, (phase, _, _) in flight.vehicles.items() if phase == "arrived"} == {
+            v["id"] for v in record["vehicles"]
+        }
+        kept = store.events(flight.id)
+        assert [(e.seq, str(e.kind), e.vehicle) for e in kept] == [
+            (e["seq"], e["kind"], e["vehicle"]) for e in record["events"]
+        ]
+        # An upload event with its mission (payload "what") is one row of uploads.
+        uploads = [e for e in kept if str(e.kind) == "upload" and "what" in e.payload]
+        assert store.upload_count(flight.id) == len(uploads) >= len(record["vehicles"])
+        for v in record["vehicles"]:
+            assert store.last_upload(flight.id, v["id"]), v["id"]
+    finally:
+        store.close()
 
 
 def free_udp_port() -> int:

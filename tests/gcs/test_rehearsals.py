@@ -26,7 +26,7 @@ from gcs.__main__ import main
 from gcs.coordination.bus import EventBus
 from gcs.rehearse import RehearsalOptions, passed, rehearse
 from planner.scenario import load_scenario
-from tests.gcs.conftest import free_udp_port
+from tests.gcs.conftest import assert_flight_kept, free_udp_port
 from tests.sitl_stub.conftest import free_port_base, mavproxy_router
 
 pytestmark = pytest.mark.slow  # about 35 s of wall time each
@@ -108,11 +108,12 @@ async def test_paper_rehearsal_on_clocks_7_s_ahead_and_4_s_behind_with_a_stalled
 
 
 async def test_spaced_rehearsal_meets_each_60_s_slot_with_an_operator_threat(
-    tmp_path: Path,
+    tmp_path: Path, pg_url: str
 ) -> None:
     """Slots 60 s apart; besides the scenario's pop-up, the operator adds a no-fly box across
     UAV3's approach (``--threats-from``, appearing at 2500 s): UAV3 is re-planned from a
-    waypoint ahead and re-timed for its same slot."""
+    waypoint ahead and re-timed for its same slot. The flight is kept in PostgreSQL as it
+    happens."""
     threats = tmp_path / "threats.jsonl"
     box = [[185_600, 203_200], [189_600, 203_200], [189_600, 207_200], [185_600, 207_200]]
     op1 = {
@@ -133,8 +134,10 @@ async def test_spaced_rehearsal_meets_each_60_s_slot_with_an_operator_threat(
             seed=1,
             threats_from=threats,
             quiet=True,
+            db_url=pg_url,
         )
     )
+    assert_flight_kept(pg_url, record)
     errors = _errors(record)
     assert all(e is not None and abs(e) <= 1.0 for e in errors.values()), errors
     assert record["min_separation_m"] >= record["separation_m"]
@@ -168,16 +171,19 @@ def test_blackout_rehearsal_from_the_cli_recovers_and_arrives(
     tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
     """UAV2's link is dark for 10 s of mission time mid-flight; the rehearsal tells the stub
-    over its control input, the coordinator reports the silence and the recovery."""
+    over its control input, the coordinator reports the silence and the recovery. The flight
+    is kept in a SQLite file as it happens (``--db``)."""
     out = tmp_path / "flight.json"
+    db = f"sqlite:///{tmp_path / 'tcgcs.db'}"
     argv = ["rehearse", str(PAPER), "--wind", "5,270", "--loss", "0.1", "--seed", "1",
             "--blackout", "UAV2,3000,10", "--tolerance", "2", "--quiet",
-            "--json", str(out)]  # fmt: skip
+            "--json", str(out), "--db", db]  # fmt: skip
     code = main(argv)
     printed = capsys.readouterr()
     assert code == 0, printed.err
     assert "rehearsal passed: every arrival within +/-2 s" in printed.out
     record = json.loads(out.read_text())
+    assert_flight_kept(db, record)
     errors = _errors(record)
     assert abs(errors["UAV2"]) <= 2.0, errors
     assert all(abs(errors[v]) <= 1.0 for v in ("UAV1", "UAV3")), errors

@@ -11,6 +11,7 @@ import pytest
 
 from gcs.errors import GcsError
 from gcs.report import _scenario_file, arrival_table, write_report
+from planner.scenario import load_scenario
 
 ROOT = Path(__file__).resolve().parents[2]
 SCENARIO = ROOT / "scenarios" / "paper_three_uav.yaml"
@@ -286,3 +287,28 @@ def test_scenario_file_relative_to_the_out_dir_parent(
     assert _scenario_file(record, tmp_path / "report") == tmp_path / "scenarios" / "s.yaml"
     monkeypatch.chdir(tmp_path)
     assert _scenario_file(record, tmp_path / "x" / "report") == Path("scenarios/s.yaml")
+
+
+def test_a_record_that_carries_its_world_needs_no_scenario_file(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """The record holds the scenario as flown and the operator's threats: the report is drawn
+    from it alone (run from a folder where the scenario file does not exist)."""
+    flight = _flight()
+    flight["scenario_file"] = "no/such/file.yaml"
+    flight["scenario"] = load_scenario(SCENARIO).model_dump(mode="json", exclude_none=True)
+    box = [[185_600, 203_200], [189_600, 203_200], [189_600, 207_200], [185_600, 207_200]]
+    flight["operator_threats"] = [
+        {
+            "kind": "no_fly",
+            "id": "OP1",
+            "polygon": [{"east_m": e, "north_m": n} for e, n in box],
+            "appears": {"at_s": 2500},
+        }
+    ]
+    monkeypatch.chdir(tmp_path)
+    paths = write_report(flight, tmp_path / "report")
+    assert [p.name for p in paths][-1] == "index.html" and all(p.is_file() for p in paths)
+    flight["operator_threats"] = [{"kind": "no_fly", "id": "OP2"}]
+    with pytest.raises(GcsError, match=r"flight record: .*polygon"):
+        write_report(flight, tmp_path / "report2")

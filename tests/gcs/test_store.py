@@ -1,56 +1,21 @@
-"""The store on SQLite (a file) and on the PostgreSQL server these machines run, over TCP.
-
-In CI (``CI`` set) a PostgreSQL that cannot be reached is a failure, not a skip.
-"""
+"""The store on SQLite (a file) and on the PostgreSQL server these machines run, over TCP
+(the ``store_url`` fixture of tests/gcs/conftest.py: in CI a PostgreSQL that cannot be
+reached is a failure, not a skip)."""
 
 from __future__ import annotations
 
 import asyncio
 import math
-import os
-import uuid
 from collections.abc import Iterator
-from pathlib import Path
 
 import pytest
-from sqlalchemy import create_engine, text
 
 from gcs.coordination.bus import EventBus
 from gcs.coordination.events import EventKind, FlightEvent
 from gcs.store.repository import EventWriter, Store, StoreConflict, StoreError, StoreNotFound
 from planner.mission import Waypoint, compile_mission
 
-PG_ADMIN = "postgresql+psycopg://postgres@127.0.0.1:5432/test"
 SCENARIO = "name: demo\nvehicles: []\n"
-
-
-def _postgres_schema() -> Iterator[str]:
-    """A fresh schema on the local PostgreSQL, dropped afterwards; its store URL."""
-    try:
-        admin = create_engine(PG_ADMIN)
-        with admin.connect() as conn:
-            conn.execute(text("select 1"))
-    except Exception as err:
-        if os.environ.get("CI"):
-            pytest.fail(f"PostgreSQL at 127.0.0.1:5432 is required in CI: {err}")
-        pytest.skip(f"no PostgreSQL at 127.0.0.1:5432: {err}")
-    schema = f"t_{uuid.uuid4().hex[:12]}"
-    with admin.begin() as conn:
-        conn.execute(text(f"create schema {schema}"))
-    try:
-        yield f"{PG_ADMIN}?options=-csearch_path%3D{schema}"
-    finally:
-        with admin.begin() as conn:
-            conn.execute(text(f"drop schema {schema} cascade"))
-        admin.dispose()
-
-
-@pytest.fixture(params=["sqlite", "postgresql"])
-def store_url(request: pytest.FixtureRequest, tmp_path: Path) -> Iterator[str]:
-    if request.param == "sqlite":
-        yield f"sqlite:///{tmp_path / 'tcgcs.db'}"
-    else:
-        yield from _postgres_schema()
 
 
 @pytest.fixture
