@@ -11,10 +11,13 @@
         [--speed-bias VEHICLE,FRACTION] [--utc-offset VEHICLE,SECONDS] [--db URL]
 
 Common options: ``--vehicle SYSID`` (default: the first vehicle heard), ``--wait S`` (how long
-to wait for it), ``--timeout S`` and ``--retries N`` per protocol exchange, ``--signing-key HEX``
-or ``--signing-passphrase TEXT``. ``.plan`` files are QGroundControl JSON, ``.waypoints`` /
-``.wpl`` / ``.txt`` are WPL 110. Exit 0 on success, 1 when the vehicle or link fails the
-operation (timeout, denied, rejected item: the message says which and why), 2 for bad input.
+to wait for it), ``--timeout S`` and ``--retries N`` per protocol exchange (default: a timeout
+from the measured round trip, and failure only when the vehicle goes silent or the exchange
+stops advancing, :mod:`gcs.retry`), ``--signing-key HEX`` or ``--signing-passphrase TEXT``. A
+mission transfer still running after a second prints its progress on stderr, once a second.
+``.plan`` files are QGroundControl JSON, ``.waypoints`` / ``.wpl`` / ``.txt`` are WPL 110. Exit 0
+on success, 1 when the vehicle or link fails the operation (timeout, denied, rejected item:
+the message says which and why), 2 for bad input.
 """
 
 from __future__ import annotations
@@ -26,15 +29,20 @@ import math
 import signal
 import sys
 import time
-from collections.abc import Sequence
+from collections.abc import Awaitable, Callable, Sequence
 from dataclasses import replace
+from types import MappingProxyType
+from typing import Final, TextIO
 
+from gcs import commands
 from gcs.errors import GcsError
 from gcs.link import Link
+from gcs.mission_protocol import Transfer
 from gcs.signing import SigningConfig, key_from_passphrase
 from gcs.status import status_line
 from gcs.vehicle import Vehicle
 from planner.errors import PlannerError
+from planner.mission import MissionItem
 from planner.missionfile import read_mission_file, write_mission_file
 
 MISSION_TYPES = {"mission": 0, "fence": 1, "rally": 2}
@@ -78,8 +86,73 @@ async def _vehicle(link: Link, args: argparse.Namespace) -> Vehicle:
     return Vehicle(link, peer.system_id, peer.component_id)
 
 
-def _transfer_options(args: argparse.Namespace) -> dict[str, float | int]:
+def _transfer_options(args: argparse.Namespace) -> dict[str, float | int | None]:
+    """``--timeout`` / ``--retries`` as the transfers take them (None: the adaptive policy)."""
     return {"timeout_s": args.timeout, "retries": args.retries}
+
+
+class ProgressLines:
+    """Progress of a slow mission transfer on ``out``: nothing during the first ``first_s``
+    (a fast transfer says nothing), then a line at most every ``every_s`` (wall seconds)."""
+
+    _VERBS: Final = MappingProxyType({"upload": "uploading", "download": "downloading"})
+
+    def __init__(
+        self,
+        out: TextIO | None = None,
+        *,
+        clock: Callable[[], float] = time.monotonic,
+        first_s: float = 1.0,
+        every_s: float = 1.0,
+    ) -> None:
+        self.out = out
+        self.clock = clock
+        self.first_s = first_s
+        self.every_s = every_s
+        self.lines = 0
+        self._transfer: Transfer | None = None
+        self._started_s = clock()
+        self._printed_s = -math.inf
+
+    def watch(self, transfer: Transfer) -> None:
+        """The transfer under way (the upload, then its verify download)."""
+        self._transfer = transfer
+
+    def poll(self) -> None:
+        """Print a line if one is due."""
+        t, now = self._transfer, self.clock()
+        if t is None or t.done or now - self._started_s < self.first_s:
+            return
+        if now - self._printed_s < self.every_s:
+            return
+        done, total = t.progress
+        verb = self._VERBS.get(t.operation, t.operation)
+        resent = t.counters["resent"]
+        print(
+            f"{verb} {done}/{total} items, {resent} resend{'' if resent == 1 else 's'}",
+            file=self.out or sys.stderr,
+            flush=True,
+        )
+        self._printed_s = now
+        self.lines += 1
+
+    async def run(self) -> None:
+        """Poll until cancelled."""
+        while True:
+            await asyncio.sleep(min(self.first_s, self.every_s) / 4)
+            self.poll()
+
+
+async def _with_progress(transfer: Callable[[ProgressLines], Awaitable[object]]) -> None:
+    """Run the transfer coroutine ``transfer(lines)`` with its progress lines on stderr."""
+    lines = ProgressLines()
+    ticker = asyncio.create_task(lines.run())
+    try:
+        await transfer(lines)
+    finally:
+        ticker.cancel()
+        with contextlib.suppress(asyncio.CancelledError):
+            await ticker
 
 
 async def mission_upload(args: argparse.Namespace) -> str:
@@ -88,8 +161,14 @@ async def mission_upload(args: argparse.Namespace) -> str:
     async with _open(args, args.conn) as link:
         vehicle = await _vehicle(link, args)
         t0 = time.monotonic()
-        await vehicle.upload_mission(
-            items, mission_type=mission_type, verify=args.verify, **_transfer_options(args)
+        await _with_progress(
+            lambda lines: vehicle.upload_mission(
+                items,
+                mission_type=mission_type,
+                verify=args.verify,
+                on_transfer=lines.watch,
+                **_transfer_options(args),
+            )
         )
         checked = ", verified by download" if args.verify else ""
         return (
@@ -102,7 +181,17 @@ async def mission_download(args: argparse.Namespace) -> str:
     mission_type = MISSION_TYPES[args.type]
     async with _open(args, args.conn) as link:
         vehicle = await _vehicle(link, args)
-        items = await vehicle.download_mission(mission_type=mission_type, **_transfer_options(args))
+        got: list[list[MissionItem]] = []
+
+        async def download(lines: ProgressLines) -> None:
+            got.append(
+                await vehicle.download_mission(
+                    mission_type=mission_type, on_transfer=lines.watch, **_transfer_options(args)
+                )
+            )
+
+        await _with_progress(download)
+    (items,) = got
     write_mission_file(args.out, items)
     return (
         f"downloaded {len(items)} {args.type} items from vehicle {vehicle.system_id} to {args.out}"
@@ -133,16 +222,21 @@ async def command(args: argparse.Namespace) -> str:
             raise UsageError(f"command speed: {rest!r} is not a number") from None
     async with _open(args, args.conn) as link:
         v = await _vehicle(link, args)
-        if action == "arm":
-            await v.arm(force=args.force)
-        elif action == "disarm":
-            await v.disarm(force=args.force)
+        sysid, comp, t, r = v.system_id, v.component_id, args.timeout, args.retries
+        if action in ("arm", "disarm"):
+            send = commands.arm if action == "arm" else commands.disarm
+            await send(link, sysid, force=args.force, target_component=comp, timeout_s=t, retries=r)
         elif action == "start":
-            await v.start_mission()
+            await commands.start_mission(link, sysid, target_component=comp, timeout_s=t, retries=r)
         elif action == "mode":
-            await v.set_mode(rest)
+            await commands.set_mode(
+                link, sysid, rest, autopilot=v.autopilot, target_component=comp, timeout_s=t,
+                retries=r,
+            )  # fmt: skip
         else:
-            await v.change_speed(speed_m_s)
+            await commands.change_speed(
+                link, sysid, speed_m_s, target_component=comp, timeout_s=t, retries=r
+            )
     what = action if rest is None else f"{action} {rest}"
     return f"vehicle {v.system_id}: {what} accepted"
 
@@ -189,8 +283,17 @@ async def status(args: argparse.Namespace) -> str:
 def _common(p: argparse.ArgumentParser) -> None:
     p.add_argument("--vehicle", type=int, help="system id (default: the first vehicle heard)")
     p.add_argument("--wait", type=float, default=10.0, help="seconds to wait for the vehicle")
-    p.add_argument("--timeout", type=float, default=1.5, help="seconds per protocol exchange")
-    p.add_argument("--retries", type=int, default=5, help="resends per exchange")
+    p.add_argument(
+        "--timeout",
+        type=float,
+        help="seconds before a resend (default: from the measured round trip, 10 ms to 1.5 s)",
+    )
+    p.add_argument(
+        "--retries",
+        type=int,
+        help="resends per exchange (default: no count; fail after 10 s without hearing the "
+        "vehicle or 20 s without progress)",
+    )
     p.add_argument("--system-id", type=int, default=255, help="our MAVLink system id")
     p.add_argument("--signing-key", help="MAVLink 2 signing key, 64 hex digits")
     p.add_argument("--signing-passphrase", help="signing key as MAVProxy derives it")

@@ -392,19 +392,25 @@ class Coordinator:
         )
 
     async def _upload(self, m: Member, pm: PathMission, what: str) -> None:
-        """Upload, restarting the whole transfer (a vehicle may drop a stalled one) twice."""
+        """Upload with the adaptive retry policy (:mod:`gcs.retry`), restarting the whole
+        transfer (a vehicle may drop a stalled one) twice.
+
+        In flight the new mission must be on board before the vehicle reaches the splice
+        point, ``_lead_s()`` mission seconds ahead: the attempts together get half of that
+        lead in wall seconds, so a lossy link either delivers in time or fails early enough
+        for the fallback (the vehicle keeps flying the mission it has).
+        """
         v = m.vehicle
+        in_flight = m.phase != "ground"
+        loop = asyncio.get_running_loop()
+        end_s = loop.time() + 0.5 * self._lead_s() / self.clock.rate if in_flight else None
         for attempt in range(3):
+            within_s = None if end_s is None else end_s - loop.time()
             try:
-                await v.upload_mission(
-                    list(pm.items),
-                    timeout_s=self._wall_timeout_s(v),
-                    retries=self.config.upload_retries,
-                    verify=m.phase == "ground",
-                )
+                await v.upload_mission(list(pm.items), verify=not in_flight, within_s=within_s)
                 break
             except GcsError as err:
-                if attempt == 2:
+                if attempt == 2 or (end_s is not None and loop.time() > end_s - 0.05):
                     raise
                 log.info("%s: %s upload failed (%s); starting it again", m.vehicle_id, what, err)
         self._emit(

@@ -42,6 +42,7 @@ __all__ = [
     "DEFAULT_RETRIES",
     "DEFAULT_TIMEOUT_S",
     "DEFAULT_WINDOW",
+    "OnTransfer",
     "Progress",
     "clear_mission",
     "download_mission",
@@ -60,6 +61,9 @@ with a vehicle that answers any request and takes items in order ahead of its re
 
 Progress = Callable[[int, int], None]
 """Called with (done, total) items whenever a transfer moves on."""
+OnTransfer = Callable[[Transfer], None]
+"""Called with each transfer as it starts (an upload, then its verify download): its
+``progress`` and ``counters`` can be read while it runs."""
 
 # One lock per (link, vehicle): transfers with one vehicle on one link take turns.
 _locks: weakref.WeakKeyDictionary[Any, dict[int, asyncio.Lock]] = weakref.WeakKeyDictionary()
@@ -138,13 +142,21 @@ class _Driver:
                 )
 
 
-async def run_transfer(link: Link, transfer: Transfer, *, progress: Progress | None = None) -> None:
+async def run_transfer(
+    link: Link,
+    transfer: Transfer,
+    *,
+    progress: Progress | None = None,
+    on_transfer: OnTransfer | None = None,
+) -> None:
     """Run ``transfer`` over ``link`` to its end; raises its typed error if it failed.
 
     Replies are handled in the link's reader callback, as they are parsed, and the answers go
     out at once: an exchange costs no task switch. The task here only keeps the timers.
     """
     async with _lock(link, transfer.target_system):
+        if on_transfer is not None:
+            on_transfer(transfer)
         driver = _Driver(link, transfer, progress)
         remove = link.add_listener(driver.on_message)
         try:
@@ -208,6 +220,7 @@ async def upload_mission(
     within_s: float | None = None,
     autopilot: Autopilot | None = None,
     window: int | None = None,
+    on_transfer: OnTransfer | None = None,
 ) -> None:
     """Upload ``items`` (seq = index, all of ``mission_type``) to vehicle ``target_system``.
 
@@ -242,9 +255,14 @@ async def upload_mission(
     if window is None:
         window = DEFAULT_WINDOW if ahead else 1
     upload = Upload(items, mission_type=mission_type, send_ahead=ahead, window=window, **opts)
-    await run_transfer(link, upload, progress=progress)
+    started_s = asyncio.get_running_loop().time()
+    await run_transfer(link, upload, progress=progress, on_transfer=on_transfer)
     if not verify:
         return
+    left_s = None
+    if within_s is not None:
+        # What is left of the bound (at least a moment: a verify that cannot run times out).
+        left_s = max(1e-3, within_s - (asyncio.get_running_loop().time() - started_s))
     got = await download_mission(
         link,
         target_system,
@@ -252,6 +270,9 @@ async def upload_mission(
         target_component=target_component,
         timeout_s=timeout_s,
         retries=retries,
+        policy=policy,
+        within_s=left_s,
+        on_transfer=on_transfer,
     )
     if autopilot is None:
         peer = getattr(link, "vehicles", {}).get(target_system)
@@ -308,6 +329,7 @@ async def download_mission(
     policy: RetryPolicy | None = None,
     within_s: float | None = None,
     window: int | None = None,
+    on_transfer: OnTransfer | None = None,
 ) -> list[MissionItem]:
     """The vehicle's items of ``mission_type``, as received (type 0: item 0 is its home).
 
@@ -318,7 +340,7 @@ async def download_mission(
     if window is None:
         window = DEFAULT_WINDOW if _answers_any_request(link, target_system) else 1
     download = Download(mission_type=mission_type, window=window, **opts)
-    await run_transfer(link, download, progress=progress)
+    await run_transfer(link, download, progress=progress, on_transfer=on_transfer)
     return list(download.items)
 
 

@@ -9,7 +9,8 @@ It never touches a socket, a clock or asyncio, so tests drive it with a fake clo
 
 - Upload: MISSION_COUNT -> (MISSION_REQUEST_INT | MISSION_REQUEST)(seq) ->
   MISSION_ITEM_INT(seq) ... -> MISSION_ACK. On timeout: resend the COUNT until a request
-  came, then the item last requested.
+  came, then the item last requested. With ``window`` > 1 (a vehicle that takes items in
+  order ahead of its requests) up to that many items go out ahead of the requests.
 - Download: MISSION_REQUEST_LIST -> MISSION_COUNT -> MISSION_REQUEST_INT(seq) ->
   (MISSION_ITEM_INT | MISSION_ITEM)(seq) ... -> our MISSION_ACK. On timeout: resend the list
   request, then the request for the missing item.
@@ -18,8 +19,8 @@ It never touches a socket, a clock or asyncio, so tests drive it with a fake clo
 
 Timeouts (:mod:`gcs.retry`): by default a resend waits a timeout that follows the measured
 round trip (SRTT + 4 RTTVAR, Karn's rule, 10 ms to 1.5 s), and a transfer fails only when
-nothing has been heard from the vehicle for ``policy.silence_s`` (5 s) or it has not advanced
-for ``policy.stall_s`` (10 s), not after a count of resends while the vehicle answers.
+nothing has been heard from the vehicle for ``policy.silence_s`` (10 s) or it has not advanced
+for ``policy.stall_s`` (20 s), not after a count of resends while the vehicle answers.
 ``timeout_s`` fixes the timeout and ``retries`` bounds the resends of one exchange, as the
 MAVLink mission service has them (1.5 s, 5); any valid request from the vehicle resets that
 count (duplicated packets cannot use it up), and an upload that only makes no progress is

@@ -3,11 +3,15 @@
 from __future__ import annotations
 
 import asyncio
+import re
 import sys
 from pathlib import Path
 
+import pytest
 from pymavlink.dialects.v20 import ardupilotmega as mavlink2
 
+from gcs.__main__ import ProgressLines
+from gcs.mission_protocol import Upload
 from planner.mission import Autopilot, MissionItem, items_equal
 from planner.missionfile import read_mission_file, to_wpl
 from sitl_stub.api import Home, SimTeam
@@ -102,3 +106,52 @@ async def test_status_prints_a_line_per_vehicle_and_commands_take_effect() -> No
         assert set(last) == {"1", "2"}
         assert "GUIDED" in last["2"] and "MANUAL" in last["1"]
         assert f"{homes[1].lat_deg:.5f}" in last["2"] and "link ok" in last["2"]
+
+
+def test_progress_lines_say_nothing_in_the_first_second_then_one_a_second_at_most(
+    capsys: pytest.CaptureFixture[str],
+) -> None:
+    now = [0.0]
+    lines = ProgressLines(clock=lambda: now[0])
+    up = Upload(mission(200), send_ahead=True, window=8, target_system=1)
+    lines.watch(up)
+    up.start(0.0)
+    for seq in range(60):
+        up.handle(request(seq), now[0])
+        lines.poll()
+        now[0] += 0.01  # 0.6 s: a fast transfer
+    assert capsys.readouterr().err == ""
+    up.tick(up.next_deadline() or 0.0)  # one resend
+    for t in (1.0, 1.5, 1.99, 2.0, 2.7, 3.1):
+        now[0] = t
+        lines.poll()
+    err = capsys.readouterr().err
+    assert err.splitlines() == ["uploading 59/200 items, 1 resend"] * 3  # at 1.0, 2.0, 3.1 s
+    up.handle(request(120), 3.2)
+    now[0] = 4.2
+    lines.poll()
+    assert capsys.readouterr().err == "uploading 120/200 items, 1 resend\n"
+
+
+def request(seq: int) -> object:
+    mav = mavlink2.MAVLink(None, srcSystem=1, srcComponent=1)
+    msg = mavlink2.MAVLink_mission_request_int_message(255, 0, seq, 0)
+    (decoded,) = mavlink2.MAVLink(None).parse_buffer(msg.pack(mav)) or []
+    return decoded
+
+
+async def test_a_slow_upload_and_download_print_progress_on_stderr(tmp_path: Path) -> None:
+    """100 ms each way: 120 items take at least 15 round trips of 0.2 s each way, in any load."""
+    src = tmp_path / "m.waypoints"
+    src.write_text(to_wpl(mission(120)))
+    async with SimTeam.start(homes=[Home(*HOME)], tcp_base=0, speedup=5.0) as team:
+        team.vehicles[0].link.faults(latency_ms=100.0)
+        conn = f"tcp:127.0.0.1:{team.ports[0]}"
+        code, _, err = await gcs("mission", "upload", conn, str(src))
+        assert code == 0, err
+        progress = re.findall(r"^uploading (\d+)/120 items, \d+ resends?$", err, re.MULTILINE)
+        assert progress and len(progress) == len(err.splitlines()), err
+        assert [int(n) for n in progress] == sorted(int(n) for n in progress)
+        code, _, err = await gcs("mission", "download", conn, "--out", str(tmp_path / "d.plan"))
+        assert code == 0, err
+        assert re.search(r"^downloading \d+/120 items, \d+ resends?$", err, re.MULTILINE), err
