@@ -637,6 +637,11 @@ class Upload(Transfer):
             self.highest_requested = seq
             self._progressed(now_s)
             self._new_exchange(now_s)
+            in_flight_s = self._sent_s[seq] if seq <= self._frontier else None
+            if in_flight_s is not None and self.timeout_s is None:
+                # Sent ahead already: its answer is due a round trip after it went out, not
+                # after this request came.
+                self._deadline_s = max(now_s, in_flight_s + self._wait_s(now_s))
             return self._fill_window(seq, now_s)
         if seq < self.highest_requested:
             # Asked again for an item it had moved past: a late copy of an old request, so an
@@ -745,6 +750,7 @@ class Download(Transfer):
         self.counters.update(legacy_items=0, stale_acks=0, tolerated_nacks=0, duplicates=0)
         self._ahead: dict[int, MissionItem] = {}  # received beyond the in-order prefix
         self._outstanding: dict[int, float | None] = {}  # seq -> sent at (None: resent)
+        self._asked_s: dict[int, float] = {}  # seq -> last asked for (each has its own timer)
         self._next_seq = 0  # lowest seq never requested
 
     @property
@@ -773,11 +779,18 @@ class Download(Transfer):
         while len(self._outstanding) < self.window and self._next_seq < self.count:
             seq = self._next_seq
             self._next_seq += 1
-            self._outstanding[seq] = now_s
+            self._outstanding[seq] = self._asked_s[seq] = now_s
             out.append(self._request(seq))
         if out:
             self._new_exchange(now_s)
+        self._deadline_from_oldest(now_s)
         return out
+
+    def _deadline_from_oldest(self, now_s: float) -> None:
+        """The timer runs for the request asked longest ago: a lost one is asked again a
+        timeout after it went out, while the others still come in."""
+        if self._asked_s and self.timeout_s is None:
+            self._deadline_s = min(self._asked_s.values()) + self._wait_s(now_s)
 
     def _start(self, now_s: float) -> list[Any]:
         self.step = Step.REQUEST_LIST
@@ -815,6 +828,7 @@ class Download(Transfer):
         if mtype == "MISSION_ITEM":
             self.counters["legacy_items"] += 1
         sent_s = self._outstanding.pop(seq)
+        self._asked_s.pop(seq, None)
         if sent_s is not None:
             self._sample(now_s - sent_s)
         self._progressed(now_s)
@@ -826,7 +840,7 @@ class Download(Transfer):
             self._succeed()
             return [self._ack(MAV_MISSION_ACCEPTED)]
         out = self._request_more(now_s)
-        if not out:
+        if not out and self.timeout_s is not None:
             # Nothing new to ask for: the timer now runs for the ones still missing.
             self._new_exchange(now_s)
         return out
@@ -847,9 +861,18 @@ class Download(Transfer):
     def _resend(self, now_s: float) -> list[Any]:
         if self.step is Step.REQUEST_LIST:
             return [self._request_list()]
-        for seq in self._outstanding:
+        if self.timeout_s is None:
+            # Those a timeout overdue (the oldest at least); the others are still on their way.
+            oldest_s = min(self._asked_s.values())
+            due_s = now_s - self.rtt.rto_s
+            again = sorted(k for k, t in self._asked_s.items() if t <= max(oldest_s, due_s))
+        else:
+            again = sorted(self._outstanding)
+        for seq in again:
             self._outstanding[seq] = None
-        return [self._request(seq) for seq in sorted(self._outstanding)]
+            self._asked_s[seq] = now_s
+        self._deadline_from_oldest(now_s)
+        return [self._request(seq) for seq in again]
 
     def _awaited(self) -> str:
         if self.step is Step.REQUEST_LIST:

@@ -190,8 +190,12 @@ def test_windowed_download_requests_ahead_and_assembles_in_order() -> None:
     assert down.handle(item_int_msg(items[0]), 0.02)[0].seq == 4
     assert [it.seq for it in down.items] == [0, 1]
     t = down.next_deadline()
-    assert t is not None
-    assert sorted(m.seq for m in down.tick(t)) == [2, 3, 4]  # the missing ones, again
+    assert t is not None and t == pytest.approx(0.01 + down.rtt.rto_s)  # item 2's timer
+    assert [m.seq for m in down.tick(t)] == [2]  # overdue; 3 and 4 went out later
+    t2 = down.next_deadline()
+    assert t2 is not None and t2 == pytest.approx(0.02 + down.rtt.rto_s)
+    assert [m.seq for m in down.tick(t2)] == [3, 4]  # now theirs
+    t = t2
     for k in (4, 2, 3):
         out = down.handle(item_int_msg(items[k]), t + 0.01)
     assert types(out) == ["MISSION_ACK"] and down.result is Result.SUCCESS
