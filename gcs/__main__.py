@@ -9,6 +9,7 @@
         [--seed N] [--connect CONN ...] [--json OUT] [--report DIR] [--arrival-s T]
         [--blackout VEHICLE,START_S,DURATION_S] [--threats-from FILE]
         [--speed-bias VEHICLE,FRACTION] [--utc-offset VEHICLE,SECONDS] [--db URL]
+        [--abort VEHICLE|all,AT_S[,rtl|loiter]]
 
 Common options: ``--vehicle SYSID`` (default: the first vehicle heard), ``--wait S`` (how long
 to wait for it), ``--timeout S`` and ``--retries N`` per protocol exchange (default: a timeout
@@ -32,7 +33,7 @@ import time
 from collections.abc import Awaitable, Callable, Sequence
 from dataclasses import replace
 from types import MappingProxyType
-from typing import Final, TextIO
+from typing import TYPE_CHECKING, Final, TextIO
 
 from gcs import commands
 from gcs.errors import GcsError
@@ -44,6 +45,9 @@ from gcs.vehicle import Vehicle
 from planner.errors import PlannerError
 from planner.mission import MissionItem
 from planner.missionfile import read_mission_file, write_mission_file
+
+if TYPE_CHECKING:
+    from gcs.rehearse import Abort
 
 MISSION_TYPES = {"mission": 0, "fence": 1, "rally": 2}
 
@@ -369,6 +373,12 @@ def parser() -> argparse.ArgumentParser:
     )
     rh.add_argument("--threats-from", help="file to watch for pop-up threats (JSON lines)")
     rh.add_argument(
+        "--abort",
+        action="append",
+        default=[],
+        help="VEHICLE|all,AT_S[,rtl|loiter]: abort at that mission time (it leaves the team)",
+    )
+    rh.add_argument(
         "--db",
         help="keep the flight in this database as it happens (SQLAlchemy URL, e.g. "
         "sqlite:///out/tcgcs.db or postgresql+psycopg://user@host/db)",
@@ -416,6 +426,7 @@ def _rehearsal_options(args: argparse.Namespace) -> object:
         if start < 0 or dur <= 0:
             raise UsageError(f"--blackout {text}: start must be >= 0 and duration > 0")
         blackouts.append(Blackout(vid, start, dur))
+    aborts = [_abort(text, ids) for text in args.abort]
     speed_bias = _per_vehicle(args.speed_bias, "--speed-bias", "FRACTION", ids, (-0.5, 0.5))
     utc_offsets = _per_vehicle(args.utc_offset, "--utc-offset", "SECONDS", ids, (-1e6, 1e6))
     if args.connect and (blackouts or args.wind or args.loss or speed_bias or utc_offsets):
@@ -440,6 +451,7 @@ def _rehearsal_options(args: argparse.Namespace) -> object:
         report_dir=Path(args.report) if args.report else None,
         required_arrival_s=args.arrival_s,
         blackouts=blackouts,
+        aborts=aborts,
         speed_bias=speed_bias,
         utc_offsets_s=utc_offsets,
         threats_from=Path(args.threats_from) if args.threats_from else None,
@@ -447,6 +459,25 @@ def _rehearsal_options(args: argparse.Namespace) -> object:
         config=CoordinatorConfig(seed=args.seed),
         db_url=args.db,
     )
+
+
+def _abort(text: str, ids: list[str]) -> Abort:
+    """``--abort VEHICLE|all,AT_S[,rtl|loiter]``."""
+    from gcs.rehearse import Abort
+
+    parts = text.split(",")
+    try:
+        vid, at_s = parts[0], float(parts[1])
+    except (IndexError, ValueError):
+        raise UsageError(f"--abort: expected VEHICLE|all,AT_S[,rtl|loiter], got {text!r}") from None
+    mode = parts[2] if len(parts) > 2 else "rtl"
+    if vid != "all" and vid not in ids:
+        raise UsageError(f"--abort: no vehicle {vid!r} in the scenario ({', '.join(ids)})")
+    if mode not in ("rtl", "loiter") or len(parts) > 3:
+        raise UsageError(f"--abort {text}: the mode is rtl or loiter")
+    if not (math.isfinite(at_s) and at_s >= 0.0):
+        raise UsageError(f"--abort {text}: AT_S must be a mission time >= 0")
+    return Abort(None if vid == "all" else vid, at_s, "rtl" if mode == "rtl" else "loiter")
 
 
 def _per_vehicle(

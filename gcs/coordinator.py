@@ -61,7 +61,9 @@ from planner.timing import takeoff_time_s
 
 log = logging.getLogger(__name__)
 
-Phase = Literal["ground", "takeoff", "route", "arrived"]
+Phase = Literal["ground", "takeoff", "route", "arrived", "aborted"]
+AbortMode = Literal["rtl", "loiter"]
+_DONE: frozenset[str] = frozenset({"arrived", "aborted"})
 FIRST_ROUTE_SEQ = 2
 """Item 0 is home, item 1 the takeoff; the route starts at item 2."""
 
@@ -97,7 +99,7 @@ class CoordinatorConfig:
 
     tolerance_s: float = 0.5
     """An ETA within this of the target needs no loiter and no new team time."""
-    loiter_margin_m_s: float = 1.0
+    loiter_margin_m_s: float = 2.0
     """Loiter turns leave the speed this far above the minimum (room to slow down after)."""
     late_margin_s: float = 2.0
     """A late vehicle moves the team time to its earliest arrival plus this."""
@@ -263,21 +265,35 @@ class Coordinator:
         self.attach_clock()
 
     def attach_clock(self) -> None:
-        """Feed every vehicle's SYSTEM_TIME into the mission clock."""
+        """Feed every vehicle's SYSTEM_TIME into the mission clock, each dated back by half the
+        least round trip seen on its link (TIMESYNC): a vehicle behind a router is heard later
+        than one reached directly, and at 200x 5 ms of it would read as a clock 1 s behind."""
         for vehicle in self.vehicles.values():
             sysid = vehicle.system_id
+            link = vehicle.link
+            least_rtt_s = [math.inf]
 
-            def on_msg(msg: Any, rx_s: float, sysid: int = sysid) -> None:
+            def on_msg(
+                msg: Any,
+                rx_s: float,
+                sysid: int = sysid,
+                link: Any = link,
+                least: Any = least_rtt_s,
+            ) -> None:
                 if msg.get_type() != "SYSTEM_TIME" or msg.get_srcSystem() != sysid:
                     return
+                rtt = link.counters.rtt_s
+                if rtt is not None and rtt < least[0]:
+                    least[0] = rtt
+                sent_s = rx_s - (0.0 if math.isinf(least[0]) else 0.5 * least[0])
                 if msg.time_unix_usec:
                     self.clock.observe(
-                        sysid, msg.time_unix_usec * 1e-6, msg.time_boot_ms * 1e-3, rx_s
+                        sysid, msg.time_unix_usec * 1e-6, msg.time_boot_ms * 1e-3, sent_s
                     )
                 else:
-                    self.clock.observe_no_utc(sysid, msg.time_boot_ms * 1e-3, rx_s)
+                    self.clock.observe_no_utc(sysid, msg.time_boot_ms * 1e-3, sent_s)
 
-            self._detach.append(vehicle.link.add_listener(on_msg))
+            self._detach.append(link.add_listener(on_msg))
 
     def now_s(self) -> float:
         """Mission time now (s since the mission start)."""
@@ -473,7 +489,7 @@ class Coordinator:
         return "per-vehicle" if self.team_ref_s is None else f"{self.team_ref_s:.1f} s"
 
     def _all_arrived(self) -> bool:
-        return all(m.phase == "arrived" for m in self.members.values())
+        return all(m.phase in _DONE for m in self.members.values())
 
     def _deadline_s(self) -> float:
         return max(m.target_s for m in self.members.values()) + self.config.overrun_s
@@ -578,7 +594,7 @@ class Coordinator:
         sub = m.vehicle.link.subscribe({"GLOBAL_POSITION_INT"}, m.vehicle.system_id, maxsize=64)
         try:
             silent = False
-            while m.phase != "arrived":
+            while m.phase not in _DONE:
                 # Look for silence often enough to see the shortest one reported.
                 poll_s = self._silence_s() / max(self.clock.rate, 1.0) / 2.0
                 msg = await sub.get(timeout_s=min(0.05, max(0.005, poll_s)))
@@ -1011,7 +1027,7 @@ class Coordinator:
         anchors: dict[str, Anchor] = {}
         keeps: dict[str, int | None] = {}
         for m in self.members.values():
-            if m.phase == "arrived":
+            if m.phase in _DONE:
                 continue
             if m.phase == "ground" and m.takeoff_s > at_s:
                 keeps[m.vehicle_id] = None
@@ -1148,6 +1164,50 @@ class Coordinator:
             value=round(t - m.target_s, 3),
             t_s=t,
         )
+
+    async def abort(
+        self, vehicle_id: str | None = None, *, mode: AbortMode = "rtl"
+    ) -> dict[str, str | None]:
+        """Abort one vehicle (or every one): it leaves the team and flies home (``rtl``) or
+        circles where it is (``loiter``); a vehicle still on the ground stays there. The rest
+        keep their arrival time. Returns per vehicle None (done) or why not.
+
+        Raises
+        ------
+        KeyError
+            No such vehicle in the flight (named).
+        """
+        if vehicle_id is not None and vehicle_id not in self.members:
+            raise KeyError(f"no vehicle {vehicle_id!r} in the flight")
+        chosen = [self.members[vehicle_id]] if vehicle_id else list(self.members.values())
+        results: dict[str, str | None] = {}
+        for m in chosen:
+            if m.phase in _DONE:
+                results[m.vehicle_id] = f"already {m.phase}"
+                continue
+            on_ground = m.phase == "ground"
+            m.phase = "aborted"
+            if on_ground:
+                self._emit("abort", "aborted on the ground: it will not take off", m.vehicle_id)
+                results[m.vehicle_id] = None
+                continue
+            flight_mode = "RTL" if mode == "rtl" else "LOITER"
+            try:
+                await m.vehicle.set_mode(
+                    flight_mode,
+                    timeout_s=self._wall_timeout_s(m.vehicle),
+                    retries=self.config.command_retries,
+                )
+            except GcsError as err:
+                results[m.vehicle_id] = str(err)
+                self._emit(
+                    "abort", f"aborted, but {flight_mode} was not taken: {err}", m.vehicle_id
+                )
+                continue
+            results[m.vehicle_id] = None
+            what = "returning home (RTL)" if mode == "rtl" else "circling where it is (LOITER)"
+            self._emit("abort", f"aborted: {what}; the others keep their time", m.vehicle_id)
+        return results
 
     async def close(self) -> None:
         for task in list(self._tasks):

@@ -23,6 +23,7 @@ import subprocess
 import sys
 import tempfile
 import time
+import uuid
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -32,10 +33,11 @@ import numpy as np
 
 from gcs.coordination.bus import EventBus, Subscription
 from gcs.coordination.events import EventKind, FlightEvent
-from gcs.coordinator import Coordinator, CoordinatorConfig, Member
+from gcs.coordinator import AbortMode, Coordinator, CoordinatorConfig, Member
 from gcs.errors import GcsError
 from gcs.link import Link
 from gcs.missionclock import MissionClock
+from gcs.service.fleet import Fleet
 from gcs.store.repository import EventWriter, Store
 from gcs.truth import TruthSample, closest_approach, min_separation, read_truth
 from gcs.vehicle import Vehicle
@@ -53,6 +55,15 @@ class Blackout:
     duration_s: float
 
 
+@dataclass(frozen=True)
+class Abort:
+    vehicle_id: str | None
+    """None: every vehicle."""
+    at_s: float
+    """Mission time (s) of the abort."""
+    mode: AbortMode = "rtl"
+
+
 @dataclass
 class RehearsalOptions:
     scenario_path: Path
@@ -68,6 +79,8 @@ class RehearsalOptions:
     report_dir: Path | None = None
     required_arrival_s: float | None = None
     blackouts: Sequence[Blackout] = ()
+    aborts: Sequence[Abort] = ()
+    """Operator aborts at mission times: the vehicle flies home (or circles) and leaves the team."""
     speed_bias: Mapping[str, float] = field(default_factory=dict)
     """Vehicle id -> fraction: the stub vehicle flies (1 + f) x the true airspeed it should."""
     utc_offsets_s: Mapping[str, float] = field(default_factory=dict)
@@ -77,6 +90,9 @@ class RehearsalOptions:
     config: CoordinatorConfig = field(default_factory=CoordinatorConfig)
     bus: EventBus | None = None
     """The flight's event bus (a new one if None): other subscribers may listen in."""
+    fleet: Fleet | None = None
+    """Take the ``connect`` vehicles from this fleet (its links, kept open; a vehicle already
+    in another flight is refused, naming it and that flight) instead of opening links."""
     db_url: str | None = None
     """Keep the flight in this database (SQLAlchemy URL) as it happens: scenario, flight and
     its state, every event, every mission uploaded."""
@@ -255,6 +271,7 @@ async def _watch_threats(coord: Coordinator, path: Path) -> None:
 async def rehearse(opts: RehearsalOptions) -> dict[str, Any]:
     """Run the rehearsal; return the flight record (also written to ``--json``)."""
     wall0 = time.perf_counter()
+    flight_id = uuid.uuid4().hex
     clock = MissionClock()
     coord = Coordinator(
         opts.scenario,
@@ -309,12 +326,19 @@ async def rehearse(opts: RehearsalOptions) -> dict[str, Any]:
             sysids = [i + 1 for i in range(len(conns))]
         async with contextlib.AsyncExitStack() as stack:
             vehicles: dict[str, Vehicle] = {}
-            for v, conn, sysid in zip(opts.scenario.vehicles, conns, sysids, strict=True):
-                link = await stack.enter_async_context(Link.open(conn))
-                peer = await link.wait_vehicle(sysid, timeout_s=15.0)
-                vehicles[v.id] = Vehicle(link, peer.system_id, peer.component_id)
+            if opts.fleet is not None and opts.connect:
+                held = await opts.fleet.claim(conns, flight_id, sysids)
+                stack.callback(opts.fleet.release, flight_id)
+                vehicles = {
+                    v.id: h.vehicle for v, h in zip(opts.scenario.vehicles, held, strict=True)
+                }
+            else:
+                for v, conn, sysid in zip(opts.scenario.vehicles, conns, sysids, strict=True):
+                    link = await stack.enter_async_context(Link.open(conn))
+                    peer = await link.wait_vehicle(sysid, timeout_s=15.0)
+                    vehicles[v.id] = Vehicle(link, peer.system_id, peer.component_id)
             coord.bind(vehicles)
-            kept = _Kept.start(opts, coord, dict(zip(vehicles, conns, strict=True)))
+            kept = _Kept.start(opts, coord, dict(zip(vehicles, conns, strict=True)), flight_id)
             stack.push_async_callback(kept.finish, coord)
             async with asyncio.timeout(15.0):
                 while not clock.synced:
@@ -326,6 +350,7 @@ async def rehearse(opts: RehearsalOptions) -> dict[str, Any]:
             if proc is not None and opts.blackouts:
                 _send_blackouts(proc, opts, stub_start, mission_start)
             tasks = [asyncio.create_task(progress.run())]
+            tasks += [asyncio.create_task(_abort_at(coord, a, mission_start)) for a in opts.aborts]
             if opts.threats_from is not None:
                 tasks.append(asyncio.create_task(_watch_threats(coord, opts.threats_from)))
             try:
@@ -340,8 +365,7 @@ async def rehearse(opts: RehearsalOptions) -> dict[str, Any]:
         elif truth_path is not None:
             await _await_truth(truth_path, coord)
         record = flight_record(coord, opts, truth_path, time.perf_counter() - wall0)
-        if kept.flight_id is not None:
-            record["flight_id"] = kept.flight_id
+        record["flight_id"] = flight_id
     finally:
         printed.close()  # the printer drains what is queued, then ends
         await printer
@@ -364,7 +388,9 @@ class _Kept:
     events: Subscription | None = None
 
     @classmethod
-    def start(cls, opts: RehearsalOptions, coord: Coordinator, conns: Mapping[str, str]) -> _Kept:
+    def start(
+        cls, opts: RehearsalOptions, coord: Coordinator, conns: Mapping[str, str], flight_id: str
+    ) -> _Kept:
         if opts.db_url is None:
             return cls()
         store = Store.open(opts.db_url)
@@ -374,7 +400,7 @@ class _Kept:
             name=opts.scenario.name,
             media_type="application/json" if suffix == ".json" else "application/yaml",
         )
-        flight_id = store.create_flight(scenario_id, conns)
+        store.create_flight(scenario_id, conns, flight_id=flight_id)
         events = coord.bus.subscribe(maxsize=1_000_000, after_seq=0)
         writer = asyncio.create_task(EventWriter(store, flight_id).run(events))
         if not opts.quiet:
@@ -392,9 +418,18 @@ class _Kept:
             return
         self.events.close()
         await self.writer
-        arrived = all(m.arrival_utc_s is not None for m in coord.members.values())
-        self.state("completed" if arrived and coord.members else "failed")
+        flying = [m for m in coord.members.values() if m.phase != "aborted"]
+        if coord.members and not flying:
+            self.state("aborted")
+        else:
+            arrived = all(m.arrival_utc_s is not None for m in flying)
+            self.state("completed" if arrived and flying else "failed")
         self.store.close()
+
+
+async def _abort_at(coord: Coordinator, abort: Abort, start_utc_s: float) -> None:
+    await coord.clock.sleep_until(start_utc_s + abort.at_s)
+    await coord.abort(abort.vehicle_id, mode=abort.mode)
 
 
 async def _await_truth(path: Path, coord: Coordinator, timeout_s: float = 5.0) -> None:
@@ -504,6 +539,7 @@ def flight_record(
         vehicles.append(
             {
                 "id": m.vehicle_id,
+                "state": m.phase,
                 "system_id": sysid,
                 "speed_min_m_s": m.limits.airspeed_min_m_s,
                 "speed_max_m_s": m.limits.airspeed_max_m_s,
@@ -595,12 +631,14 @@ def _period(samples: Sequence[TruthSample]) -> float:
 
 
 def passed(record: Mapping[str, Any], tolerance_s: float) -> bool:
-    """Every vehicle arrived within tolerance and the separation held."""
+    """Every vehicle not aborted arrived within tolerance and the separation held."""
     ok = all(
-        v["error_s"] is not None and abs(v["error_s"]) <= tolerance_s for v in record["vehicles"]
+        v["error_s"] is not None and abs(v["error_s"]) <= tolerance_s
+        for v in record["vehicles"]
+        if v.get("state") != "aborted"
     )
     sep = record.get("min_separation_m")
     return ok and (sep is None or sep >= record["separation_m"])
 
 
-__all__ = ["Blackout", "RehearsalOptions", "flight_record", "passed", "rehearse"]
+__all__ = ["Abort", "Blackout", "RehearsalOptions", "flight_record", "passed", "rehearse"]

@@ -37,7 +37,7 @@ __all__ = ["BiasConfig", "SpeedBiasEstimator"]
 class BiasConfig:
     """Knobs of :class:`SpeedBiasEstimator` (mission seconds, m/s)."""
 
-    time_constant_s: float = 150.0
+    time_constant_s: float = 60.0
     """Fixes older than this weigh 1/e of a new one."""
     prior_fixes: float = 4.0
     """The pull towards ``k = 1, dw = 0``, as that many fixes' worth of evidence."""

@@ -405,6 +405,7 @@ _PHASE_OF = {
     EventKind.LAUNCH: "climbing",
     EventKind.ROUTE: "on_route",
     EventKind.ARRIVED: "arrived",
+    EventKind.ABORT: "aborted",
 }
 
 

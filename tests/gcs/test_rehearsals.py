@@ -24,7 +24,8 @@ import pytest
 
 from gcs.__main__ import main
 from gcs.coordination.bus import EventBus
-from gcs.rehearse import RehearsalOptions, passed, rehearse
+from gcs.rehearse import Abort, RehearsalOptions, passed, rehearse
+from gcs.service.fleet import Fleet, VehicleBusy
 from planner.scenario import load_scenario
 from tests.gcs.conftest import assert_flight_kept, free_udp_port
 from tests.sitl_stub.conftest import free_port_base, mavproxy_router
@@ -105,6 +106,26 @@ async def test_paper_rehearsal_on_clocks_7_s_ahead_and_4_s_behind_with_a_stalled
     assert said.keys() == {"UAV2", "UAV3"}, said
     assert said["UAV2"] == pytest.approx(7.0, abs=0.3)
     assert said["UAV3"] == pytest.approx(-4.0, abs=0.3)
+
+
+async def test_an_aborted_vehicle_flies_home_while_the_others_keep_their_time() -> None:
+    """The operator aborts UAV1 at 2000 s: it returns to its launch point (RTL) and leaves the
+    team; UAV2 and UAV3 still arrive within 1 s of the team time."""
+    record = await rehearse(_demo_run(seed=4, aborts=[Abort("UAV1", 2000.0, "rtl")]))
+    by_id = {v["id"]: v for v in record["vehicles"]}
+    assert by_id["UAV1"]["state"] == "aborted"
+    assert all(abs(by_id[v]["error_s"]) <= 1.0 for v in ("UAV2", "UAV3")), _errors(record)
+    assert passed(record, 1.0)
+    aborts = [e for e in record["events"] if e["kind"] == "abort"]
+    assert [e["vehicle"] for e in aborts] == ["UAV1"]
+    assert 2000.0 <= aborts[0]["t_s"] <= 2010.0 and "RTL" in aborts[0]["reason"]
+    # The truth: UAV1 turned back and was over its launch point before the others arrived.
+    scenario = load_scenario(PAPER)
+    home_e, home_n = scenario.vehicle("UAV1").start.local(scenario.frame())
+    t_abort = record["start_utc_s"] + aborts[0]["t_s"]
+    away = [math.hypot(r[1] - home_e, r[2] - home_n) for r in by_id["UAV1"]["track"]
+            if r[0] >= t_abort]  # fmt: skip
+    assert away[0] > 20_000.0 and min(away) < 1_000.0, (away[0], min(away))
 
 
 async def test_spaced_rehearsal_meets_each_60_s_slot_with_an_operator_threat(
@@ -199,13 +220,15 @@ def test_blackout_rehearsal_from_the_cli_recovers_and_arrives(
     assert gap is not None and 9.5 <= float(gap.group(1)) <= 13.0, back
 
 
-async def _start_stub(scenario: Path, base: int, truth: Path) -> asyncio.subprocess.Process:
+async def _start_stub(
+    scenario: Path, base: int, truth: Path, speedup: float = 200.0
+) -> asyncio.subprocess.Process:
     """``python -m sitl_stub --scenario`` as an operator would start it: on its own, homes
     from the scenario (nose toward the goal), the scenario's airspeeds, default timeouts, one
     TCP client per port as ArduPilot's SITL serves."""
     proc = await asyncio.create_subprocess_exec(
         sys.executable, "-m", "sitl_stub", "--scenario", str(scenario), "--vehicles", "3",
-        "--tcp-base", str(base), "--speedup", "200", "--truth", str(truth),
+        "--tcp-base", str(base), "--speedup", repr(speedup), "--truth", str(truth),
         "--one-client-per-port",
         stdout=asyncio.subprocess.PIPE, stderr=asyncio.subprocess.PIPE,
     )  # fmt: skip
@@ -260,3 +283,61 @@ async def test_connect_rehearsal_flies_separately_started_vehicles_one_behind_ma
     strategies = {a["strategy"] for a in record["adjustments"]}
     assert strategies >= {"takeoff_delay", "speed", "loiter"}
     assert [t["id"] for t in record["threats_appeared"]] == ["POPUP1"]
+
+
+async def _stop_stub(proc: asyncio.subprocess.Process) -> None:
+    if proc.returncode is None:
+        proc.send_signal(signal.SIGINT)
+    async with asyncio.timeout(20):
+        await proc.communicate()
+
+
+async def test_two_flights_at_once_on_one_fleet_each_to_its_own_time(tmp_path: Path) -> None:
+    """One process, one fleet, two simulators of three vehicles: two flights run together,
+    the second asked for a team time 300 s later; each arrives on its own time. A third flight
+    that asks for a vehicle of the first is refused, naming the vehicle and the flight."""
+    bases = [free_port_base(3), free_port_base(3)]
+    while bases[1] == bases[0]:
+        bases[1] = free_port_base(3)
+    truths = [tmp_path / "a.jsonl", tmp_path / "b.jsonl"]
+    procs = [
+        await _start_stub(PAPER, b, t, speedup=100.0) for b, t in zip(bases, truths, strict=True)
+    ]
+    conns = [[f"tcp:127.0.0.1:{b + 10 * i}" for i in range(3)] for b in bases]
+    scenario = load_scenario(PAPER)
+    try:
+        async with Fleet() as fleet:
+
+            def flight(k: int, **more: Any) -> RehearsalOptions:
+                return RehearsalOptions(
+                    scenario_path=PAPER, scenario=scenario, connect=conns[k], truth=truths[k],
+                    fleet=fleet, seed=k + 1, quiet=True, **more,
+                )  # fmt: skip
+
+            first = asyncio.create_task(rehearse(flight(0)))
+            async with asyncio.timeout(60):
+                while fleet.flight_of(conns[0][0]) is None:
+                    await asyncio.sleep(0.05)
+            owner = fleet.flight_of(conns[0][0])
+            second = asyncio.create_task(rehearse(flight(1, required_arrival_s=5600.0)))
+            mixed = RehearsalOptions(
+                scenario_path=PAPER, scenario=scenario, connect=[conns[0][0], *conns[1][1:]],
+                fleet=fleet, quiet=True,
+            )  # fmt: skip
+            with pytest.raises(
+                VehicleBusy, match=f"vehicle {conns[0][0]} is already in flight {owner}"
+            ):
+                await rehearse(mixed)
+            records = await asyncio.gather(first, second)
+    finally:
+        for proc in procs:
+            await _stop_stub(proc)
+    assert records[0]["flight_id"] == owner != records[1]["flight_id"]
+    # The second started on the time it asked for (the pop-up may move either later).
+    start = next(e for e in records[1]["events"] if e["kind"] == "start")
+    assert "team arrival 5600.0 s" in start["reason"], start
+    assert records[1]["required_arrival_s"] - records[0]["required_arrival_s"] > 150.0
+    for record in records:
+        assert record["arrival_source"] == "simulator"
+        errors = _errors(record)
+        assert all(e is not None and abs(e) <= 1.0 for e in errors.values()), errors

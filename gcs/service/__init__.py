@@ -1,0 +1,1 @@
+"""The long-lived side of the coordinator: the fleet of vehicle links its flights share."""

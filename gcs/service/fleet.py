@@ -1,0 +1,110 @@
+"""The fleet: every vehicle link the process holds, and which flight each vehicle is in.
+
+Links are opened once, by connection string, and kept for the life of the fleet: a flight
+borrows its vehicles (:meth:`Fleet.claim`) and gives them back when it ends
+(:meth:`Fleet.release`), so several flights run at once on distinct vehicles, and a vehicle
+is in at most one flight at a time.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+from gcs.errors import GcsError
+from gcs.link import Link
+from gcs.vehicle import Vehicle
+
+__all__ = ["Fleet", "FleetVehicle", "VehicleBusy"]
+
+
+class VehicleBusy(GcsError):
+    """A vehicle asked for by a flight is already in another one (both named)."""
+
+    def __init__(self, connection: str, flight_id: str) -> None:
+        super().__init__(f"vehicle {connection} is already in flight {flight_id}")
+        self.connection = connection
+        self.flight_id = flight_id
+
+
+@dataclass
+class FleetVehicle:
+    """One vehicle the fleet holds: its connection string, link and the flight it is in."""
+
+    connection: str
+    link: Link
+    vehicle: Vehicle
+    flight_id: str | None = None
+
+
+class Fleet:
+    """Vehicle links for the life of the process; each vehicle in at most one flight."""
+
+    def __init__(self, *, wait_s: float = 15.0) -> None:
+        self.wait_s = wait_s
+        self._vehicles: dict[str, FleetVehicle] = {}
+        self._stack = contextlib.AsyncExitStack()
+        self._lock = asyncio.Lock()
+
+    async def vehicle(self, connection: str, system_id: int | None = None) -> FleetVehicle:
+        """The vehicle at ``connection``, its link opened (and its HEARTBEAT heard) the first
+        time it is asked for."""
+        async with self._lock:
+            held = self._vehicles.get(connection)
+            if held is not None:
+                return held
+            link = await self._stack.enter_async_context(Link.open(connection))
+            peer = await link.wait_vehicle(system_id, timeout_s=self.wait_s)
+            held = FleetVehicle(connection, link, Vehicle(link, peer.system_id, peer.component_id))
+            self._vehicles[connection] = held
+            return held
+
+    async def claim(
+        self,
+        connections: Sequence[str],
+        flight_id: str,
+        system_ids: Sequence[int | None] | None = None,
+    ) -> list[FleetVehicle]:
+        """Put the vehicles at ``connections`` in flight ``flight_id``; all or none.
+
+        Raises
+        ------
+        VehicleBusy
+            One of them is in another flight (the first such is named, with its flight);
+            nothing is claimed.
+        """
+        ids = list(system_ids) if system_ids is not None else [None] * len(connections)
+        for conn in connections:
+            held = self._vehicles.get(conn)
+            if held is not None and held.flight_id not in (None, flight_id):
+                raise VehicleBusy(conn, held.flight_id)
+        vehicles = [await self.vehicle(c, s) for c, s in zip(connections, ids, strict=True)]
+        for held in vehicles:  # checked again: another flight may have claimed meanwhile
+            if held.flight_id not in (None, flight_id):
+                raise VehicleBusy(held.connection, held.flight_id)
+        for held in vehicles:
+            held.flight_id = flight_id
+        return vehicles
+
+    def release(self, flight_id: str) -> None:
+        """The flight's vehicles are free again (their links stay open)."""
+        for held in self._vehicles.values():
+            if held.flight_id == flight_id:
+                held.flight_id = None
+
+    def flight_of(self, connection: str) -> str | None:
+        held = self._vehicles.get(connection)
+        return None if held is None else held.flight_id
+
+    async def close(self) -> None:
+        """Close every link."""
+        self._vehicles.clear()
+        await self._stack.aclose()
+
+    async def __aenter__(self) -> Fleet:
+        return self
+
+    async def __aexit__(self, *exc: object) -> None:
+        await self.close()
