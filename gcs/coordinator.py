@@ -444,22 +444,21 @@ class Coordinator:
         return tuple(self._extra_threats)
 
     def add_threat(self, threat: Threat, at_s: float | None = None) -> None:
-        """A threat for the mission in flight: re-planned around when it appears.
+        """A threat for the mission: re-planned around when it appears.
 
         It appears at mission time ``at_s`` if given, else when its own ``appears`` says (a
         mission time, or a delay after a vehicle's takeoff), else now; a time already past is
-        now. Until then no plan avoids it.
+        now. Before the mission starts it is queued ("now" is the start). Until it appears no
+        plan avoids it.
 
         Raises
         ------
         ValueError
-            The mission has not started, or a threat with this id is already in it.
+            A threat with this id is already in the mission.
         """
-        if self.start_utc_s is None:
-            raise ValueError(f"threat {threat.id}: the mission has not started")
         if threat.id in {t.id for t in (*self.scenario.threats, *self._extra_threats)}:
             raise ValueError(f"threat {threat.id}: a threat with this id is already in the mission")
-        now = self.now_s()
+        now = self.now_s() if self.start_utc_s is not None else 0.0
         if at_s is not None or threat.appears is None:
             when = now if at_s is None else max(now, at_s)
             threat = threat.model_copy(update={"appears": Appearance(at_s=when)})
@@ -556,7 +555,8 @@ class Coordinator:
     def _due_popups(self, now: float) -> list[ThreatZone]:
         out = []
         for z in popup_zones(self._zones()):
-            if z.id not in self._popups_done and (z.appears_at_s or math.inf) <= now:
+            appears_s = math.inf if z.appears_at_s is None else z.appears_at_s
+            if z.id not in self._popups_done and appears_s <= now:
                 self._popups_done.add(z.id)
                 out.append(z)
         return out

@@ -9,6 +9,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from pydantic import TypeAdapter
 
 from gcs.__main__ import main
 from gcs.coordinator import Coordinator, InfeasibleRequest
@@ -17,7 +18,7 @@ from planner.atmosphere import eas2tas
 from planner.errors import PlannerError
 from planner.mission import MAV_CMD_DO_CHANGE_SPEED, MAV_CMD_NAV_LOITER_TURNS, MAV_CMD_NAV_WAYPOINT
 from planner.plan import World, build_world, plan
-from planner.scenario import Scenario, load_scenario
+from planner.scenario import Scenario, Threat, load_scenario
 from planner.schedule import (
     Anchor,
     PopupOutcome,
@@ -257,3 +258,24 @@ def test_popup_anchor_time_is_when_the_vehicle_reaches_the_splice_point(
         assert first_new.t_start_s == pytest.approx(t_p + ahead_s)
         _, s_then, _ = timed.schedule.vehicle(vid).state_at(t_p + ahead_s)
         assert s_then == pytest.approx(s_m, abs=1e-3)
+
+
+def test_a_threat_added_before_the_start_is_queued_for_its_time_and_not_planned_around() -> None:
+    scenario = load_scenario(PAPER)
+    coord = Coordinator(scenario, MissionClock())
+    box = [[185_600, 203_200], [189_600, 203_200], [189_600, 207_200], [185_600, 207_200]]
+    op1 = TypeAdapter(Threat).validate_python(
+        {"kind": "no_fly", "id": "OP1", "polygon": [{"east_m": e, "north_m": n} for e, n in box]}
+    )
+    coord.add_threat(op1, at_s=2500.0)
+    coord.add_threat(op1.model_copy(update={"id": "OP2"}))  # no time: at the start
+    assert [(t.id, t.appears.at_s if t.appears else None) for t in coord.operator_threats] == [
+        ("OP1", 2500.0),
+        ("OP2", 0.0),
+    ]
+    with pytest.raises(ValueError, match="OP1: a threat with this id is already"):
+        coord.add_threat(op1)
+    # Nothing is planned around them: they appear in flight, as pop-ups do.
+    assert {z.id for z in coord._due_popups(2499.0)} == {"OP2"}
+    assert {z.id for z in coord._due_popups(2500.0)} == {"OP1"}
+    assert all(t.id not in {"OP1", "OP2"} for t in coord.scenario.threats)
