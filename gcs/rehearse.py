@@ -41,8 +41,10 @@ from gcs.service.fleet import Fleet
 from gcs.store.repository import EventWriter, Store
 from gcs.truth import TruthSample, closest_approach, min_separation, read_truth
 from gcs.vehicle import Vehicle
+from planner.deconflict import separation
 from planner.plan import build_terrain
 from planner.scenario import Scenario
+from planner.schedulefile import schedule_json
 
 FLIGHT_FORMAT = "tcgcs-flight/1"
 
@@ -401,6 +403,12 @@ class _Kept:
             media_type="application/json" if suffix == ".json" else "application/yaml",
         )
         store.create_flight(scenario_id, conns, flight_id=flight_id)
+        if coord.schedule is not None and coord.world is not None:
+            sep = separation(coord.schedule.vehicles, coord.scenario.separation_m)
+            doc = schedule_json(
+                coord.schedule, sep, coord.world.terrain, scenario_file=str(opts.scenario_path)
+            )
+            store.update_flight(flight_id, resume={"schedule": doc})
         events = coord.bus.subscribe(maxsize=1_000_000, after_seq=0)
         writer = asyncio.create_task(EventWriter(store, flight_id).run(events))
         if not opts.quiet:

@@ -64,6 +64,9 @@ def assert_flight_kept(url: str, record: dict[str, Any]) -> None:
     try:
         flight = store.flight(record["flight_id"])
         assert flight.state == "completed"
+        assert flight.resume is not None  # the schedule it was launched on
+        planned = [v["id"] for v in flight.resume["schedule"]["vehicles"]]
+        assert planned == [v["id"] for v in record["vehicles"]]
         assert flight.team_time_s is not None and record["required_arrival_s"] is not None
         assert abs(flight.team_time_s - record["required_arrival_s"]) < 1e-3
         assert {vid for vid, (phase, _, _) in flight.vehicles.items() if phase == "arrived"} == {
