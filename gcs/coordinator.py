@@ -129,7 +129,6 @@ class CoordinatorConfig:
     method: Method = "aco"
     seed: int = 0
     command_retries: int = 8
-    upload_retries: int = 20
     overrun_s: float = 900.0
     """Give up this long after the latest target if a vehicle has not arrived."""
 
