@@ -706,6 +706,10 @@ class Upload(Transfer):
         # go again, and one more each time (the vehicle may have taken all we sent ahead and
         # its requests been lost).
         top = min(len(self.items) - 1, self._highest_sent + 1, h + self.retries_done)
+        if self.window > 1:
+            # Streaming: the vehicle takes these in order, so the window goes again at once
+            # instead of a round trip later with the request that would refill it.
+            top = min(len(self.items) - 1, h + self.window - 1)
         ahead = range(max(h + 1, top - SEND_AHEAD_MAX + 1), top + 1)
         self.counters["sent_ahead"] += len(ahead)
         return [self._item(h), *(self._item(seq) for seq in ahead)]
