@@ -108,6 +108,11 @@ class CoordinatorConfig:
     the planning and upload wall time scaled by the rate)."""
     loiter_min_time_left_s: float = 300.0
     """No loiter is inserted closer than this to the arrival (the speed trims the rest)."""
+    speed_reserve_m_s: float = 1.0
+    """Farther than ``loiter_min_time_left_s`` from the arrival, a vehicle whose required
+    airspeed is less than this above its minimum gets loiter turns as if it were early: its
+    last minutes keep room to slow down (a pop-up re-plan, timed in still air, can leave it
+    at the minimum in wind)."""
     arrival_radius_m: float = 1000.0
     """Goal passages are looked for within this distance of the goal."""
     link_silence_s: float = 3.0
@@ -769,16 +774,16 @@ class Coordinator:
         )
 
     def _decide(self, m: Member, t: float, s: float, st: Any) -> None:
-        d = m.controller.decide(
-            m.track,
-            s_m=s,
-            now_s=t,
-            target_s=m.target_s,
-            wind=self._wind(m),
-            current_level_m_s=m.level_m_s,
-            loiters_done=self._loiters_done(m),
-            tas_per_eas=m.tas_per_eas(s),
-        )
+        inputs: dict[str, Any] = {
+            "s_m": s,
+            "now_s": t,
+            "target_s": m.target_s,
+            "wind": self._wind(m),
+            "current_level_m_s": m.level_m_s,
+            "loiters_done": self._loiters_done(m),
+            "tas_per_eas": m.tas_per_eas(s),
+        }
+        d = m.controller.decide(m.track, **inputs)
         m.last_decision = d
         time_left = m.target_s - t
         m.next_decision_s = t + ArrivalController.period_s(time_left)
@@ -798,13 +803,20 @@ class Coordinator:
                 )
         elif d.verdict == "late":
             self._late(m, d, t)
-        elif (
-            d.verdict == "early"
-            and time_left > self.config.loiter_min_time_left_s
-            and t - m.last_loiter_s > 120.0
-        ):
-            m.last_loiter_s = t
-            self._spawn(self._insert_loiter(m, d, t, s))
+        elif time_left > self.config.loiter_min_time_left_s and t - m.last_loiter_s > 120.0:
+            # Early, or so little above the minimum speed that the last minutes would have no
+            # room to slow down: loiter turns now, while a buffer is ahead (judged as if the
+            # minimum were higher by the reserve; the turns leave the loiter margin above it).
+            reserve = self.config.speed_reserve_m_s
+            lo, hi = m.limits.airspeed_min_m_s, m.limits.airspeed_max_m_s
+            if d.verdict != "early" and reserve > 0.0 and d.required_m_s < min(lo + reserve, hi):
+                held = SpeedLimits(min(lo + reserve, hi), hi, m.limits.step_m_s)
+                d = ArrivalController(held, tolerance_s=self.config.tolerance_s).decide(
+                    m.track, **inputs
+                )
+            if d.verdict == "early":
+                m.last_loiter_s = t
+                self._spawn(self._insert_loiter(m, d, t, s))
 
     async def _command_speed(self, m: Member, d: Decision, t: float) -> None:
         assert d.command_m_s is not None

@@ -50,8 +50,11 @@ MIN_FIT_SPAN_S = 0.002
 OFFSET_SAMPLES = 15
 """A vehicle's offset from the team's UTC is the median of this many recent samples."""
 OFFSET_JUMP_S = 0.25
-"""Once a vehicle's offset is known, a sample farther than this from it is set aside; as many
-in a row as :data:`OFFSET_SAMPLES` replace it (the vehicle's clock did move)."""
+"""Once a vehicle's offset is known, a sample farther than this from it is set aside;
+:data:`OFFSET_CONFIRM` of them in a row replace it (the vehicle's clock did move)."""
+OFFSET_CONFIRM = 30
+"""How many outlying offset samples in a row move a known offset (a clock step is followed
+within that many reports; a burst of delayed reports shorter than that is not)."""
 OFFSET_WINDOW = 64
 """Each offset sample compares the least delayed of a vehicle's last this many reports: a
 stretch of delayed reports from one vehicle (its link queued, 70 ms of wall time is 14 s of
@@ -183,10 +186,10 @@ class MissionClock:
                 # An outlier (a burst of delayed reports, the rate re-fitting after a stall),
                 # unless the samples keep saying so: then the clock really moved.
                 vc.outliers.append(sample)
-                if len(vc.outliers) < OFFSET_SAMPLES:
+                if len(vc.outliers) < OFFSET_CONFIRM:
                     continue
                 vc.offset_samples.clear()
-                vc.offset_samples.extend(vc.outliers)
+                vc.offset_samples.extend(vc.outliers[-OFFSET_SAMPLES:])
             else:
                 vc.offset_samples.append(sample)
             vc.outliers.clear()

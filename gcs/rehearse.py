@@ -17,9 +17,6 @@ import asyncio
 import contextlib
 import json
 import math
-import signal
-import socket
-import subprocess
 import sys
 import tempfile
 import time
@@ -38,6 +35,7 @@ from gcs.errors import GcsError
 from gcs.link import Link
 from gcs.missionclock import MissionClock
 from gcs.service.fleet import Fleet
+from gcs.service.stubs import StubProcess
 from gcs.store.repository import EventWriter, Store
 from gcs.truth import TruthSample, closest_approach, min_separation, read_truth
 from gcs.vehicle import Vehicle
@@ -100,27 +98,6 @@ class RehearsalOptions:
     its state, every event, every mission uploaded."""
 
 
-def _free_tcp_base(n: int) -> int:
-    """A base port with ``n`` free ports at stride 10 (SITL layout)."""
-    for _ in range(50):
-        with socket.socket() as sock:
-            sock.bind(("127.0.0.1", 0))
-            base = int(sock.getsockname()[1])
-        if base + 10 * n > 65000:
-            continue
-        ok = True
-        for i in range(n):
-            with socket.socket() as sock:
-                try:
-                    sock.bind(("127.0.0.1", base + 10 * i))
-                except OSError:
-                    ok = False
-                    break
-        if ok:
-            return base
-    raise GcsError("no free TCP ports for the stub vehicles")
-
-
 def _stub_homes(coord: Coordinator) -> list[str]:
     assert coord.schedule is not None
     scenario = coord.scenario
@@ -137,18 +114,11 @@ def _stub_homes(coord: Coordinator) -> list[str]:
     return out
 
 
-def _stub_command(
-    opts: RehearsalOptions, coord: Coordinator, base: int, truth: Path, start_utc_s: float
+def _stub_args(
+    opts: RehearsalOptions, coord: Coordinator, truth: Path, start_utc_s: float
 ) -> list[str]:
     scenario = opts.scenario
     cmd = [
-        sys.executable,
-        "-m",
-        "sitl_stub",
-        "--vehicles",
-        str(len(scenario.vehicles)),
-        "--tcp-base",
-        str(base),
         "--speedup",
         repr(opts.speedup),
         "--seed",
@@ -175,23 +145,7 @@ def _stub_command(
         cmd += ["--speed-bias", f"{ids.index(vid)},{fraction!r}"]
     for vid, offset in opts.utc_offsets_s.items():
         cmd += ["--utc-offset", f"{ids.index(vid)},{offset!r}"]
-    if opts.blackouts:
-        cmd += ["--control-stdin"]
     return cmd
-
-
-async def _wait_ready(proc: asyncio.subprocess.Process, timeout_s: float = 30.0) -> None:
-    assert proc.stdout is not None
-    async with asyncio.timeout(timeout_s):
-        while True:
-            line = await proc.stdout.readline()
-            if not line:
-                err = b""
-                if proc.stderr is not None:
-                    err = await proc.stderr.read()
-                raise GcsError(f"sitl_stub exited before it was ready: {err.decode().strip()}")
-            if b"ready" in line:
-                return
 
 
 class Progress:
@@ -298,7 +252,7 @@ async def rehearse(opts: RehearsalOptions) -> dict[str, Any]:
             flush=True,
         )
     truth_path: Path | None = None
-    proc: asyncio.subprocess.Process | None = None
+    stub: StubProcess | None = None
     tmp = tempfile.TemporaryDirectory(prefix="tcgcs-rehearse-")
     try:
         mission_start: float | None = None
@@ -313,18 +267,14 @@ async def rehearse(opts: RehearsalOptions) -> dict[str, Any]:
             sysids: list[int | None] = [None] * len(conns)
             truth_path = opts.truth
         else:
-            base = _free_tcp_base(len(opts.scenario.vehicles))
             truth_path = Path(tmp.name) / "truth.jsonl"
             stub_start = time.time()
-            cmd = _stub_command(opts, coord, base, truth_path, stub_start)
-            proc = await asyncio.create_subprocess_exec(
-                *cmd,
-                stdin=subprocess.PIPE if opts.blackouts else subprocess.DEVNULL,
-                stdout=subprocess.PIPE,
-                stderr=subprocess.PIPE,
+            stub = await StubProcess.start(
+                len(opts.scenario.vehicles),
+                _stub_args(opts, coord, truth_path, stub_start),
+                control=bool(opts.blackouts),
             )
-            await _wait_ready(proc)
-            conns = [f"tcp:127.0.0.1:{base + 10 * i}" for i in range(len(opts.scenario.vehicles))]
+            conns = stub.connections
             sysids = [i + 1 for i in range(len(conns))]
         async with contextlib.AsyncExitStack() as stack:
             vehicles: dict[str, Vehicle] = {}
@@ -349,8 +299,8 @@ async def rehearse(opts: RehearsalOptions) -> dict[str, Any]:
             await coord.upload_all()
             mission_start = clock.now_utc_s() + max(10.0, 1.0 * clock.rate)
             kept.state("running", start_utc_s=mission_start, team_time_s=coord.team_ref_s)
-            if proc is not None and opts.blackouts:
-                _send_blackouts(proc, opts, stub_start, mission_start)
+            if stub is not None and opts.blackouts:
+                _send_blackouts(stub, opts, stub_start, mission_start)
             tasks = [asyncio.create_task(progress.run())]
             tasks += [asyncio.create_task(_abort_at(coord, a, mission_start)) for a in opts.aborts]
             if opts.threats_from is not None:
@@ -361,9 +311,9 @@ async def rehearse(opts: RehearsalOptions) -> dict[str, Any]:
                 for task in tasks:
                     task.cancel()
                 await coord.close()
-        if proc is not None:
-            await _stop(proc)
-            proc = None
+        if stub is not None:
+            await stub.stop()
+            stub = None
         elif truth_path is not None:
             await _await_truth(truth_path, coord)
         record = flight_record(coord, opts, truth_path, time.perf_counter() - wall0)
@@ -371,8 +321,8 @@ async def rehearse(opts: RehearsalOptions) -> dict[str, Any]:
     finally:
         printed.close()  # the printer drains what is queued, then ends
         await printer
-        if proc is not None:
-            await _stop(proc)
+        if stub is not None:
+            await stub.stop()
         tmp.cleanup()
     if opts.json_out is not None:
         opts.json_out.parent.mkdir(parents=True, exist_ok=True)
@@ -460,28 +410,13 @@ async def _await_truth(path: Path, coord: Coordinator, timeout_s: float = 5.0) -
 
 
 def _send_blackouts(
-    proc: asyncio.subprocess.Process, opts: RehearsalOptions, stub_start: float, start: float
+    stub: StubProcess, opts: RehearsalOptions, stub_start: float, start: float
 ) -> None:
     """Blackouts in mission time, sent to the stub in its simulated time."""
-    assert proc.stdin is not None
     ids = [v.id for v in opts.scenario.vehicles]
     for b in opts.blackouts:
         sim_s = start - stub_start + b.start_s
-        proc.stdin.write(
-            f"blackout {ids.index(b.vehicle_id)} {sim_s:.3f} {b.duration_s:g}\n".encode()
-        )
-
-
-async def _stop(proc: asyncio.subprocess.Process) -> None:
-    if proc.returncode is None:
-        with contextlib.suppress(ProcessLookupError):
-            proc.send_signal(signal.SIGINT)
-        try:
-            async with asyncio.timeout(10.0):
-                await proc.wait()
-        except TimeoutError:
-            proc.kill()
-            await proc.wait()
+        stub.control(f"blackout {ids.index(b.vehicle_id)} {sim_s:.3f} {b.duration_s:g}")
 
 
 def _ev_json(ev: FlightEvent, start_utc_s: float) -> dict[str, Any]:

@@ -3,7 +3,8 @@
 Links are opened once, by connection string, and kept for the life of the fleet: a flight
 borrows its vehicles (:meth:`Fleet.claim`) and gives them back when it ends
 (:meth:`Fleet.release`), so several flights run at once on distinct vehicles, and a vehicle
-is in at most one flight at a time.
+is in at most one flight at a time. Live vehicles are reached by connection string; bundled
+simulator vehicles are started on request (:meth:`Fleet.start_stubs`).
 """
 
 from __future__ import annotations
@@ -15,6 +16,7 @@ from dataclasses import dataclass
 
 from gcs.errors import GcsError
 from gcs.link import Link
+from gcs.service.stubs import StubProcess
 from gcs.vehicle import Vehicle
 
 __all__ = ["Fleet", "FleetVehicle", "VehicleBusy"]
@@ -87,6 +89,15 @@ class Fleet:
         for held in vehicles:
             held.flight_id = flight_id
         return vehicles
+
+    async def start_stubs(
+        self, count: int, args: Sequence[str], *, control: bool = False
+    ) -> StubProcess:
+        """Bundled simulator vehicles (``python -m sitl_stub ARGS``), stopped when the fleet
+        closes; claim them by :attr:`StubProcess.connections` like any others."""
+        stub = await StubProcess.start(count, args, control=control)
+        self._stack.push_async_callback(stub.stop)
+        return stub
 
     def release(self, flight_id: str) -> None:
         """The flight's vehicles are free again (their links stay open)."""

@@ -31,3 +31,16 @@ async def test_vehicles_are_claimed_whole_flights_at_a_time_and_links_are_kept()
         second = await fleet.claim([conns[1], conns[2]], "flight-b")
         assert second[0].link is first[1].link  # the link outlived the first flight
         assert second[0].link.vehicles[2].system_id == 2
+
+
+async def test_bundled_simulator_vehicles_are_started_on_request_and_stopped_with_the_fleet() -> (
+    None
+):
+    home = ",".join(f"{x:g}" for x in HOME)
+    async with asyncio.timeout(60):
+        async with Fleet(wait_s=10.0) as fleet:
+            stub = await fleet.start_stubs(2, ["--home", home, "--speedup", "5"])
+            held = await fleet.claim(stub.connections, "rehearsal", [1, 2])
+            assert [h.vehicle.system_id for h in held] == [1, 2]
+            assert stub.proc.returncode is None
+        assert stub.proc.returncode == 0  # interrupted cleanly when the fleet closed

@@ -1,0 +1,113 @@
+"""Bundled simulator vehicles on request: ``python -m sitl_stub`` in a child process.
+
+:meth:`StubProcess.start` picks free TCP ports in ArduPilot SITL's layout (vehicle ``i`` at
+``base + 10 i``), starts the simulator with the arguments given and waits for its ready line;
+:meth:`StubProcess.stop` interrupts it (and kills it if it does not stop).
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import signal
+import socket
+import subprocess
+import sys
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+from gcs.errors import GcsError
+
+__all__ = ["StubProcess", "free_tcp_base"]
+
+
+def free_tcp_base(n: int) -> int:
+    """A base port with ``n`` free ports at stride 10 (SITL layout)."""
+    for _ in range(50):
+        with socket.socket() as sock:
+            sock.bind(("127.0.0.1", 0))
+            base = int(sock.getsockname()[1])
+        if base + 10 * n > 65000:
+            continue
+        ok = True
+        for i in range(n):
+            with socket.socket() as sock:
+                try:
+                    sock.bind(("127.0.0.1", base + 10 * i))
+                except OSError:
+                    ok = False
+                    break
+        if ok:
+            return base
+    raise GcsError("no free TCP ports for the stub vehicles")
+
+
+@dataclass
+class StubProcess:
+    """A running simulator of ``count`` vehicles on ``base``, ``base + 10``, ..."""
+
+    proc: asyncio.subprocess.Process
+    base: int
+    count: int
+
+    @property
+    def connections(self) -> list[str]:
+        return [f"tcp:127.0.0.1:{self.base + 10 * i}" for i in range(self.count)]
+
+    @classmethod
+    async def start(
+        cls, count: int, args: Sequence[str], *, control: bool = False, timeout_s: float = 30.0
+    ) -> StubProcess:
+        """``python -m sitl_stub --vehicles COUNT --tcp-base BASE ARGS``, ready; with
+        ``control`` its control input is open (``--control-stdin``) for :meth:`control`."""
+        base = free_tcp_base(count)
+        cmd = [sys.executable, "-m", "sitl_stub", "--vehicles", str(count), "--tcp-base", str(base)]
+        cmd += list(args)
+        if control:
+            cmd.append("--control-stdin")
+        proc = await asyncio.create_subprocess_exec(
+            *cmd,
+            stdin=subprocess.PIPE if control else subprocess.DEVNULL,
+            stdout=subprocess.PIPE,
+            stderr=subprocess.PIPE,
+        )
+        stub = cls(proc, base, count)
+        try:
+            await stub._wait_ready(timeout_s)
+        except BaseException:
+            await stub.stop()
+            raise
+        return stub
+
+    async def _wait_ready(self, timeout_s: float) -> None:
+        proc = self.proc
+        assert proc.stdout is not None
+        async with asyncio.timeout(timeout_s):
+            while True:
+                line = await proc.stdout.readline()
+                if not line:
+                    err = b""
+                    if proc.stderr is not None:
+                        err = await proc.stderr.read()
+                    raise GcsError(f"sitl_stub exited before it was ready: {err.decode().strip()}")
+                if b"ready" in line:
+                    return
+
+    def control(self, line: str) -> None:
+        """One line on the simulator's control input (e.g. ``blackout I START_S DURATION_S``)."""
+        if self.proc.stdin is None:
+            raise GcsError("the simulator was started without its control input")
+        self.proc.stdin.write(line.rstrip("\n").encode() + b"\n")
+
+    async def stop(self) -> None:
+        """Interrupt the simulator; kill it if it has not stopped within 10 s."""
+        proc = self.proc
+        if proc.returncode is None:
+            with contextlib.suppress(ProcessLookupError):
+                proc.send_signal(signal.SIGINT)
+            try:
+                async with asyncio.timeout(10.0):
+                    await proc.wait()
+            except TimeoutError:
+                proc.kill()
+                await proc.wait()
