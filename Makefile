@@ -46,6 +46,7 @@ bench: $(STAMP)
 	$(PY) bench/bench_planner.py
 	$(PY) bench/bench_sitl_stub.py
 	$(PY) bench/bench_gcs_mission.py
+	$(PY) bench/bench_gcs_mission_loss.py
 	$(PY) bench/bench_gcs_ingest.py
 
 clean:
