@@ -1,8 +1,8 @@
 """Benchmark: one gcs process ingesting N stub vehicles at 10 Hz position telemetry.
 
 The stub vehicles run at 1x in a child process (one TCP link each). This process opens one
-``gcs.link.Link`` per vehicle, asks for GLOBAL_POSITION_INT at 10 Hz (SET_MESSAGE_INTERVAL),
-and folds every message into a ``gcs.telemetry.TelemetryReducer``. For each position message
+``gcs.mavlink.link.Link`` per vehicle, asks for GLOBAL_POSITION_INT at 10 Hz (SET_MESSAGE_INTERVAL),
+and folds every message into a ``gcs.mavlink.telemetry.TelemetryReducer``. For each position message
 the lag is the wall time (UTC) at which the reducer's state holds it, minus the time the
 vehicle stamped it with: the stub's step time ``time_boot_ms``, mapped to UTC through the
 wall time at which the stub's clock started (the child reports it). The stub writes a step's
@@ -22,8 +22,8 @@ import statistics
 import time
 from typing import Any
 
-from gcs.link import Link
-from gcs.telemetry import TelemetryReducer
+from gcs.mavlink.link import Link
+from gcs.mavlink.telemetry import TelemetryReducer
 from sitl_stub.api import Home, SimTeam
 
 

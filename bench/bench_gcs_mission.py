@@ -1,7 +1,7 @@
 """Benchmark: our 200-item mission upload next to MAVSDK's ``mission_raw``, same stub vehicle.
 
 One stub vehicle runs in a child process (1x). This process holds both clients on the same
-vehicle at once: a ``gcs.link.Link`` and MAVSDK 4.x (its C core, over ``tcpout://``). Each
+vehicle at once: a ``gcs.mavlink.link.Link`` and MAVSDK 4.x (its C core, over ``tcpout://``). Each
 round uploads the same 200 items with ours, then with MAVSDK (the order alternates between
 rounds), and downloads them back with each; every upload is checked against the vehicle's
 download. The figures are the ratios of medians, ours / MAVSDK, for upload and download.
@@ -20,8 +20,8 @@ from typing import Any
 
 from pymavlink.dialects.v20 import ardupilotmega as mavlink2
 
-from gcs.link import Link
-from gcs.mission_client import download_mission, upload_mission
+from gcs.mavlink.link import Link
+from gcs.mavlink.mission_client import download_mission, upload_mission
 from planner.mission import Autopilot, MissionItem, items_equal
 from sitl_stub.api import Home, SimTeam
 from sitl_stub.model import displace_deg

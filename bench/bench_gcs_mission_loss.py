@@ -2,7 +2,7 @@
 
 One stub vehicle per row, in a child process at 1x (its mission timers are in simulated time:
 at 1x its 1.5 s re-request is ArduPilot's, where at 20x it would re-request every 75 ms, five
-times in a 400 ms round trip), our ``gcs.link.Link`` over loopback TCP in this one. Each run
+times in a 400 ms round trip), our ``gcs.mavlink.link.Link`` over loopback TCP in this one. Each run
 uploads a new 200-item mission with the default options, checks what the download gives back
 against it in ArduPilot's stored form, and times both. Rows: 30 % loss each way, the same with
 200 ms added each way, 50 % loss.
@@ -22,9 +22,9 @@ from typing import Any
 
 from bench_gcs_mission import HOME, mission
 
-from gcs.link import Link
-from gcs.mission_client import download_mission, upload_mission
-from gcs.mission_errors import MissionError
+from gcs.mavlink.link import Link
+from gcs.mavlink.mission_client import download_mission, upload_mission
+from gcs.mavlink.mission_errors import MissionError
 from planner.mission import Autopilot, items_equal
 from sitl_stub.api import SimTeam
 

@@ -14,12 +14,11 @@
 Common options: ``--vehicle SYSID`` (default: the first vehicle heard), ``--wait S`` (how long
 to wait for it), ``--timeout S`` and ``--retries N`` per protocol exchange (default: a timeout
 from the measured round trip, and failure only when the vehicle goes silent or the exchange
-stops advancing, :mod:`gcs.retry`), ``--signing-key HEX`` or ``--signing-passphrase TEXT``. A
-mission transfer still running after a second prints its progress on stderr, once a second.
-``.plan`` files are QGroundControl JSON, ``.waypoints`` / ``.wpl`` / ``.txt`` are WPL 110. Exit 0
-on success, 1 when the vehicle or link fails the operation (timeout, denied, rejected item:
-the message says which and why), 2 for bad input.
-"""
+stops advancing, :mod:`gcs.mavlink.retry`), ``--signing-key HEX`` or ``--signing-passphrase
+TEXT``. A mission transfer still running after a second prints its progress on stderr, once a
+second. ``.plan`` files are QGroundControl JSON, ``.waypoints`` / ``.wpl`` / ``.txt`` are WPL
+110. Exit 0 on success, 1 when the vehicle or link fails the operation (timeout, denied,
+rejected item: the message says which and why), 2 for bad input."""
 
 from __future__ import annotations
 
@@ -35,19 +34,19 @@ from dataclasses import replace
 from types import MappingProxyType
 from typing import TYPE_CHECKING, Final, TextIO
 
-from gcs import commands
 from gcs.errors import GcsError
-from gcs.link import Link
-from gcs.mission_protocol import Transfer
-from gcs.signing import SigningConfig, key_from_passphrase
-from gcs.status import status_line
-from gcs.vehicle import Vehicle
+from gcs.mavlink import commands
+from gcs.mavlink.link import Link
+from gcs.mavlink.mission_protocol import Transfer
+from gcs.mavlink.signing import SigningConfig, key_from_passphrase
+from gcs.mavlink.status import status_line
+from gcs.mavlink.vehicle import Vehicle
 from planner.errors import PlannerError
 from planner.mission import MissionItem
 from planner.missionfile import read_mission_file, write_mission_file
 
 if TYPE_CHECKING:
-    from gcs.rehearse import Abort
+    from gcs.rehearsal.rehearse import Abort
 
 MISSION_TYPES = {"mission": 0, "fence": 1, "rally": 2}
 
@@ -392,8 +391,8 @@ def parser() -> argparse.ArgumentParser:
 def _rehearsal_options(args: argparse.Namespace) -> object:
     from pathlib import Path
 
-    from gcs.coordinator import CoordinatorConfig
-    from gcs.rehearse import Blackout, RehearsalOptions
+    from gcs.coordination.coordinator import CoordinatorConfig
+    from gcs.rehearsal.rehearse import Blackout, RehearsalOptions
     from planner.scenario import load_scenario
 
     path = Path(args.scenario)
@@ -463,7 +462,7 @@ def _rehearsal_options(args: argparse.Namespace) -> object:
 
 def _abort(text: str, ids: list[str]) -> Abort:
     """``--abort VEHICLE|all,AT_S[,rtl|loiter]``."""
-    from gcs.rehearse import Abort
+    from gcs.rehearsal.rehearse import Abort
 
     parts = text.split(",")
     try:
@@ -500,8 +499,8 @@ def _per_vehicle(
 
 
 async def rehearse_cmd(args: argparse.Namespace) -> str:
-    from gcs.rehearse import RehearsalOptions, passed, rehearse
-    from gcs.report import arrival_table, write_report
+    from gcs.rehearsal.rehearse import RehearsalOptions, passed, rehearse
+    from gcs.rehearsal.report import arrival_table, write_report
 
     opts = _rehearsal_options(args)
     assert isinstance(opts, RehearsalOptions)

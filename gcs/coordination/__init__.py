@@ -1,1 +1,2 @@
-"""The flight engine's sans-IO parts: typed events and the bus they travel on."""
+"""The flight engine: the arrival controller, the learnt airspeed scale, the mission clock,
+the team coordinator, and the typed events and bus it publishes on."""

@@ -15,9 +15,9 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 
 from gcs.errors import GcsError
-from gcs.link import Link
+from gcs.mavlink.link import Link
+from gcs.mavlink.vehicle import Vehicle
 from gcs.service.stubs import StubProcess
-from gcs.vehicle import Vehicle
 
 __all__ = ["Fleet", "FleetVehicle", "VehicleBusy"]
 

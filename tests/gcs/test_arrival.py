@@ -1,4 +1,4 @@
-"""Tests of gcs.arrival: wind, route tracking, time to go, decisions and the closed loop."""
+"""gcs.coordination.arrival: wind, route tracking, time to go, decisions and the closed loop."""
 
 from __future__ import annotations
 
@@ -9,7 +9,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from gcs.arrival import (
+from gcs.coordination.arrival import (
     ArrivalController,
     ArrivalInputError,
     Decision,

@@ -11,7 +11,7 @@ import pytest
 from pymavlink.dialects.v20 import ardupilotmega as mavlink2
 
 from gcs.__main__ import ProgressLines
-from gcs.mission_protocol import Upload
+from gcs.mavlink.mission_protocol import Upload
 from planner.mission import Autopilot, MissionItem, items_equal
 from planner.missionfile import read_mission_file, to_wpl
 from sitl_stub.api import Home, SimTeam

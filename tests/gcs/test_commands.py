@@ -12,7 +12,8 @@ from typing import Any
 import pytest
 from pymavlink.dialects.v20 import ardupilotmega as mavlink2
 
-from gcs.commands import (
+from gcs.errors import GcsError
+from gcs.mavlink.commands import (
     FORCE_ARM_MAGIC,
     CommandAck,
     CommandCancelled,
@@ -36,9 +37,8 @@ from gcs.commands import (
     set_mode,
     start_mission,
 )
-from gcs.errors import GcsError
-from gcs.link import Link
-from gcs.retry import RetryPolicy
+from gcs.mavlink.link import Link
+from gcs.mavlink.retry import RetryPolicy
 from sitl_stub.api import Home, SimTeam
 from sitl_stub.autopilot import Mode
 from sitl_stub.items import MissionItem
@@ -183,7 +183,7 @@ def test_command_succeeds_on_accepted_ack() -> None:
     assert tx.tick(10.0) == []
 
 
-# -- sans-IO: the adaptive defaults (gcs.retry) ------------------------------------------
+# -- sans-IO: the adaptive defaults (gcs.mavlink.retry) ------------------------------------------
 
 
 def test_command_with_defaults_resends_after_the_measured_round_trip() -> None:
@@ -435,7 +435,7 @@ class FakePeer:
 
 
 class FakeLink:
-    """Enough of gcs.link.Link for the runner: replies are delivered synchronously."""
+    """Enough of gcs.mavlink.link.Link for the runner: replies are delivered synchronously."""
 
     system_id = GCS_SYS
     component_id = GCS_COMP
@@ -495,7 +495,7 @@ async def test_runner_with_defaults_resends_and_seeds_the_next_command_with_its_
     assert first.attempts == 2  # resent after the initial timeout, nothing measured
     second = await command_long(link, 1, CMD_ARM, (1.0,))
     assert second.attempts == 1
-    from gcs.retry import rtt_hint_s
+    from gcs.mavlink.retry import rtt_hint_s
 
     hint = rtt_hint_s(link, 1)
     assert hint is not None and hint < POLICY.initial_rto_s  # the second ACK's round trip

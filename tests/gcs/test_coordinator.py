@@ -12,8 +12,8 @@ import pytest
 from pydantic import TypeAdapter
 
 from gcs.__main__ import main
-from gcs.coordinator import Coordinator, InfeasibleRequest
-from gcs.missionclock import MissionClock
+from gcs.coordination.coordinator import Coordinator, InfeasibleRequest
+from gcs.coordination.missionclock import MissionClock
 from planner.atmosphere import eas2tas
 from planner.errors import PlannerError
 from planner.mission import MAV_CMD_DO_CHANGE_SPEED, MAV_CMD_NAV_LOITER_TURNS, MAV_CMD_NAV_WAYPOINT

@@ -1,4 +1,4 @@
-"""gcs.link over real loopback sockets: TCP (stub and hand-driven vehicles), UDP, serial (pty)."""
+"""gcs.mavlink.link over loopback: TCP (stub and hand-driven vehicles), UDP, serial (pty)."""
 
 from __future__ import annotations
 
@@ -9,10 +9,10 @@ from typing import Any
 import pytest
 from pymavlink.dialects.v20 import ardupilotmega as mavlink2
 
-from gcs.endpoints import Endpoint, Kind, parse_connection
 from gcs.errors import ConnectionStringError, LinkTimeout
-from gcs.link import Link
-from gcs.signing import SigningConfig, apply_signing, key_from_passphrase
+from gcs.mavlink.endpoints import Endpoint, Kind, parse_connection
+from gcs.mavlink.link import Link
+from gcs.mavlink.signing import SigningConfig, apply_signing, key_from_passphrase
 from sitl_stub.api import Home, SimTeam
 from tests.gcs.conftest import HOME, Packer, TcpVehicle, free_udp_port, heartbeat
 
@@ -404,7 +404,7 @@ def test_signing_config_rejects_bad_keys() -> None:
 
 
 def test_signing_timestamp_is_in_10us_units_since_2015() -> None:
-    from gcs.signing import signing_timestamp
+    from gcs.mavlink.signing import signing_timestamp
 
     assert signing_timestamp(1420070400.0) == 0
     assert signing_timestamp(1420070401.5) == 150_000

@@ -13,8 +13,8 @@ from typing import Any
 import pytest
 from pymavlink.dialects.v20 import ardupilotmega as mavlink2
 
-from gcs.link import Link
-from gcs.mission_client import (
+from gcs.mavlink.link import Link
+from gcs.mavlink.mission_client import (
     DEFAULT_WINDOW,
     clear_mission,
     download_mission,
@@ -22,7 +22,7 @@ from gcs.mission_client import (
     set_current_item,
     upload_mission,
 )
-from gcs.mission_errors import (
+from gcs.mavlink.mission_errors import (
     MissionDenied,
     MissionError,
     MissionInputError,
@@ -30,7 +30,7 @@ from gcs.mission_errors import (
     MissionTimeout,
     MissionUnsupported,
 )
-from gcs.mission_protocol import Clear, Upload
+from gcs.mavlink.mission_protocol import Clear, Upload
 from planner.mission import (
     MAV_CMD_NAV_WAYPOINT,
     MAV_FRAME_GLOBAL,
@@ -110,7 +110,7 @@ class _Sub:
 
 
 class MemoryLink:
-    """The part of gcs.link.Link the runner uses, wired to a MissionServer in memory."""
+    """The part of gcs.mavlink.link.Link the runner uses, wired to a MissionServer in memory."""
 
     system_id, component_id = GCS_SYS, GCS_COMP
 

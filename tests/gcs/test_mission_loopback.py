@@ -10,10 +10,10 @@ from dataclasses import replace
 
 import pytest
 
-from gcs.link import Link
-from gcs.mission_client import download_mission, upload_mission
-from gcs.mission_errors import MissionTimeout
-from gcs.retry import DEFAULT_POLICY
+from gcs.mavlink.link import Link
+from gcs.mavlink.mission_client import download_mission, upload_mission
+from gcs.mavlink.mission_errors import MissionTimeout
+from gcs.mavlink.retry import DEFAULT_POLICY
 from planner.mission import Autopilot, MissionItem, items_equal
 from sitl_stub.api import SimTeam
 from tests.gcs.test_mission_client import HOME, _planner, stored, waypoints

@@ -19,7 +19,7 @@ from hypothesis import strategies as st
 from pymavlink.dialects.v20 import ardupilotmega as mavlink2
 
 from gcs.errors import GcsError
-from gcs.mission_errors import (
+from gcs.mavlink.mission_errors import (
     MAV_MISSION_RESULT_NAMES,
     MissionCancelled,
     MissionDenied,
@@ -34,7 +34,7 @@ from gcs.mission_errors import (
     MissionUnsupportedFrame,
     error_for_result,
 )
-from gcs.mission_protocol import (
+from gcs.mavlink.mission_protocol import (
     Clear,
     Download,
     Result,

@@ -11,10 +11,10 @@ from typing import Any
 
 import pytest
 
-from gcs.mission_client import DEFAULT_WINDOW
-from gcs.mission_errors import MissionTimeout
-from gcs.mission_protocol import Download, Result, Upload
-from gcs.retry import RetryPolicy, RttEstimator
+from gcs.mavlink.mission_client import DEFAULT_WINDOW
+from gcs.mavlink.mission_errors import MissionTimeout
+from gcs.mavlink.mission_protocol import Download, Result, Upload
+from gcs.mavlink.retry import RetryPolicy, RttEstimator
 from planner.mission import Autopilot, items_equal, stored_item
 from sitl_stub import items as stub_items
 from sitl_stub.mission_server import MissionServer

@@ -1,4 +1,4 @@
-"""gcs.missionclock: the vehicles' UTC through the local monotonic clock."""
+"""gcs.coordination.missionclock: the vehicles' UTC through the local monotonic clock."""
 
 from __future__ import annotations
 
@@ -10,8 +10,8 @@ import time
 import numpy as np
 import pytest
 
+from gcs.coordination.missionclock import ANCHOR_OBSERVATIONS, MissionClock
 from gcs.errors import GcsError
-from gcs.missionclock import ANCHOR_OBSERVATIONS, MissionClock
 
 UTC0 = 1_704_067_200.0
 

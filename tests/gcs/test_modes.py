@@ -8,7 +8,7 @@ from hypothesis import strategies as st
 from pymavlink import mavutil
 from pymavlink.dialects.v20 import ardupilotmega as mavlink2
 
-from gcs.modes import (
+from gcs.mavlink.modes import (
     ARDUPLANE_MODES,
     AUTOPILOT_ARDUPILOT,
     AUTOPILOT_PX4,

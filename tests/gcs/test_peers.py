@@ -13,10 +13,10 @@ from typing import Any
 import pytest
 from pymavlink.dialects.v20 import ardupilotmega as mavlink2
 
-from gcs.link import Link
-from gcs.mission_client import download_mission, upload_mission
-from gcs.telemetry import TrackSample
-from gcs.vehicle import Vehicle
+from gcs.mavlink.link import Link
+from gcs.mavlink.mission_client import download_mission, upload_mission
+from gcs.mavlink.telemetry import TrackSample
+from gcs.mavlink.vehicle import Vehicle
 from planner.mission import (
     Autopilot,
     Loiter,

@@ -24,7 +24,7 @@ import pytest
 
 from gcs.__main__ import main
 from gcs.coordination.bus import EventBus
-from gcs.rehearse import Abort, RehearsalOptions, passed, rehearse
+from gcs.rehearsal.rehearse import Abort, RehearsalOptions, passed, rehearse
 from gcs.service.fleet import Fleet, VehicleBusy
 from planner.scenario import load_scenario
 from tests.gcs.conftest import assert_flight_kept, free_udp_port

@@ -7,8 +7,8 @@ import math
 import numpy as np
 import pytest
 
-from gcs.arrival import Wind, groundspeed_m_s
-from gcs.speedbias import SpeedBiasEstimator
+from gcs.coordination.arrival import Wind, groundspeed_m_s
+from gcs.coordination.speedbias import SpeedBiasEstimator
 
 
 def _fly(

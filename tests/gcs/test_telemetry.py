@@ -13,10 +13,10 @@ from hypothesis import assume, example, given
 from hypothesis import strategies as st
 from pymavlink.dialects.v20 import ardupilotmega as mavlink2
 
-from gcs.commands import arm, set_message_interval, set_mode
-from gcs.link import Link
-from gcs.modes import mode_number
-from gcs.telemetry import (
+from gcs.mavlink.commands import arm, set_message_interval, set_mode
+from gcs.mavlink.link import Link
+from gcs.mavlink.modes import mode_number
+from gcs.mavlink.telemetry import (
     REBOOT_BACKSTEP_S,
     HomePosition,
     StatusText,

@@ -1,4 +1,4 @@
-"""gcs.truth: reading simulator truth files, closest approach and minimum separation."""
+"""gcs.rehearsal.truth: reading simulator truth files, closest approach and minimum separation."""
 
 from __future__ import annotations
 
@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 from gcs.errors import GcsError
-from gcs.truth import (
+from gcs.rehearsal.truth import (
     TruthSample,
     closest_approach,
     metres_per_degree,

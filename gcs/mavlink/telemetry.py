@@ -30,7 +30,7 @@ from typing import Any, Final, NamedTuple
 
 from pymavlink.dialects.v20 import ardupilotmega as mavlink2
 
-from gcs.modes import mode_name
+from gcs.mavlink.modes import mode_name
 
 REBOOT_BACKSTEP_S: Final = 10.0
 DEFAULT_HISTORY_LEN: Final = 256

@@ -12,7 +12,7 @@ import contextlib
 import os
 from typing import Any, Protocol
 
-from gcs.endpoints import Endpoint, Kind
+from gcs.mavlink.endpoints import Endpoint, Kind
 
 # Stop queueing when a TCP peer stops reading (drop instead of growing without bound).
 MAX_WRITE_BUFFER_BYTES = 1 << 20

@@ -3,7 +3,7 @@
 The transaction (:class:`CommandTransaction`) follows the MAVLink command protocol as MAVSDK's
 ``MavlinkCommandSender`` does: send COMMAND_LONG (or COMMAND_INT), wait for the COMMAND_ACK of
 that command from the target, resend on timeout (COMMAND_LONG with ``confirmation`` + 1).
-When to resend and when to give up is the mission transfers' policy (:mod:`gcs.retry`): by
+When to resend and when to give up is the mission transfers' policy (:mod:`gcs.mavlink.retry`): by
 default the resend timeout follows the measured round trip (an ACK to a command sent once is a
 sample), and the command fails when nothing has been heard from the vehicle for
 ``policy.silence_s`` or no answer came for ``policy.stall_s``, not after a count of resends.
@@ -14,7 +14,7 @@ progress reports stop, the transaction times out without resending (a resend cou
 long-running operation). It is driven by ``start``/``handle``/``heard``/``tick`` with the
 caller's clock and returns the messages to send: no sockets, no clock, no asyncio.
 
-:func:`command_long` / :func:`command_int` run a transaction over a :class:`gcs.link.Link`
+:func:`command_long` / :func:`command_int` run a transaction over a :class:`gcs.mavlink.link.Link`
 and return a :class:`CommandAck` or raise a :class:`CommandError` subclass.
 """
 
@@ -30,16 +30,16 @@ from typing import TYPE_CHECKING, Any, Final
 from pymavlink.dialects.v20 import ardupilotmega as mavlink2
 
 from gcs.errors import GcsError
-from gcs.modes import AUTOPILOT_PX4, mode_number, px4_main_sub
-from gcs.retry import DEFAULT_POLICY, RetryPolicy, RttEstimator, remember_rtt, rtt_hint_s
+from gcs.mavlink.modes import AUTOPILOT_PX4, mode_number, px4_main_sub
+from gcs.mavlink.retry import DEFAULT_POLICY, RetryPolicy, RttEstimator, remember_rtt, rtt_hint_s
 
 if TYPE_CHECKING:
-    from gcs.link import Link
+    from gcs.mavlink.link import Link
 
 DEFAULT_TIMEOUT_S: Final = 1.5
 DEFAULT_RETRIES: Final = 5
 """The MAVLink command service's fixed timeout and resend count: what ``timeout_s=`` and
-``retries=`` gave by default before the adaptive policy (:mod:`gcs.retry`) replaced them."""
+``retries=`` gave by default before the adaptive policy (:mod:`gcs.mavlink.retry`) replaced them."""
 DEFAULT_IN_PROGRESS_TIMEOUT_S: Final = 5.0
 FORCE_ARM_MAGIC: Final = 21196.0  # ArduPilot/PX4: param2 of ARM_DISARM bypasses checks
 
@@ -533,7 +533,7 @@ async def command_long(
 ) -> CommandAck:
     """Send COMMAND_LONG and wait for its final ACK; raises a CommandError subclass.
 
-    Timeouts as :class:`CommandTransaction` (default: adaptive, :mod:`gcs.retry`)."""
+    Timeouts as :class:`CommandTransaction` (default: adaptive, :mod:`gcs.mavlink.retry`)."""
     own_sys, own_comp = _own_ids(link)
     tx = CommandTransaction(
         target_system,

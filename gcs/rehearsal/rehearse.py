@@ -29,16 +29,16 @@ from typing import Any
 import numpy as np
 
 from gcs.coordination.bus import EventBus, Subscription
+from gcs.coordination.coordinator import AbortMode, Coordinator, CoordinatorConfig, Member
 from gcs.coordination.events import EventKind, FlightEvent
-from gcs.coordinator import AbortMode, Coordinator, CoordinatorConfig, Member
+from gcs.coordination.missionclock import MissionClock
 from gcs.errors import GcsError
-from gcs.link import Link
-from gcs.missionclock import MissionClock
+from gcs.mavlink.link import Link
+from gcs.mavlink.vehicle import Vehicle
+from gcs.rehearsal.truth import TruthSample, closest_approach, min_separation, read_truth
 from gcs.service.fleet import Fleet
 from gcs.service.stubs import StubProcess
 from gcs.store.repository import EventWriter, Store
-from gcs.truth import TruthSample, closest_approach, min_separation, read_truth
-from gcs.vehicle import Vehicle
 from planner.deconflict import separation
 from planner.plan import build_terrain
 from planner.scenario import Scenario

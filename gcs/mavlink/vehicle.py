@@ -1,8 +1,8 @@
 """One vehicle on a link: its live telemetry state and the operations addressed to it.
 
-A :class:`Vehicle` attaches a :class:`~gcs.telemetry.TelemetryReducer` to the link (so its
-state is always current) and forwards missions and commands to ``gcs.mission_client`` and
-``gcs.commands`` with its system id. Commands of the same kind to the same vehicle are
+A :class:`Vehicle` attaches a :class:`~gcs.mavlink.telemetry.TelemetryReducer` to the link (so its
+state is always current) and forwards missions and commands to ``gcs.mavlink.mission_client`` and
+``gcs.mavlink.commands`` with its system id. Commands of the same kind to the same vehicle are
 serialised: two identical COMMAND_LONGs in flight cannot be told apart by their ACKs.
 """
 
@@ -12,10 +12,10 @@ import asyncio
 from collections.abc import Sequence
 from typing import Any
 
-from gcs import commands, mission_client
-from gcs.dialect import mavlink2
-from gcs.link import Link
-from gcs.telemetry import TelemetryReducer, VehicleState
+from gcs.mavlink import commands, mission_client
+from gcs.mavlink.dialect import mavlink2
+from gcs.mavlink.link import Link
+from gcs.mavlink.telemetry import TelemetryReducer, VehicleState
 from planner.mission import MissionItem
 
 
@@ -71,7 +71,7 @@ class Vehicle:
         return self._command_locks.setdefault(command, asyncio.Lock())
 
     async def arm(self, *, force: bool = False, **options: Any) -> None:
-        """Arm; ``options``: ``timeout_s``, ``retries`` per :func:`gcs.commands.command_long`."""
+        """Arm; ``options``: ``timeout_s``, ``retries`` (see :mod:`gcs.mavlink.commands`)."""
         async with self._lock(mavlink2.MAV_CMD_COMPONENT_ARM_DISARM):
             await commands.arm(
                 self.link,

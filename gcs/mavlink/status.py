@@ -4,8 +4,8 @@ from __future__ import annotations
 
 import datetime as dt
 
-from gcs.link import LinkCounters
-from gcs.telemetry import VehicleState
+from gcs.mavlink.link import LinkCounters
+from gcs.mavlink.telemetry import VehicleState
 
 
 def _num(v: float | None, fmt: str, unit: str = "") -> str:

@@ -7,11 +7,11 @@ replacing the rest of its mission ahead of the leg it flies) -> a later team arr
 would be late even at its maximum speed. Pop-up threats re-plan the affected vehicles from a
 waypoint ahead of them and re-time the team.
 
-Mission time is the vehicles' UTC (SYSTEM_TIME) through :class:`~gcs.missionclock.MissionClock`;
-nothing here reads the wall clock or knows whether the vehicles are simulated, and every wait
-and timeout scales with the clock's rate, so a rehearsal at 200x runs the same logic as a live
-flight. Planning runs in a worker thread so the links keep being served.
-"""
+Mission time is the vehicles' UTC (SYSTEM_TIME) through
+:class:`~gcs.coordination.missionclock.MissionClock`; nothing here reads the wall clock or
+knows whether the vehicles are simulated, and every wait and timeout scales with the clock's
+rate, so a rehearsal at 200x runs the same logic as a live flight. Planning runs in a worker
+thread so the links keep being served."""
 
 from __future__ import annotations
 
@@ -27,14 +27,21 @@ from typing import Any, Literal
 
 import numpy as np
 
-from gcs.arrival import ArrivalController, Decision, LoiterSpec, RouteTrack, SpeedLimits, Wind
+from gcs.coordination.arrival import (
+    ArrivalController,
+    Decision,
+    LoiterSpec,
+    RouteTrack,
+    SpeedLimits,
+    Wind,
+)
 from gcs.coordination.bus import EventBus
 from gcs.coordination.events import EventKind, FlightEvent
+from gcs.coordination.missionclock import MissionClock
+from gcs.coordination.speedbias import SpeedBiasEstimator
 from gcs.errors import GcsError
-from gcs.missionclock import MissionClock
-from gcs.speedbias import SpeedBiasEstimator
-from gcs.truth import TruthSample, closest_approach
-from gcs.vehicle import Vehicle
+from gcs.mavlink.vehicle import Vehicle
+from gcs.rehearsal.truth import TruthSample, closest_approach
 from planner.atmosphere import eas2tas
 from planner.errors import InfeasibleError, PlannerError
 from planner.mission import (
@@ -216,7 +223,7 @@ class Coordinator:
     """Flies a scenario's team to its required arrival time.
 
     Use: :meth:`prepare` (plan, schedule, refuse an infeasible request), :meth:`bind` (each
-    scenario vehicle's :class:`~gcs.vehicle.Vehicle`), :meth:`upload_all`, :meth:`run`.
+    scenario vehicle's :class:`~gcs.mavlink.vehicle.Vehicle`), :meth:`upload_all`, :meth:`run`.
     """
 
     def __init__(
@@ -412,7 +419,7 @@ class Coordinator:
         )
 
     async def _upload(self, m: Member, pm: PathMission, what: str) -> None:
-        """Upload with the adaptive retry policy (:mod:`gcs.retry`), restarting the whole
+        """Upload with the adaptive retry policy (:mod:`gcs.mavlink.retry`), restarting the whole
         transfer (a vehicle may drop a stalled one) twice.
 
         In flight the new mission must be on board before the vehicle reaches the splice

@@ -31,11 +31,11 @@ from collections.abc import Callable, Collection, Mapping
 from dataclasses import asdict, dataclass
 from typing import Any
 
-from gcs.dialect import MESSAGE_BY_NAME, mavlink2
-from gcs.endpoints import Endpoint, parse_connection
 from gcs.errors import LinkClosed, LinkTimeout
-from gcs.signing import CheckingCodec, SigningConfig, apply_signing
-from gcs.transports import Transport, open_transport
+from gcs.mavlink.dialect import MESSAGE_BY_NAME, mavlink2
+from gcs.mavlink.endpoints import Endpoint, parse_connection
+from gcs.mavlink.signing import CheckingCodec, SigningConfig, apply_signing
+from gcs.mavlink.transports import Transport, open_transport
 
 log = logging.getLogger(__name__)
 

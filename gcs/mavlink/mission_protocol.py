@@ -5,7 +5,7 @@ items: an explicit :class:`Step`, a retry counter and a :class:`Result`. A trans
 by ``start(now_s)``, ``handle(msg, now_s)`` for every received message and ``tick(now_s)``
 when :meth:`Transfer.next_deadline` has passed; each returns the pymavlink messages to send.
 It never touches a socket, a clock or asyncio, so tests drive it with a fake clock
-(``gcs.mission_client`` is the asyncio runner).
+(``gcs.mavlink.mission_client`` is the asyncio runner).
 
 - Upload: MISSION_COUNT -> (MISSION_REQUEST_INT | MISSION_REQUEST)(seq) ->
   MISSION_ITEM_INT(seq) ... -> MISSION_ACK. On timeout: resend the COUNT until a request
@@ -17,7 +17,7 @@ It never touches a socket, a clock or asyncio, so tests drive it with a fake clo
 - Clear: MISSION_CLEAR_ALL -> MISSION_ACK. SetCurrent: MISSION_SET_CURRENT(seq) ->
   MISSION_CURRENT with that seq. On timeout: resend.
 
-Timeouts (:mod:`gcs.retry`): by default a resend waits a timeout that follows the measured
+Timeouts (:mod:`gcs.mavlink.retry`): by default a resend waits a timeout that follows the measured
 round trip (SRTT + 4 RTTVAR, Karn's rule, 10 ms to 1.5 s), and a transfer fails only when
 nothing has been heard from the vehicle for ``policy.silence_s`` (10 s) or it has not advanced
 for ``policy.stall_s`` (20 s), not after a count of resends while the vehicle answers.
@@ -60,7 +60,7 @@ from typing import Any, ClassVar
 
 from pymavlink.dialects.v20 import ardupilotmega as mavlink2
 
-from gcs.mission_errors import (
+from gcs.mavlink.mission_errors import (
     MAV_MISSION_ACCEPTED,
     MAV_MISSION_INVALID_SEQUENCE,
     MAV_MISSION_OPERATION_CANCELLED,
@@ -73,7 +73,7 @@ from gcs.mission_errors import (
     error_for_result,
     result_name,
 )
-from gcs.retry import DEFAULT_POLICY, RetryPolicy, RttEstimator
+from gcs.mavlink.retry import DEFAULT_POLICY, RetryPolicy, RttEstimator
 from planner.mission import INT32_UNSET, MissionItem
 
 __all__ = [

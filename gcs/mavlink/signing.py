@@ -14,7 +14,7 @@ from collections.abc import Collection
 from dataclasses import dataclass, field
 from typing import Any
 
-from gcs.dialect import MESSAGE_BY_NAME, mavlink2
+from gcs.mavlink.dialect import MESSAGE_BY_NAME, mavlink2
 
 # MAVLink signing timestamps count 10 microsecond units since 2015-01-01T00:00:00Z.
 SIGNING_EPOCH_UNIX_S = 1420070400.0

@@ -1,11 +1,11 @@
-"""Mission transfers over a :class:`gcs.link.Link`: the thin asyncio runner.
+"""Mission transfers over a :class:`gcs.mavlink.link.Link`: the thin asyncio runner.
 
-Each function builds one sans-IO transfer from :mod:`gcs.mission_protocol`, subscribes to
-the target's replies before sending anything, feeds every reply and every timer tick into
-it and sends what it returns; it returns the result or raises a
-:class:`gcs.mission_errors.MissionError` subclass. Nothing waits without a bound: besides the
-transfer's own timeouts and retries, a watchdog ends a transfer that has not moved (no new
-step and no progress) for longer than the transfer's own limits allow.
+Each function builds one sans-IO transfer from :mod:`gcs.mavlink.mission_protocol`, subscribes
+to the target's replies before sending anything, feeds every reply and every timer tick into it
+and sends what it returns; it returns the result or raises a
+:class:`gcs.mavlink.mission_errors.MissionError` subclass. Nothing waits without a bound:
+besides the transfer's own timeouts and retries, a watchdog ends a transfer that has not moved
+(no new step and no progress) for longer than the transfer's own limits allow.
 
 Transfers with one vehicle over one link run one at a time (a later call waits for the
 earlier one): two transfers would each take the other's MISSION_REQUESTs and ACKs.
@@ -23,10 +23,10 @@ import weakref
 from collections.abc import Callable, Sequence
 from typing import TYPE_CHECKING, Any, Final
 
-from gcs.mission_errors import MissionMismatch, MissionTimeout
-from gcs.mission_protocol import Clear, Download, SetCurrent, Transfer, Upload
-from gcs.modes import AUTOPILOT_PX4
-from gcs.retry import DEFAULT_POLICY, RetryPolicy, remember_rtt, rtt_hint_s
+from gcs.mavlink.mission_errors import MissionMismatch, MissionTimeout
+from gcs.mavlink.mission_protocol import Clear, Download, SetCurrent, Transfer, Upload
+from gcs.mavlink.modes import AUTOPILOT_PX4
+from gcs.mavlink.retry import DEFAULT_POLICY, RetryPolicy, remember_rtt, rtt_hint_s
 from planner.mission import (
     Autopilot,
     MissionItem,
@@ -36,7 +36,7 @@ from planner.mission import (
 )
 
 if TYPE_CHECKING:
-    from gcs.link import Link
+    from gcs.mavlink.link import Link
 
 __all__ = [
     "DEFAULT_RETRIES",
@@ -54,7 +54,7 @@ __all__ = [
 DEFAULT_TIMEOUT_S: Final = 1.5
 DEFAULT_RETRIES: Final = 5
 """The MAVLink mission service's fixed timeout and retry count: what ``timeout_s=`` and
-``retries=`` gave by default before the adaptive policy (:mod:`gcs.retry`) replaced them."""
+``retries=`` gave by default before the adaptive policy (:mod:`gcs.mavlink.retry`) replaced them."""
 DEFAULT_WINDOW: Final = 8
 """Item requests outstanding in a download, and items sent ahead of the requests in an upload,
 with a vehicle that answers any request and takes items in order ahead of its requests."""
@@ -234,7 +234,7 @@ async def upload_mission(
 
     Timeouts: by default each resend waits a timeout that follows the measured round trip,
     and the upload fails only when the vehicle has been silent for ``policy.silence_s`` or the
-    upload has not advanced for ``policy.stall_s`` (:mod:`gcs.retry`). ``timeout_s`` fixes
+    upload has not advanced for ``policy.stall_s`` (:mod:`gcs.mavlink.retry`). ``timeout_s`` fixes
     the resend timeout instead; ``retries`` limits the resends of one exchange. ``within_s``
     bounds the upload itself: a transfer still going then is cancelled (``MissionTimeout``)
     and the vehicle keeps the mission it had. ``window``: items sent ahead of the vehicle's
