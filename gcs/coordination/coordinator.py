@@ -39,9 +39,9 @@ from gcs.coordination.bus import EventBus
 from gcs.coordination.events import EventKind, FlightEvent
 from gcs.coordination.missionclock import MissionClock
 from gcs.coordination.speedbias import SpeedBiasEstimator
+from gcs.coordination.tracks import TruthSample, closest_approach
 from gcs.errors import GcsError
 from gcs.mavlink.vehicle import Vehicle
-from gcs.rehearsal.truth import TruthSample, closest_approach
 from planner.atmosphere import eas2tas
 from planner.errors import InfeasibleError, PlannerError
 from planner.mission import (

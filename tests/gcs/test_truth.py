@@ -10,14 +10,14 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from gcs.errors import GcsError
-from gcs.rehearsal.truth import (
+from gcs.coordination.tracks import (
     TruthSample,
     closest_approach,
     metres_per_degree,
     min_separation,
-    read_truth,
 )
+from gcs.errors import GcsError
+from gcs.rehearsal.truth import read_truth
 from planner.geo import LocalFrame, geodesic_distance_m
 
 LAT0, LON0 = -35.363261, 149.165230
