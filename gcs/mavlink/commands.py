@@ -534,21 +534,10 @@ async def command_long(
     """Send COMMAND_LONG and wait for its final ACK; raises a CommandError subclass.
 
     Timeouts as :class:`CommandTransaction` (default: adaptive, :mod:`gcs.mavlink.retry`)."""
-    own_sys, own_comp = _own_ids(link)
-    tx = CommandTransaction(
-        target_system,
-        command,
-        params,
-        target_component=target_component,
-        own_system=own_sys,
-        own_component=own_comp,
-        timeout_s=timeout_s,
-        retries=retries,
-        in_progress_timeout_s=in_progress_timeout_s,
-        policy=policy or DEFAULT_POLICY,
-        rtt_hint_s=rtt_hint_s(link, target_system),
-    )
-    return await run_transaction(link, tx)
+    return await _send(
+        link, target_system, command, params, None, target_component, timeout_s, retries,
+        in_progress_timeout_s, policy,
+    )  # fmt: skip
 
 
 async def command_int(
@@ -568,13 +557,32 @@ async def command_int(
     policy: RetryPolicy | None = None,
 ) -> CommandAck:
     """Send COMMAND_INT (params 1-4, frame, x, y, z) and wait for its final ACK."""
+    return await _send(
+        link, target_system, command, params, IntPosition(frame, x, y, z), target_component,
+        timeout_s, retries, in_progress_timeout_s, policy,
+    )  # fmt: skip
+
+
+async def _send(
+    link: Link,
+    target_system: int,
+    command: int,
+    params: Sequence[float],
+    position: IntPosition | None,
+    target_component: int,
+    timeout_s: float | None,
+    retries: int | None,
+    in_progress_timeout_s: float,
+    policy: RetryPolicy | None,
+) -> CommandAck:
+    """One command transaction (COMMAND_INT when ``position`` is given), run to its ACK."""
     own_sys, own_comp = _own_ids(link)
     tx = CommandTransaction(
         target_system,
         command,
         params,
         target_component=target_component,
-        position=IntPosition(frame, x, y, z),
+        position=position,
         own_system=own_sys,
         own_component=own_comp,
         timeout_s=timeout_s,

@@ -25,7 +25,6 @@ from typing import TYPE_CHECKING, Any, Final
 
 from gcs.mavlink.mission_errors import MissionMismatch, MissionTimeout
 from gcs.mavlink.mission_protocol import Clear, Download, SetCurrent, Transfer, Upload
-from gcs.mavlink.modes import AUTOPILOT_PX4
 from gcs.mavlink.retry import DEFAULT_POLICY, RetryPolicy, remember_rtt, rtt_hint_s
 from planner.mission import (
     Autopilot,
@@ -199,10 +198,15 @@ def _options(
     }
 
 
+def _autopilot_of(link: Link, target_system: int) -> Autopilot:
+    """The vehicle's autopilot from its HEARTBEAT on the link (UNKNOWN before one)."""
+    peer = getattr(link, "vehicles", {}).get(target_system)
+    return Autopilot.from_heartbeat(None if peer is None else int(peer.autopilot))
+
+
 def _answers_any_request(link: Link, target_system: int) -> bool:
     """A vehicle known not to be PX4 (ArduPilot, the stub) takes requests and items ahead."""
-    peer = getattr(link, "vehicles", {}).get(target_system)
-    return peer is not None and int(peer.autopilot) != AUTOPILOT_PX4
+    return _autopilot_of(link, target_system) not in (Autopilot.PX4, Autopilot.UNKNOWN)
 
 
 async def upload_mission(
@@ -275,8 +279,7 @@ async def upload_mission(
         on_transfer=on_transfer,
     )
     if autopilot is None:
-        peer = getattr(link, "vehicles", {}).get(target_system)
-        autopilot = Autopilot.from_heartbeat(None if peer is None else peer.autopilot)
+        autopilot = _autopilot_of(link, target_system)
     _check_same(upload, list(items), got, autopilot)
 
 
