@@ -63,9 +63,10 @@ UTC at 200x) does not move its offset unless it lasts longer than that."""
 
 @dataclass(frozen=True, slots=True)
 class _Observation:
+    """One report of a vehicle's UTC and when it was received (monotonic)."""
+
     rx_mono_s: float
     utc_s: float
-    system_id: int
 
 
 @dataclass
@@ -165,7 +166,7 @@ class MissionClock:
             vc = self._vehicles[system_id] = _VehicleClock(boot_offset_s, utc_s)
         vc.boot_offset_s = boot_offset_s
         vc.last_utc_s = utc_s
-        obs = _Observation(rx_mono_s, utc_s, system_id)
+        obs = _Observation(rx_mono_s, utc_s)
         vc.recent.append(obs)
         self._update_offsets(rx_mono_s)
         self._accepted_utc = True
