@@ -49,6 +49,13 @@ MIN_FIT_SPAN_S = 0.002
 """The rate is re-fitted only when the window spans at least this much monotonic time."""
 OFFSET_SAMPLES = 15
 """A vehicle's offset from the team's UTC is the median of this many recent samples."""
+BACKLOG_FRACTION = 0.25
+BACKLOG_GAP_S = 0.001
+"""A report received less than BACKLOG_GAP_S after the vehicle's previous one, and in less
+than BACKLOG_FRACTION of the time its UTC advanced since (at the fitted rate), came out of a
+backlog (a stalled loop reading a full socket): it is accepted but does not date the
+vehicle's clock, fit its rate or its offset. An 820 ms stall at 100x otherwise read as a clock
+27 s off and moved the team time."""
 OFFSET_JUMP_S = 0.25
 """Once a vehicle's offset is known, a sample farther than this from it is set aside;
 :data:`OFFSET_CONFIRM` of them in a row replace it (the vehicle's clock did move)."""
@@ -76,6 +83,10 @@ class _VehicleClock:
     boot_offset_s: float
     """Its UTC minus its boot time (or, with no UTC, team UTC minus boot time)."""
     last_utc_s: float
+    last_rx_mono_s: float | None = None
+    """When its newest report was received (backlogged ones included)."""
+    backlog_run: int = 0
+    """Reports in a row taken as out of a backlog."""
     recent: deque[_Observation] = field(default_factory=lambda: deque(maxlen=OFFSET_WINDOW))
     offset_samples: deque[float] = field(default_factory=lambda: deque(maxlen=OFFSET_SAMPLES))
     offset_s: float = 0.0
@@ -102,6 +113,7 @@ class MissionClock:
         self.accepted = 0
         self.rejected = 0
         self.resets = 0  # vehicles whose UTC jumped back by more than JUMP_BACK_S
+        self.backlogged = 0  # reports that came out of a backlog (not used for dating)
 
     # -- input -------------------------------------------------------------------------------
 
@@ -164,12 +176,27 @@ class MissionClock:
         vc = self._vehicles.get(system_id)
         if vc is None:
             vc = self._vehicles[system_id] = _VehicleClock(boot_offset_s, utc_s)
+        # A report received much faster than its UTC advanced comes out of a backlog (the
+        # loop or the link was stalled): it is as old as the stall, so it dates nothing.
+        gap_s = None if vc.last_rx_mono_s is None else rx_mono_s - vc.last_rx_mono_s
+        backlog = (
+            vc.rate is not None
+            and gap_s is not None
+            and 0.0 <= gap_s < BACKLOG_GAP_S
+            and utc_s > vc.last_utc_s
+            and gap_s * vc.rate < BACKLOG_FRACTION * (utc_s - vc.last_utc_s)
+            and vc.backlog_run < 2 * self.window  # that many in a row: the rate did change
+        )
+        vc.backlog_run = vc.backlog_run + 1 if backlog else 0
         vc.boot_offset_s = boot_offset_s
         vc.last_utc_s = utc_s
-        obs = _Observation(rx_mono_s, utc_s)
-        vc.recent.append(obs)
-        self._update_offsets(rx_mono_s)
+        vc.last_rx_mono_s = rx_mono_s
         self._accepted_utc = True
+        if backlog:
+            self.backlogged += 1
+            return
+        vc.recent.append(_Observation(rx_mono_s, utc_s))
+        self._update_offsets(rx_mono_s)
         self._fit(vc)
 
     def _update_offsets(self, mono_s: float) -> None:

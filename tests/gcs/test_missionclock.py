@@ -366,3 +366,38 @@ def test_a_clock_that_really_steps_forward_is_followed() -> None:
             mono.t = max(mono.t, sent + 0.0005)
             clock.observe(sid, utc + (3.0 if sid == 3 else 0.0), float(j), sent + 0.0005)
     assert clock.offset_s(3) == pytest.approx(3.0, abs=0.05)
+
+
+def test_a_backlog_read_after_a_stalled_loop_dates_no_clock() -> None:
+    """The loop stalls 820 ms at 100x: 82 reports per vehicle wait in the sockets, then are
+    read vehicle after vehicle within a millisecond. Seen in a two-flight rehearsal, the
+    backlog read as a clock 27 s off and moved the team time; it must date nothing."""
+    mono = FakeMono()
+    clock = MissionClock(mono)
+    rate = 100.0
+    offsets = {1: 0.0, 2: 7.0, 3: -4.0}
+    worst = 0.0
+    backlog: list[tuple[int, float, float]] = []
+    for j in range(600):
+        utc = UTC0 + j
+        sent = 1000.0 + j / rate
+        stalled = 300 <= j < 382
+        if j == 382:  # the loop runs again: the sockets are read one after another
+            mono.t = max(mono.t, sent)
+            for sid, u, boot in sorted(backlog, key=lambda r: r[0]):
+                mono.t += 0.00001
+                clock.observe(sid, u, boot, mono.t)
+                for other, off in offsets.items():
+                    got = clock.offset_s(other)
+                    assert got is not None
+                    worst = max(worst, abs(got - off))
+        for sid, off in offsets.items():
+            if stalled:
+                backlog.append((sid, utc + off, float(j)))
+                continue
+            mono.t = max(mono.t, sent + 0.0005)
+            clock.observe(sid, utc + off, float(j), mono.t)
+    assert worst < 0.1
+    assert clock.backlogged > 200
+    for sid in offsets:
+        assert clock.utc_of_boot(sid, 590.0) == pytest.approx(UTC0 + 590.0, abs=0.1)

@@ -328,7 +328,8 @@ async def test_two_flights_at_once_on_one_fleet_each_to_its_own_time(tmp_path: P
             def flight(k: int, **more: Any) -> RehearsalOptions:
                 return RehearsalOptions(
                     scenario_path=PAPER, scenario=scenario, connect=conns[k], truth=truths[k],
-                    fleet=fleet, seed=k + 1, quiet=True, **more,
+                    fleet=fleet, seed=k + 1, quiet=True, json_out=tmp_path / f"flight{k}.json",
+                    **more,
                 )  # fmt: skip
 
             first = asyncio.create_task(rehearse(flight(0)))
