@@ -59,8 +59,9 @@ def _cmd_schedule(args: argparse.Namespace) -> int:
 
     from planner.deconflict import separation
     from planner.plan import build_world, plan
+    from planner.popup import replay_popups
+    from planner.retime import build_schedule
     from planner.scenario import load_scenario
-    from planner.schedule import build_schedule, replay_popups
     from planner.schedulefile import schedule_json
 
     t0 = time.perf_counter()

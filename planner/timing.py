@@ -1,7 +1,7 @@
 """Per-vehicle arrival windows, the team arrival time and discrete speed/loiter timing.
 
 The three time strategies of section 4, as pure one-dimensional arithmetic over the length
-still to fly (the geometry lives in :mod:`planner.schedule`):
+still to fly (the geometry lives in :mod:`planner.retime`):
 
 * takeoff delay (eq. 5): a vehicle on the ground takes off so that it would arrive on time at
   its cruise speed, within its takeoff window;

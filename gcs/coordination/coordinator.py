@@ -50,17 +50,10 @@ from planner.mission import (
     MAV_CMD_NAV_WAYPOINT,
 )
 from planner.plan import Method, World, build_world, plan
+from planner.popup import apply_popup, popup_zones
+from planner.retime import build_schedule, retime_vehicle
 from planner.scenario import Appearance, Scenario, Threat
-from planner.schedule import (
-    Adjustment,
-    Anchor,
-    Schedule,
-    VehicleSchedule,
-    apply_popup,
-    build_schedule,
-    popup_zones,
-    retime_vehicle,
-)
+from planner.schedule import Adjustment, Anchor, Schedule, VehicleSchedule
 from planner.schedulefile import PathMission, path_mission, splice_mission
 from planner.threats import ThreatZone, active, build_threats
 from planner.timing import SpeedLimits as PlannerLimits

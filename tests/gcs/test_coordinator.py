@@ -18,16 +18,10 @@ from planner.atmosphere import eas2tas
 from planner.errors import PlannerError
 from planner.mission import MAV_CMD_DO_CHANGE_SPEED, MAV_CMD_NAV_LOITER_TURNS, MAV_CMD_NAV_WAYPOINT
 from planner.plan import World, build_world, plan
+from planner.popup import PopupOutcome, apply_popup, popup_zones
+from planner.retime import build_schedule, retime_vehicle
 from planner.scenario import Scenario, Threat, load_scenario
-from planner.schedule import (
-    Anchor,
-    PopupOutcome,
-    Schedule,
-    apply_popup,
-    build_schedule,
-    popup_zones,
-    retime_vehicle,
-)
+from planner.schedule import Anchor, Schedule
 from planner.schedulefile import path_mission, splice_mission
 from planner.threats import active, build_threats
 

@@ -13,8 +13,10 @@ from planner.atmosphere import eas2tas, mean_eas2tas
 from planner.deconflict import separation
 from planner.errors import InfeasibleError
 from planner.plan import build_world, plan
+from planner.popup import replay_popups
+from planner.retime import build_schedule
 from planner.scenario import load_scenario, parse_scenario
-from planner.schedule import Schedule, build_schedule, replay_popups
+from planner.schedule import Schedule
 from tests.planner.conftest import small_scenario
 
 ROOT = Path(__file__).resolve().parents[2]

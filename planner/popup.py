@@ -1,0 +1,318 @@
+"""The re-plan around pop-up threats (section 5).
+
+:func:`apply_popup` re-plans the vehicles whose remaining route a new threat touches from where
+they are, and re-times the team for the same arrival time, or the earliest common one when that
+is no longer feasible. :func:`replay_popups` flies a schedule through the scenario's pop-up
+threats offline, applying each at its appearance.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass, replace
+
+import numpy as np
+
+from planner.flightpath import FlightPath, Segment
+from planner.plan import Method, World, build_problem, build_world, solve_and_finish
+from planner.retime import (
+    anchored_state,
+    arrival_targets,
+    arrival_window,
+    format_arrival,
+    retime_on_path,
+    speed_spans,
+    speed_stage,
+)
+from planner.scenario import Scenario
+from planner.schedule import (
+    Adjustment,
+    Anchor,
+    Anchors,
+    Event,
+    Schedule,
+    SpeedSpan,
+    Stage,
+    VehicleSchedule,
+)
+from planner.threats import ThreatZone, active, build_threats
+from planner.timing import TIME_TOL_S
+
+
+def truncate_path(path: FlightPath, s_m: float) -> FlightPath | None:
+    """The first ``s_m`` metres of a path (None when ``s_m`` is ~0)."""
+    if s_m <= 1e-6:
+        return None
+    if s_m >= path.length_m:
+        return path
+    out: list[Segment] = []
+    for start, seg in zip(path.cumulative_m(), path.segments, strict=True):
+        if start >= s_m:
+            break
+        if start + seg.length_m <= s_m:
+            out.append(seg)
+        else:
+            out.append(Segment(seg.start, s_m - start, seg.turn, seg.radius_m))
+    return FlightPath(tuple(out))
+
+
+def _anchor_t(at_s: float, anchor: Anchor | None) -> float:
+    """When the vehicle is at its anchor (``at_s`` unless the anchor says)."""
+    if anchor is not None and anchor.t_s is not None:
+        return anchor.t_s
+    return at_s
+
+
+def _touches(vs: VehicleSchedule, s0: float, zone: ThreatZone, margin_m: float) -> bool:
+    if vs.path.length_m - s0 < 1.0:
+        return False
+    n = max(2, int(math.ceil((vs.path.length_m - s0) / 200.0)) + 1)
+    s = np.linspace(s0, vs.path.length_m, n)
+    pts = np.array([[p.east_m, p.north_m] for p in (vs.path.pose_at(float(x)) for x in s)])
+    alt = np.interp(s, vs.wp_s_m, vs.wp_alt_m)
+    d = zone.distance_m(pts[:, 0], pts[:, 1])
+    below = alt < zone.ceiling_m
+    limit = margin_m if zone.forbidden else 0.0
+    return bool((below & (d < limit)).any())
+
+
+def _replan(
+    world: World,
+    threats: Sequence[ThreatZone],
+    scenario: Scenario,
+    schedule: Schedule,
+    vehicle_ids: Sequence[str],
+    now_s: float,
+    method: Method,
+    rng: np.random.Generator,
+    anchors: Anchors,
+) -> dict[str, VehicleSchedule]:
+    """New paths for the vehicles from where they are at ``now_s`` (prefix kept)."""
+    starts: dict[str, tuple[float, float, float]] = {}
+    poses: dict[str, tuple[float, float, float]] = {}
+    for vid in vehicle_ids:
+        vs = schedule.vehicle(vid)
+        phase, s0, _ = anchored_state(vs, now_s, anchors.get(vid))
+        if phase == "ground":
+            continue
+        p = vs.path.pose_at(s0)
+        alt = vs.alt_at(s0)
+        starts[vid] = (p.east_m, p.north_m, alt)
+        poses[vid] = (s0, p.heading_rad, alt)
+    problem = build_problem(world, threats=threats, starts=starts, vehicles=list(vehicle_ids))
+    airborne = {vid: (alt, heading) for vid, (_, heading, alt) in poses.items()}
+    _, routes = solve_and_finish(
+        world, problem, method, threats=threats, rng=rng, airborne=airborne
+    )
+    out: dict[str, VehicleSchedule] = {}
+    for vid, route in zip(vehicle_ids, routes, strict=True):
+        vs = schedule.vehicle(vid)
+        s0 = poses[vid][0] if vid in poses else 0.0
+        prefix = truncate_path(vs.path, s0)
+        path = route.path if prefix is None else FlightPath(prefix.segments + route.path.segments)
+        keep = vs.wp_s_m < s0 - 1e-6
+        wp_s = np.concatenate([vs.wp_s_m[keep], np.asarray(route.profile.s_m) + s0])
+        wp_alt = np.concatenate([vs.wp_alt_m[keep], np.asarray(route.profile.alt_m)])
+        out[vid] = replace(
+            vs,
+            path=path,
+            wp_s_m=wp_s,
+            wp_alt_m=wp_alt,
+            replanned_at_s=(*vs.replanned_at_s, now_s),
+        )
+    return out
+
+
+@dataclass(frozen=True)
+class PopupOutcome:
+    """The team after one pop-up threat: re-planned, re-timed, and what was decided."""
+
+    schedule: Schedule
+    affected: tuple[str, ...]
+    adjustments: tuple[Adjustment, ...]
+    events: tuple[Event, ...]
+
+
+def apply_popup(
+    current: Schedule,
+    zone: ThreatZone,
+    *,
+    at_s: float,
+    world: World,
+    threats: Sequence[ThreatZone],
+    method: Method = "aco",
+    rng: np.random.Generator,
+    anchors: Anchors | None = None,
+    loiter_margin_m_s: float = 0.0,
+) -> PopupOutcome:
+    """Re-plan around one new threat from where the team is at ``at_s`` and re-time it.
+
+    Parameters
+    ----------
+    current
+        The team's schedule before the threat.
+    zone
+        The new threat.
+    at_s
+        Mission time (s) from which the new routes start (the threat's appearance offline; a
+        little ahead of the vehicles in flight, so that they reach the splice point after the
+        new missions are uploaded).
+    world, threats
+        The world and every threat in force from ``at_s`` (``zone`` included).
+    anchors
+        Where airborne vehicles really are (:class:`Anchor`: s_m along their path, speed m/s,
+        and the time they are there, ``at_s`` unless given); the others are where the
+        schedule has them at ``at_s``.
+    loiter_margin_m_s
+        Loiter turns leave the speed this far above the minimum when they can.
+
+    Raises
+    ------
+    InfeasibleError
+        A re-plan fails, or no common arrival time remains; names the vehicle.
+    """
+    scenario = current.scenario
+    anchors = anchors or {}
+    adjustments: list[Adjustment] = []
+    events = [Event(at_s, "popup", f"threat {zone.id} appears")]
+    stages = list(current.stages)
+    affected: list[str] = []
+    for v in scenario.vehicles:
+        vs = current.vehicle(v.id)
+        phase, s0, _ = anchored_state(vs, at_s, anchors.get(v.id))
+        if phase != "arrived" and _touches(vs, s0, zone, v.min_turn_radius_m):
+            affected.append(v.id)
+    if not affected:
+        events.append(Event(at_s, "popup", f"{zone.id} touches no remaining route"))
+        return PopupOutcome(
+            replace(current, events=(*current.events, *events)), (), (), tuple(events)
+        )
+    events.append(Event(at_s, "replan", f"re-planning {', '.join(affected)} around {zone.id}"))
+    new_paths = _replan(world, threats, scenario, current, affected, at_s, method, rng, anchors)
+    vehicles = [new_paths.get(vs.vehicle_id, vs) for vs in current.vehicles]
+    staged = replace(current, vehicles=tuple(vehicles))
+    where = {
+        v.id: anchored_state(staged.vehicle(v.id), at_s, anchors.get(v.id))
+        for v in scenario.vehicles
+    }
+    t_at = {v.id: _anchor_t(at_s, anchors.get(v.id)) for v in scenario.vehicles}
+    windows = [
+        arrival_window(
+            scenario,
+            v,
+            staged.vehicle(v.id),
+            t_at[v.id],
+            current.step_m_s,
+            threats,
+            anchors.get(v.id),
+        )
+        for v in scenario.vehicles
+        if where[v.id][0] != "arrived"
+    ]
+    natural = {vs.vehicle_id: vs.arrival_s for vs in current.vehicles}
+    targets, ref, reason = arrival_targets(scenario, windows, current.required_arrival_s, natural)
+    events.append(Event(at_s, "arrival", f"team arrival {format_arrival(ref)}: {reason}"))
+    # Fig. 9: the constant speed each vehicle would now need, in range or not.
+    need: dict[str, tuple[SpeedSpan, ...]] = {}
+    for v in scenario.vehicles:
+        vs = staged.vehicle(v.id)
+        phase, s0, _ = where[v.id]
+        t_v = t_at[v.id]
+        past = tuple(sp for sp in speed_spans(vs) if sp.t_end_s <= t_v + TIME_TOL_S)
+        if phase == "arrived" or v.id not in targets:
+            need[v.id] = speed_spans(vs)
+            continue
+        dep = max(t_v, vs.takeoff_s) if phase == "ground" else t_v
+        cut = tuple(
+            SpeedSpan(sp.t_start_s, t_v, sp.speed_m_s, sp.kind)
+            for sp in speed_spans(vs)
+            if sp.t_start_s < t_v < sp.t_end_s
+        )
+        v_need = (vs.path.length_m - s0) / vs.tas_per_eas(s0) / max(targets[v.id] - dep, 1e-9)
+        need[v.id] = (*past, *cut, SpeedSpan(dep, targets[v.id], v_need, "required"))
+    stages.append(Stage(f"{zone.id} at {at_s:.0f} s: re-planned, required speed", at_s, need))
+    retimed: list[VehicleSchedule] = []
+    for v in scenario.vehicles:
+        vs = staged.vehicle(v.id)
+        same_time = abs(targets.get(v.id, vs.arrival_s) - vs.arrival_s) < 0.05
+        if v.id not in targets or (v.id not in affected and same_time):
+            retimed.append(vs)
+            continue
+        anchor = anchors.get(v.id)
+        r = retime_on_path(
+            scenario,
+            v,
+            vs,
+            now_s=t_at[v.id],
+            target_s=targets[v.id],
+            step_m_s=current.step_m_s,
+            threats=threats,
+            at=(anchor.s_m, anchor.speed_m_s)
+            if where[v.id][0] == "leg" and anchor is not None
+            else None,
+            loiter_margin_m_s=loiter_margin_m_s,
+        )
+        retimed.append(r.schedule)
+        adjustments.extend(r.adjustments)
+    stages.append(speed_stage(f"after {zone.id}: final", at_s, retimed))
+    out = replace(
+        current,
+        vehicles=tuple(retimed),
+        required_arrival_s=ref,
+        arrival_reason=reason,
+        adjustments=(*current.adjustments, *adjustments),
+        stages=tuple(stages),
+        events=(*current.events, *events),
+    )
+    return PopupOutcome(out, tuple(affected), tuple(adjustments), tuple(events))
+
+
+def replay_popups(
+    schedule: Schedule,
+    *,
+    method: Method = "aco",
+    rng: np.random.Generator | None = None,
+    world: World | None = None,
+) -> Schedule:
+    """Fly the schedule through the scenario's pop-up threats (section 5, offline).
+
+    At each pop-up's appearance (resolved from the scheduled takeoffs), the vehicles whose
+    remaining route the threat touches (within ``min_turn_radius_m`` of a forbidden zone, or
+    inside a costed one) are re-planned from their current position and heading; then every
+    vehicle is re-timed for the same team arrival time when the windows still hold it, else
+    for the earliest common time (the reason names the vehicle that forced it). Unaffected
+    vehicles keep their timing when the arrival time stands.
+
+    Raises
+    ------
+    InfeasibleError
+        A re-plan fails, or no common arrival time remains; names the vehicle.
+    """
+    scenario = schedule.scenario
+    rng = rng if rng is not None else np.random.default_rng(0)
+    takeoffs = {vs.vehicle_id: vs.takeoff_s for vs in schedule.vehicles}
+    all_threats = build_threats(scenario, takeoffs)
+    world = world or build_world(scenario, takeoffs)
+    world = replace(world, threats=tuple(all_threats))
+    current = schedule
+    for zone in popup_zones(all_threats):
+        t_p = float(zone.appears_at_s or 0.0)
+        current = apply_popup(
+            current,
+            zone,
+            at_s=t_p,
+            world=world,
+            threats=active(all_threats, t_p),
+            rng=rng,
+            method=method,
+        ).schedule
+    return current
+
+
+def popup_zones(threats: Sequence[ThreatZone]) -> list[ThreatZone]:
+    """The threats that appear during the mission, in order of appearance."""
+    return sorted(
+        (t for t in threats if t.appears_at_s is not None and math.isfinite(t.appears_at_s)),
+        key=lambda t: (t.appears_at_s or 0.0, t.id),
+    )

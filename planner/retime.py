@@ -1,0 +1,550 @@
+"""Timing the team's routes: takeoffs, discrete speeds and loiters on flyable paths (section 4).
+
+:func:`build_schedule` times a :class:`~planner.plan.Plan`: the team arrival time from the
+vehicles' windows (eq. 1), each vehicle on the ground moved to take off on time at cruise speed
+(eq. 5), the remainder trimmed by two discrete speeds (eqs. 6-7), and loiter turns in a buffer
+area where the speed range cannot absorb the surplus (eqs. 8-9). :func:`retime_vehicle`
+re-times one airborne vehicle from where it really is. Both, and the pop-up re-plan
+(:mod:`planner.popup`), time each vehicle with :func:`retime_on_path`: from a moment on, on
+its current path.
+
+The timing arithmetic is :mod:`planner.timing`'s; here it is laid on the geometry: loiter sites
+in the buffers (:func:`find_loiter_site`), legs and loiter circles along the path. The model
+(equivalent airspeeds, loiter circles) is described in :mod:`planner.schedule`.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, replace
+
+import numpy as np
+
+from planner.errors import InfeasibleError
+from planner.flightpath import FlightPath
+from planner.plan import Plan, World, build_world, required_arrival_s
+from planner.scenario import Scenario, Spaced, Vehicle, Windows
+from planner.schedule import (
+    Adjustment,
+    Anchor,
+    Event,
+    Leg,
+    LoiterPlan,
+    Schedule,
+    SpeedSpan,
+    Stage,
+    VehicleSchedule,
+)
+from planner.threats import ThreatZone, active
+from planner.timing import (
+    SPEED_STEP_M_S,
+    TIME_TOL_S,
+    ArrivalWindow,
+    LoiterSite,
+    Piece,
+    SpeedLimits,
+    Timing,
+    flyable_loiter_radius_m,
+    takeoff_time_s,
+    team_arrival,
+    time_path,
+    vehicle_window,
+)
+
+SITE_STEP_M = 100.0
+
+
+# --- loiter sites ----------------------------------------------------------------------
+
+
+@dataclass(frozen=True, slots=True)
+class _Site:
+    s_m: float
+    centre: tuple[float, float]
+    entry: tuple[float, float]
+    clockwise: bool
+    detour_m: float
+    buffer_id: str
+
+
+def find_loiter_site(
+    scenario: Scenario,
+    vehicle: Vehicle,
+    path: FlightPath,
+    s_from_m: float,
+    radius_m: float,
+    threats: Sequence[ThreatZone] = (),
+) -> _Site | None:
+    """Where to loiter on ``path`` after ``s_from_m``, inside a buffer the vehicle may use.
+
+    A circle tangent to the path at a path point, entirely inside a buffer, is preferred (the
+    paper keeps the added path within ``2 r_min`` of the planned one); among those, the first
+    stretch of the path that allows one, at its deepest point. Otherwise a circle in the
+    buffer nearest the path, reached by a straight detour from the nearest path point.
+    """
+    frame = scenario.frame()
+    buffers = [
+        (b.id, *b.center.local(frame), b.radius_m)
+        for b in scenario.buffers
+        if b.vehicles is None or vehicle.id in b.vehicles
+    ]
+    if not buffers:
+        return None
+    lead = max(4.0 * radius_m, 1000.0)
+    lo, hi = s_from_m + lead, path.length_m - lead
+    if hi <= lo:
+        return None
+    s_values = np.arange(lo, hi, SITE_STEP_M)
+
+    def clear(e: float, n: float) -> bool:
+        for t in threats:
+            if t.forbidden and float(t.distance_m(np.array([e]), np.array([n]))[0]) < radius_m:
+                return False
+        return True
+
+    best: tuple[float, _Site] | None = None
+    poses = [path.pose_at(float(s)) for s in s_values]
+    for s, p in zip(s_values, poses, strict=True):
+        for clockwise in (True, False):
+            sign = 1.0 if clockwise else -1.0
+            ce = p.east_m + sign * radius_m * math.cos(p.heading_rad)
+            cn = p.north_m - sign * radius_m * math.sin(p.heading_rad)
+            for bid, be, bn, br in buffers:
+                margin = br - radius_m - math.hypot(ce - be, cn - bn)
+                if margin >= 0.0 and clear(ce, cn):
+                    site = _Site(float(s), (ce, cn), (p.east_m, p.north_m), clockwise, 0.0, bid)
+                    if best is None or margin > best[0]:
+                        best = (margin, site)
+        if best is not None and s - best[1].s_m > 4.0 * radius_m:
+            break  # the first stretch that allows a tangent circle is past its deepest point
+    if best is not None:
+        return best[1]
+    detour: _Site | None = None
+    for bid, be, bn, br in buffers:
+        if br < radius_m:
+            continue
+        d = [math.hypot(p.east_m - be, p.north_m - bn) for p in poses]
+        k = int(np.argmin(d))
+        p = poses[k]
+        ux, uy = (p.east_m - be) / d[k], (p.north_m - bn) / d[k]
+        ce, cn = be + ux * (br - radius_m), bn + uy * (br - radius_m)
+        ee, en = ce + ux * radius_m, cn + uy * radius_m
+        length = 2.0 * math.hypot(p.east_m - ee, p.north_m - en)
+        if clear(ce, cn) and (detour is None or length < detour.detour_m):
+            detour = _Site(float(s_values[k]), (ce, cn), (ee, en), True, length, bid)
+    return detour
+
+
+# --- timing one vehicle ----------------------------------------------------------------
+
+
+def _limits(v: Vehicle, step_m_s: float) -> SpeedLimits:
+    return SpeedLimits(v.speed_min_m_s, v.speed_max_m_s, v.cruise_m_s, step_m_s)
+
+
+def _timeline(
+    pieces: Sequence[Piece],
+    *,
+    s0_m: float,
+    t0_s: float,
+    site: _Site | None,
+    radius_m: float,
+    turns: int,
+    tas_per_eas: float,
+) -> tuple[list[Leg], list[LoiterPlan], float]:
+    """Legs and loiters from timing pieces whose lengths are in metres / ``tas_per_eas``."""
+    legs: list[Leg] = []
+    loiters: list[LoiterPlan] = []
+    s, t = s0_m, t0_s
+    for p in pieces:
+        dt = p.duration_s
+        if p.kind == "leg":
+            length = p.length_m * tas_per_eas
+            legs.append(Leg(s, s + length, p.speed_m_s, t, t + dt, tas_per_eas))
+            s += length
+        else:
+            assert site is not None
+            loiters.append(
+                LoiterPlan(
+                    site.s_m,
+                    site.centre[0],
+                    site.centre[1],
+                    site.entry[0],
+                    site.entry[1],
+                    radius_m,
+                    turns,
+                    site.clockwise,
+                    site.detour_m,
+                    p.speed_m_s,
+                    t,
+                    t + dt,
+                    site.buffer_id,
+                    tas_per_eas,
+                )
+            )
+        t += dt
+    return legs, loiters, t
+
+
+@dataclass(frozen=True)
+class Retimed:
+    schedule: VehicleSchedule
+    adjustments: list[Adjustment]
+
+
+def retime_on_path(
+    scenario: Scenario,
+    v: Vehicle,
+    vs: VehicleSchedule,
+    *,
+    now_s: float,
+    target_s: float,
+    step_m_s: float,
+    threats: Sequence[ThreatZone],
+    at: tuple[float, float] | None = None,
+    loiter_margin_m_s: float = 0.0,
+) -> Retimed:
+    """Re-time one vehicle from ``now_s`` to arrive at ``target_s`` on its current path.
+
+    ``at`` = (s_m, speed_m_s) anchors the vehicle where it really is (airborne, on a leg)
+    instead of where the schedule has it at ``now_s``.
+    """
+    limits = _limits(v, step_m_s)
+    if at is None:
+        phase, s0, speed_now = vs.state_at(now_s)
+        kept_legs = [leg for leg in vs.legs if leg.t_end_s <= now_s + TIME_TOL_S]
+        kept_loiters = [lo for lo in vs.loiters if lo.t_end_s <= now_s + TIME_TOL_S]
+    else:
+        phase, (s0, speed_now) = "leg", at
+        kept_legs = [leg for leg in vs.legs if leg.s_end_m <= s0 + 1e-6]
+        kept_loiters = [lo for lo in vs.loiters if lo.s_m < s0]
+        cut = [leg for leg in vs.legs if leg.s_start_m < s0 < leg.s_end_m]
+        if cut:
+            kept_legs.append(replace(cut[0], s_end_m=s0, t_end_s=now_s))
+    start_t = now_s
+    if phase == "loiter":
+        current = next(lo for lo in vs.loiters if lo.t_start_s <= now_s < lo.t_end_s)
+        kept_loiters.append(current)
+        start_t = current.t_end_s
+    elif phase == "leg" and at is None:
+        cur = [leg for leg in vs.legs if leg.t_start_s < now_s < leg.t_end_s]
+        if cur:
+            kept_legs.append(replace(cur[0], s_end_m=s0, t_end_s=now_s))
+    adjustments: list[Adjustment] = []
+    radius = flyable_loiter_radius_m(v.min_turn_radius_m)
+    length = vs.path.length_m
+    # The timing arithmetic runs in metres / tas_per_eas, at equivalent airspeeds.
+    ratio = vs.tas_per_eas(s0)
+    on_ground = phase == "ground"
+    takeoff = vs.takeoff_s
+    if on_ground:
+        window = (max(v.takeoff_window_s[0], now_s), max(v.takeoff_window_s[1], now_s))
+        takeoff = takeoff_time_s(length, target_s, limits, window, ratio)
+        start_t = takeoff
+        if abs(takeoff - vs.takeoff_s) > TIME_TOL_S or now_s == 0.0:
+            adjustments.append(
+                Adjustment(
+                    now_s,
+                    v.id,
+                    "takeoff_delay",
+                    round(takeoff, 3),
+                    f"take off at {takeoff:.1f} s to arrive at {target_s:.1f} s "
+                    f"(eq. 5: cruise {v.cruise_m_s:g} m/s, "
+                    f"window [{window[0]:g}, {window[1]:g}] s)",
+                )
+            )
+    remaining = length - s0
+    site = find_loiter_site(scenario, v, vs.path, s0, radius, threats)
+    loiter_site = None if site is None else LoiterSite(site.s_m - s0, radius, site.detour_m)
+    timing: Timing = time_path(
+        v.id,
+        remaining,
+        target_s - start_t,
+        limits,
+        site=loiter_site,
+        current_m_s=speed_now if phase in ("leg", "loiter") and speed_now > 0.0 else None,
+        loiter_margin_m_s=loiter_margin_m_s,
+        tas_per_eas=ratio,
+    )
+    legs, loiters, arrival = _timeline(
+        timing.pieces,
+        s0_m=s0,
+        t0_s=start_t,
+        site=site,
+        radius_m=radius,
+        turns=timing.turns,
+        tas_per_eas=ratio,
+    )
+    speeds = sorted({leg.speed_m_s for leg in legs})
+    held = sum(lo.t_end_s - lo.t_start_s for lo in loiters)
+    mean = remaining / ratio / max(target_s - start_t - held, 1e-9)
+    if speeds and (phase in ("leg", "loiter") or speeds != [v.cruise_m_s]):
+        adjustments.append(
+            Adjustment(
+                start_t,
+                v.id,
+                "speed",
+                legs[0].speed_m_s,
+                "fly "
+                + ", then ".join(
+                    f"{leg.speed_m_s:g} m/s for {(leg.s_end_m - leg.s_start_m) / 1000:.2f} km"
+                    for leg in legs
+                )
+                + f" to arrive at {target_s:.1f} s (mean {mean:.2f} m/s on the path, "
+                f"true airspeed x{ratio:.3f})",
+            )
+        )
+    for lo in loiters:
+        adjustments.append(
+            Adjustment(
+                start_t,
+                v.id,
+                "loiter",
+                float(lo.turns),
+                f"{lo.turns} turns of {lo.radius_m:g} m in buffer {lo.buffer_id} at "
+                f"{lo.s_m / 1000:.1f} km along the path (+{lo.length_m:.0f} m, eq. 8): "
+                f"{remaining / 1000:.1f} km at {v.speed_min_m_s:g} m/s would arrive "
+                f"{target_s - start_t - remaining / ratio / v.speed_min_m_s:.1f} s early",
+            )
+        )
+    if (
+        kept_legs
+        and legs
+        and kept_legs[-1].speed_m_s == legs[0].speed_m_s
+        and kept_legs[-1].tas_per_eas == legs[0].tas_per_eas
+        and abs(kept_legs[-1].t_end_s - legs[0].t_start_s) < TIME_TOL_S
+        and abs(kept_legs[-1].s_end_m - legs[0].s_start_m) < 1e-6
+    ):
+        last = kept_legs.pop()
+        legs[0] = replace(legs[0], s_start_m=last.s_start_m, t_start_s=last.t_start_s)
+    new = replace(
+        vs,
+        takeoff_s=takeoff,
+        arrival_s=arrival,
+        legs=tuple(kept_legs + legs),
+        loiters=tuple(kept_loiters + loiters),
+    )
+    return Retimed(new, adjustments)
+
+
+def anchored_state(
+    vs: VehicleSchedule, t_s: float, anchor: Anchor | None
+) -> tuple[str, float, float]:
+    """``(phase, s_m, speed_m_s)`` at time t: on a leg at the anchor when there is one, else
+    where the schedule has the vehicle (:meth:`~planner.schedule.VehicleSchedule.state_at`)."""
+    if anchor is None:
+        return vs.state_at(t_s)
+    return "leg", anchor[0], anchor[1]
+
+
+def arrival_window(
+    scenario: Scenario,
+    v: Vehicle,
+    vs: VehicleSchedule,
+    now_s: float,
+    step_m_s: float,
+    threats: Sequence[ThreatZone],
+    anchor: Anchor | None = None,
+) -> ArrivalWindow:
+    """The vehicle's feasible arrival window from ``now_s`` (eq. 1), from where it is."""
+    phase, s0, _ = anchored_state(vs, now_s, anchor)
+    start = now_s
+    if phase == "loiter":
+        start = next(lo.t_end_s for lo in vs.loiters if lo.t_start_s <= now_s < lo.t_end_s)
+    radius = flyable_loiter_radius_m(v.min_turn_radius_m)
+    site = find_loiter_site(scenario, v, vs.path, s0, radius, threats)
+    return vehicle_window(
+        v.id,
+        now_s=start,
+        remaining_m=vs.path.length_m - s0,
+        limits=_limits(v, step_m_s),
+        takeoff_window_s=v.takeoff_window_s if phase == "ground" else None,
+        can_loiter=site is not None,
+        tas_per_eas=vs.tas_per_eas(s0),
+    )
+
+
+def _offsets(scenario: Scenario) -> dict[str, float]:
+    arrival = scenario.arrival
+    ids = [v.id for v in scenario.vehicles]
+    if isinstance(arrival, Spaced):
+        return {vid: k * arrival.interval_s for k, vid in enumerate(arrival.order or ids)}
+    return dict.fromkeys(ids, 0.0)
+
+
+def arrival_targets(
+    scenario: Scenario,
+    windows: Sequence[ArrivalWindow],
+    requested_s: float | None,
+    natural_s: Mapping[str, float],
+) -> tuple[dict[str, float], float | None, str]:
+    """Each vehicle's target arrival, the team reference and the reason for it."""
+    arrival = scenario.arrival
+    if isinstance(arrival, Windows):
+        own = {w.vehicle: (w.earliest_s, w.latest_s) for w in arrival.windows}
+        out: dict[str, float] = {}
+        for w in windows:
+            lo_s, hi_s = own[w.vehicle_id]
+            lo, hi = max(w.t_min_s, lo_s), min(w.t_max_s, hi_s)
+            if lo > hi + TIME_TOL_S:
+                short = lo - hi
+                why = w.min_reason if w.t_min_s > hi_s else w.max_reason
+                raise InfeasibleError(
+                    f"vehicle {w.vehicle_id}: window [{lo_s:g}, {hi_s:g}] s cannot be met: "
+                    f"{why}: short by {short:.1f} s"
+                )
+            out[w.vehicle_id] = min(max(natural_s[w.vehicle_id], lo), hi)
+        return out, None, "each vehicle within its own arrival window"
+    offsets = _offsets(scenario)
+    ref, reason = team_arrival(windows, requested_s, offsets_s=offsets)
+    return {w.vehicle_id: ref + offsets[w.vehicle_id] for w in windows}, ref, reason
+
+
+def speed_spans(vs: VehicleSchedule) -> tuple[SpeedSpan, ...]:
+    """The vehicle's legs and loiters as speed spans, in time order."""
+    out = [SpeedSpan(leg.t_start_s, leg.t_end_s, leg.speed_m_s, "leg") for leg in vs.legs]
+    out += [SpeedSpan(lo.t_start_s, lo.t_end_s, lo.speed_m_s, "loiter") for lo in vs.loiters]
+    return tuple(sorted(out, key=lambda x: x.t_start_s))
+
+
+def speed_stage(name: str, time_s: float, vehicles: Sequence[VehicleSchedule]) -> Stage:
+    """The team's speed profiles as they stand, as one stage of the story."""
+    return Stage(name, time_s, {vs.vehicle_id: speed_spans(vs) for vs in vehicles})
+
+
+# --- the schedule ----------------------------------------------------------------------
+
+
+def build_schedule(
+    scenario: Scenario,
+    plan: Plan,
+    *,
+    step_m_s: float = SPEED_STEP_M_S,
+    world: World | None = None,
+) -> Schedule:
+    """Time a plan: team arrival, takeoffs (eq. 5), discrete speeds and loiters.
+
+    Parameters
+    ----------
+    scenario
+        The scenario the plan was made for.
+    plan
+        Its routes (``plan.routes[i].path``: exact lengths, Dubins arcs included).
+    step_m_s
+        Speed quantum, m/s.
+    world
+        Re-used when given (threats for the loiter sites).
+
+    Raises
+    ------
+    InfeasibleError
+        The arrival constraint cannot be met; names the vehicle and the shortfall (s).
+    """
+    world = world or build_world(scenario)
+    threats = active(world.threats, None)
+    base: list[VehicleSchedule] = []
+    for v, route in zip(scenario.vehicles, plan.routes, strict=True):
+        base.append(
+            VehicleSchedule(
+                v.id,
+                route.path,
+                np.asarray(route.profile.s_m, dtype=np.float64),
+                np.asarray(route.profile.alt_m, dtype=np.float64),
+                0.0 if v.airborne else v.takeoff_window_s[0],
+                math.nan,
+                (),
+                (),
+                v.speed_min_m_s,
+                v.speed_max_m_s,
+                v.airborne,
+            )
+        )
+    requested = required_arrival_s(scenario)
+    windows = [
+        arrival_window(scenario, v, vs, 0.0, step_m_s, threats)
+        for v, vs in zip(scenario.vehicles, base, strict=True)
+    ]
+    natural = {
+        v.id: (0.0 if v.airborne else v.takeoff_window_s[0])
+        + vs.path.length_m / (v.cruise_m_s * vs.tas_per_eas())
+        for v, vs in zip(scenario.vehicles, base, strict=True)
+    }
+    targets, ref, reason = arrival_targets(scenario, windows, requested, natural)
+    events = [Event(0.0, "arrival", f"team arrival {format_arrival(ref)}: {reason}")]
+    # The pre-plan picture of Fig. 6b: everyone leaves at the earliest common takeoff and
+    # flies the constant speed that arrives on time, in range or not.
+    t0 = max((v.takeoff_window_s[0] for v in scenario.vehicles if not v.airborne), default=0.0)
+    pre: dict[str, tuple[SpeedSpan, ...]] = {}
+    for v, vs in zip(scenario.vehicles, base, strict=True):
+        dep = 0.0 if v.airborne else t0
+        need = vs.path.length_m / vs.tas_per_eas() / max(targets[v.id] - dep, 1e-9)
+        pre[v.id] = (SpeedSpan(dep, targets[v.id], need, "required"),)
+    stages = [Stage("pre-plan (common takeoff)", 0.0, pre)]
+    timed: list[VehicleSchedule] = []
+    adjustments: list[Adjustment] = []
+    for v, vs in zip(scenario.vehicles, base, strict=True):
+        r = retime_on_path(
+            scenario,
+            v,
+            vs,
+            now_s=0.0,
+            target_s=targets[v.id],
+            step_m_s=step_m_s,
+            threats=threats,
+        )
+        timed.append(r.schedule)
+        adjustments.extend(r.adjustments)
+    stages.append(speed_stage("takeoff and speed adjustment", 0.0, timed))
+    return Schedule(
+        scenario,
+        requested,
+        ref,
+        reason,
+        tuple(timed),
+        tuple(adjustments),
+        tuple(stages),
+        tuple(events),
+        step_m_s,
+        _offsets(scenario),
+    )
+
+
+def format_arrival(t: float | None) -> str:
+    """The team arrival time for an event's text."""
+    return "per-vehicle windows" if t is None else f"{t:.1f} s"
+
+
+def retime_vehicle(
+    schedule: Schedule,
+    vehicle_id: str,
+    *,
+    now_s: float,
+    s_m: float,
+    speed_m_s: float,
+    target_s: float,
+    threats: Sequence[ThreatZone],
+    loiter_margin_m_s: float = 0.0,
+) -> tuple[VehicleSchedule, tuple[Adjustment, ...]]:
+    """Re-time one airborne vehicle from where it really is (``s_m`` along its path, flying
+    ``speed_m_s``) at ``now_s`` to arrive at ``target_s``: speeds, and loiter turns in a buffer
+    ahead when the speed range cannot absorb the surplus (eqs. 6-9).
+
+    Raises
+    ------
+    InfeasibleError
+        Too late even at top speed, or too early with no buffer ahead; names the vehicle.
+    """
+    v = schedule.scenario.vehicle(vehicle_id)
+    r = retime_on_path(
+        schedule.scenario,
+        v,
+        schedule.vehicle(vehicle_id),
+        now_s=now_s,
+        target_s=target_s,
+        step_m_s=schedule.step_m_s,
+        threats=threats,
+        at=(s_m, speed_m_s),
+        loiter_margin_m_s=loiter_margin_m_s,
+    )
+    return r.schedule, tuple(r.adjustments)
