@@ -10,7 +10,8 @@ from typing import Any
 import pytest
 
 from gcs.errors import GcsError
-from gcs.rehearsal.report import _scenario_file, arrival_table, write_report
+from gcs.rehearsal.flightrecord import _scenario_file
+from gcs.rehearsal.report import arrival_table, write_report
 from planner.scenario import load_scenario
 
 ROOT = Path(__file__).resolve().parents[2]
