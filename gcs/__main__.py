@@ -382,6 +382,13 @@ def parser() -> argparse.ArgumentParser:
         help="keep the flight in this database as it happens (SQLAlchemy URL, e.g. "
         "sqlite:///out/tcgcs.db or postgresql+psycopg://user@host/db)",
     )
+    rh.add_argument(
+        "--resume",
+        metavar="FLIGHT_ID",
+        help="resume this flight of --db from its last checkpoint after its process died: "
+        "reach its vehicles again (--connect, else the flight's own connections), compare "
+        "their missions with the kept ones and go on; nothing launched or uploaded twice",
+    )
     rh.add_argument("--tolerance", type=float, default=1.0, help="pass mark for arrivals (s)")
     rh.add_argument("--quiet", action="store_true", help="no progress lines")
     rh.set_defaults(fn=rehearse_cmd)
@@ -391,7 +398,7 @@ def parser() -> argparse.ArgumentParser:
 def _rehearsal_options(args: argparse.Namespace) -> object:
     from pathlib import Path
 
-    from gcs.coordination.coordinator import CoordinatorConfig
+    from gcs.coordination.config import FlightConfig
     from gcs.rehearsal.rehearse import Blackout, RehearsalOptions
     from planner.scenario import load_scenario
 
@@ -455,8 +462,9 @@ def _rehearsal_options(args: argparse.Namespace) -> object:
         utc_offsets_s=utc_offsets,
         threats_from=Path(args.threats_from) if args.threats_from else None,
         quiet=args.quiet,
-        config=CoordinatorConfig(seed=args.seed),
+        config=FlightConfig(seed=args.seed),
         db_url=args.db,
+        resume=args.resume,
     )
 
 

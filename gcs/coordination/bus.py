@@ -90,9 +90,12 @@ class Subscription:
 class EventBus:
     """Numbers a flight's events, keeps the latest ``history`` and fans them out."""
 
-    def __init__(self, history: int = DEFAULT_HISTORY) -> None:
+    def __init__(self, history: int = DEFAULT_HISTORY, *, first_seq: int = 1) -> None:
+        """``first_seq``: the number of the first event (a flight resumed after a restart
+        goes on from its last kept event)."""
         self._history: deque[FlightEvent] = deque(maxlen=history)
-        self._seq = itertools.count(1)
+        self._seq = itertools.count(first_seq)
+        self._first_seq = first_seq
         self._subscribers: set[Subscription] = set()
         self._listeners: list[Callable[[FlightEvent], None]] = []
         self.published = 0
@@ -133,7 +136,7 @@ class EventBus:
     @property
     def last_seq(self) -> int:
         """The sequence number of the newest event (0 before any)."""
-        return self._history[-1].seq if self._history else 0
+        return self._history[-1].seq if self._history else self._first_seq - 1
 
     @property
     def dropped(self) -> int:

@@ -48,7 +48,13 @@ class EventKind(enum.StrEnum):
     CLOCK = "clock"
     """A vehicle keeps a UTC of its own, or none."""
     ABORT = "abort"
-    """The loop stopped before every vehicle arrived."""
+    """A vehicle (or the team) was aborted, or the loop stopped before every vehicle arrived."""
+    STATE = "state"
+    """A vehicle's state changed (``payload``: ``state``, ``was``;
+    :class:`~gcs.coordination.member.VehicleState` values)."""
+    FLIGHT = "flight"
+    """The flight's own state changed (``payload``: ``state``; planned, uploading, ready,
+    running, completed, aborted, failed), or it was resumed after a restart."""
 
 
 @dataclass(frozen=True)

@@ -28,7 +28,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from gcs.coordination.arrival import Wind
+from gcs.coordination.routetrack import Wind
 
 __all__ = ["BiasConfig", "SpeedBiasEstimator"]
 

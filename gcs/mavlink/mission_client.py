@@ -283,6 +283,17 @@ async def upload_mission(
     _check_same(upload, list(items), got, autopilot)
 
 
+def held_difference(
+    link: Link, target_system: int, sent: Sequence[MissionItem], got: Sequence[MissionItem]
+) -> int | None:
+    """Index of the first item of ``sent`` that the vehicle's downloaded mission ``got`` does
+    not hold in its autopilot's stored form (item 0, home, is the vehicle's own); None: the
+    vehicle holds ``sent``."""
+    return first_difference(
+        sent, got, autopilot=_autopilot_of(link, target_system), compare_home=False
+    )
+
+
 def _check_same(
     upload: Upload, sent: list[MissionItem], got: list[MissionItem], autopilot: Autopilot
 ) -> None:

@@ -55,6 +55,12 @@ class Vehicle:
             self.link, self.system_id, target_component=self.component_id, **kwargs
         )
 
+    async def mission_difference(self, items: Sequence[MissionItem], **kwargs: Any) -> int | None:
+        """Download the vehicle's mission: the index of the first item of ``items`` it does not
+        hold as its autopilot stores it, or None when it holds exactly ``items``."""
+        got = await self.download_mission(**kwargs)
+        return mission_client.held_difference(self.link, self.system_id, items, got)
+
     async def clear_mission(self, **kwargs: Any) -> None:
         await mission_client.clear_mission(
             self.link, self.system_id, target_component=self.component_id, **kwargs

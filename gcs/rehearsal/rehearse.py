@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import dataclasses
 import json
 import math
 import sys
@@ -28,17 +29,20 @@ from typing import Any
 
 import numpy as np
 
+from gcs.coordination.actions import AbortMode
 from gcs.coordination.bus import EventBus, Subscription
-from gcs.coordination.coordinator import AbortMode, Coordinator, CoordinatorConfig, Member
+from gcs.coordination.config import FlightConfig
 from gcs.coordination.events import EventKind, FlightEvent
+from gcs.coordination.member import Member
 from gcs.coordination.missionclock import MissionClock
+from gcs.coordination.runner import FlightRunner
 from gcs.errors import GcsError
 from gcs.mavlink.link import Link
 from gcs.mavlink.vehicle import Vehicle
 from gcs.rehearsal.truth import TruthSample, closest_approach, min_separation, read_truth
 from gcs.service.fleet import Fleet
 from gcs.service.stubs import StubProcess
-from gcs.store.repository import EventWriter, Store
+from gcs.store.repository import CheckpointWriter, EventWriter, Store
 from planner.deconflict import separation
 from planner.plan import build_terrain
 from planner.scenario import Scenario
@@ -87,7 +91,7 @@ class RehearsalOptions:
     """Vehicle id -> seconds: the stub vehicle's UTC is the true UTC plus this."""
     threats_from: Path | None = None
     quiet: bool = False
-    config: CoordinatorConfig = field(default_factory=CoordinatorConfig)
+    config: FlightConfig = field(default_factory=FlightConfig)
     bus: EventBus | None = None
     """The flight's event bus (a new one if None): other subscribers may listen in."""
     fleet: Fleet | None = None
@@ -95,10 +99,15 @@ class RehearsalOptions:
     in another flight is refused, naming it and that flight) instead of opening links."""
     db_url: str | None = None
     """Keep the flight in this database (SQLAlchemy URL) as it happens: scenario, flight and
-    its state, every event, every mission uploaded."""
+    its state, every event, every mission uploaded, the checkpoint a restart resumes from."""
+    resume: str | None = None
+    """Resume this flight of ``db_url`` from its last checkpoint (its process died): the
+    vehicles are reached again (``connect``, else the flight's own connections), their
+    missions compared with the kept ones, and the closed loop goes on; nothing is launched
+    or uploaded again that is already so."""
 
 
-def _stub_homes(coord: Coordinator) -> list[str]:
+def _stub_homes(coord: FlightRunner) -> list[str]:
     assert coord.schedule is not None
     scenario = coord.scenario
     frame = scenario.frame()
@@ -115,7 +124,7 @@ def _stub_homes(coord: Coordinator) -> list[str]:
 
 
 def _stub_args(
-    opts: RehearsalOptions, coord: Coordinator, truth: Path, start_utc_s: float
+    opts: RehearsalOptions, coord: FlightRunner, truth: Path, start_utc_s: float
 ) -> list[str]:
     scenario = opts.scenario
     cmd = [
@@ -151,12 +160,12 @@ def _stub_args(
 class Progress:
     """One status line per vehicle every so often while the mission runs."""
 
-    def __init__(self, coord: Coordinator, quiet: bool) -> None:
+    def __init__(self, coord: FlightRunner, quiet: bool) -> None:
         self.coord = coord
         self.quiet = quiet
 
     def event(self, ev: FlightEvent) -> None:
-        if self.quiet or ev.kind is EventKind.UPLOAD:
+        if self.quiet or ev.kind in (EventKind.UPLOAD, EventKind.STATE):
             return
         who = f"{ev.vehicle:>6}" if ev.vehicle else "  team"
         print(f"{ev.t_s:9.1f} s {who} {ev.kind:<8} {ev.reason}", flush=True)
@@ -186,7 +195,7 @@ def _member_line(m: Member) -> str:
     return f"{m.vehicle_id} {m.phase}{s}{lvl}{eta}"
 
 
-async def _watch_threats(coord: Coordinator, path: Path) -> None:
+async def _watch_threats(coord: FlightRunner, path: Path) -> None:
     """Threats appended to a file (one JSON threat per line) appear when read."""
     from pydantic import TypeAdapter, ValidationError
 
@@ -227,30 +236,52 @@ async def _watch_threats(coord: Coordinator, path: Path) -> None:
 async def rehearse(opts: RehearsalOptions) -> dict[str, Any]:
     """Run the rehearsal; return the flight record (also written to ``--json``)."""
     wall0 = time.perf_counter()
-    flight_id = uuid.uuid4().hex
     clock = MissionClock()
-    coord = Coordinator(
-        opts.scenario,
-        clock,
-        config=opts.config,
-        required_arrival_s=opts.required_arrival_s,
-        bus=opts.bus,
-    )
+    store = _open_store(opts)
+    try:
+        if opts.resume is not None:
+            flight_id = opts.resume
+            coord, conns = _resumed(opts, store, clock)
+            opts = dataclasses.replace(opts, connect=conns)
+        else:
+            flight_id = uuid.uuid4().hex
+            coord = FlightRunner(
+                opts.scenario,
+                clock,
+                config=opts.config,
+                required_arrival_s=opts.required_arrival_s,
+                bus=opts.bus,
+            )
+        record = await _rehearse(opts, coord, flight_id, store, wall0)
+    finally:
+        if store is not None:
+            store.close()
+    if opts.json_out is not None:
+        opts.json_out.parent.mkdir(parents=True, exist_ok=True)
+        opts.json_out.write_text(json.dumps(record, indent=1) + "\n", encoding="utf-8")
+    return record
+
+
+async def _rehearse(
+    opts: RehearsalOptions, coord: FlightRunner, flight_id: str, store: Store | None, wall0: float
+) -> dict[str, Any]:
+    clock = coord.clock
     progress = Progress(coord, opts.quiet)
     printed = coord.bus.subscribe(maxsize=100_000)
     printer = asyncio.create_task(progress.follow(printed))
-    try:
-        await coord.prepare()
-    except BaseException:
-        printed.close()
-        await printer
-        raise
-    if not opts.quiet:
-        print(
-            f"rehearse: planned {len(opts.scenario.vehicles)} vehicles in "
-            f"{coord.plan_wall_s:.1f} s; team arrival {coord.fmt_ref()}",
-            flush=True,
-        )
+    if not coord.resumed:
+        try:
+            await coord.prepare()
+        except BaseException:
+            printed.close()
+            await printer
+            raise
+        if not opts.quiet:
+            print(
+                f"rehearse: planned {len(opts.scenario.vehicles)} vehicles in "
+                f"{coord.plan_wall_s:.1f} s; team arrival {coord.fmt_ref()}",
+                flush=True,
+            )
     truth_path: Path | None = None
     stub: StubProcess | None = None
     tmp = tempfile.TemporaryDirectory(prefix="tcgcs-rehearse-")
@@ -290,15 +321,21 @@ async def rehearse(opts: RehearsalOptions) -> dict[str, Any]:
                     peer = await link.wait_vehicle(sysid, timeout_s=15.0)
                     vehicles[v.id] = Vehicle(link, peer.system_id, peer.component_id)
             coord.bind(vehicles)
-            kept = _Kept.start(opts, coord, dict(zip(vehicles, conns, strict=True)), flight_id)
+            kept = _Kept.start(
+                opts, coord, dict(zip(vehicles, conns, strict=True)), flight_id, store
+            )
             stack.push_async_callback(kept.finish, coord)
             async with asyncio.timeout(15.0):
                 while not clock.synced:
                     await asyncio.sleep(0.02)
-            kept.state("uploading")
-            await coord.upload_all()
-            mission_start = clock.now_utc_s() + max(10.0, 1.0 * clock.rate)
-            kept.state("running", start_utc_s=mission_start, team_time_s=coord.team_ref_s)
+            if coord.resumed:
+                await coord.reconcile()
+                mission_start = coord.start_utc_s
+            else:
+                await coord.upload_all()
+                mission_start = clock.now_utc_s() + max(10.0, 1.0 * clock.rate)
+                kept.state("running", start_utc_s=mission_start, team_time_s=coord.team_ref_s)
+            assert mission_start is not None
             if stub is not None and opts.blackouts:
                 _send_blackouts(stub, opts, stub_start, mission_start)
             tasks = [asyncio.create_task(progress.run())]
@@ -324,81 +361,122 @@ async def rehearse(opts: RehearsalOptions) -> dict[str, Any]:
         if stub is not None:
             await stub.stop()
         tmp.cleanup()
-    if opts.json_out is not None:
-        opts.json_out.parent.mkdir(parents=True, exist_ok=True)
-        opts.json_out.write_text(json.dumps(record, indent=1) + "\n", encoding="utf-8")
     return record
 
 
 @dataclass
 class _Kept:
-    """The flight in the store (``--db``), or nothing."""
+    """The flight in the store (``--db``), or nothing: its events, states and checkpoints
+    as they happen."""
 
     store: Store | None = None
     flight_id: str | None = None
     writer: asyncio.Task[None] | None = None
     events: Subscription | None = None
+    checkpoints: CheckpointWriter | None = None
 
     @classmethod
     def start(
-        cls, opts: RehearsalOptions, coord: Coordinator, conns: Mapping[str, str], flight_id: str
+        cls,
+        opts: RehearsalOptions,
+        coord: FlightRunner,
+        conns: Mapping[str, str],
+        flight_id: str,
+        store: Store | None,
     ) -> _Kept:
-        if opts.db_url is None:
+        if store is None:
             return cls()
-        store = Store.open(opts.db_url)
-        suffix = opts.scenario_path.suffix.lower()
-        scenario_id = store.save_scenario(
-            opts.scenario_path.read_text(encoding="utf-8"),
-            name=opts.scenario.name,
-            media_type="application/json" if suffix == ".json" else "application/yaml",
-        )
-        store.create_flight(scenario_id, conns, flight_id=flight_id)
-        if coord.schedule is not None and coord.world is not None:
-            sep = separation(coord.schedule.vehicles, coord.scenario.separation_m)
-            doc = schedule_json(
-                coord.schedule, sep, coord.world.terrain, scenario_file=str(opts.scenario_path)
+        if not coord.resumed:
+            suffix = opts.scenario_path.suffix.lower()
+            scenario_id = store.save_scenario(
+                opts.scenario_path.read_text(encoding="utf-8"),
+                name=opts.scenario.name,
+                media_type="application/json" if suffix == ".json" else "application/yaml",
             )
-            store.update_flight(flight_id, resume={"schedule": doc})
+            store.create_flight(scenario_id, conns, flight_id=flight_id)
+            if coord.schedule is not None and coord.world is not None:
+                sep = separation(coord.schedule.vehicles, coord.scenario.separation_m)
+                doc = schedule_json(
+                    coord.schedule, sep, coord.world.terrain, scenario_file=str(opts.scenario_path)
+                )
+                store.update_flight(flight_id, resume={"schedule": doc})
         events = coord.bus.subscribe(maxsize=1_000_000, after_seq=0)
         writer = asyncio.create_task(EventWriter(store, flight_id).run(events))
+        checkpoints = CheckpointWriter(store, flight_id)
+        coord.on_checkpoint = checkpoints.offer
         if not opts.quiet:
             print(f"rehearse: flight {flight_id} kept in {store.engine.url!r}", flush=True)
-        return cls(store, flight_id, writer, events)
+        return cls(store, flight_id, writer, events, checkpoints)
 
     def state(self, state: str, **fields: Any) -> None:
         if self.store is not None and self.flight_id is not None:
             self.store.update_flight(self.flight_id, state=state, **fields)
 
-    async def finish(self, coord: Coordinator) -> None:
-        """The last events written, then the final state (completed, or failed when a
-        vehicle did not arrive)."""
+    async def finish(self, coord: FlightRunner) -> None:
+        """The last events and checkpoint written (the final state is the last event's)."""
         if self.store is None or self.events is None or self.writer is None:
             return
+        coord.on_checkpoint = None
+        if self.checkpoints is not None:
+            await self.checkpoints.close()
         self.events.close()
         await self.writer
-        flying = [m for m in coord.members.values() if m.phase != "aborted"]
-        if coord.members and not flying:
-            self.state("aborted")
-        else:
-            arrived = all(m.arrival_utc_s is not None for m in flying)
-            self.state("completed" if arrived and flying else "failed")
         self.store.close()
 
 
-async def _abort_at(coord: Coordinator, abort: Abort, start_utc_s: float) -> None:
+def _open_store(opts: RehearsalOptions) -> Store | None:
+    return None if opts.db_url is None else Store.open(opts.db_url)
+
+
+def _resumed(
+    opts: RehearsalOptions, store: Store | None, clock: MissionClock
+) -> tuple[FlightRunner, list[str]]:
+    """The runner of ``opts.resume``'s flight from its last checkpoint, and its vehicles'
+    connections (``--connect``, else the ones the flight was flown on).
+
+    Raises
+    ------
+    GcsError
+        No database, no such flight, one that has ended or never started, or a scenario
+        file that is not the flight's.
+    """
+    fid = opts.resume
+    assert fid is not None
+    if store is None:
+        raise GcsError("--resume needs --db: the database the flight is kept in")
+    row = store.flight(fid)
+    if row.state in ("completed", "aborted", "failed"):
+        raise GcsError(f"--resume: flight {fid} has ended ({row.state}); nothing to resume")
+    blob = store.checkpoint(fid)
+    if blob is None:
+        raise GcsError(f"--resume: flight {fid} has no checkpoint (it never started)")
+    if store.scenario(row.scenario_id).body != opts.scenario_path.read_text(encoding="utf-8"):
+        raise GcsError(
+            f"--resume: {opts.scenario_path} is not the scenario flight {fid} was planned on"
+        )
+    events = store.events(fid)
+    bus = opts.bus or EventBus(first_seq=(events[-1].seq if events else 0) + 1)
+    coord = FlightRunner.resume(blob, clock, bus=bus, events=events)
+    conns = list(opts.connect)
+    if not conns:
+        conns = [str(row.vehicles[v.id][1]) for v in coord.scenario.vehicles]
+    return coord, conns
+
+
+async def _abort_at(coord: FlightRunner, abort: Abort, start_utc_s: float) -> None:
     await coord.clock.sleep_until(start_utc_s + abort.at_s)
     await coord.abort(abort.vehicle_id, mode=abort.mode)
 
 
-async def _await_truth(path: Path, coord: Coordinator, timeout_s: float = 5.0) -> None:
+async def _await_truth(path: Path, coord: FlightRunner, timeout_s: float = 5.0) -> None:
     """Wait until a running simulator's truth log has reached past every arrival (it is
     flushed about once a wall second)."""
     need = max(
-        (m.arrival_utc_s for m in coord.members.values() if m.arrival_utc_s is not None),
-        default=None,
+        (m.arrival_s for m in coord.members.values() if m.arrival_s is not None), default=None
     )
-    if need is None:
+    if need is None or coord.start_utc_s is None:
         return
+    need += coord.start_utc_s
     loop = asyncio.get_running_loop()
     until = loop.time() + timeout_s
     while loop.time() < until:
@@ -434,7 +512,7 @@ def _ev_json(ev: FlightEvent, start_utc_s: float) -> dict[str, Any]:
 
 
 def flight_record(
-    coord: Coordinator, opts: RehearsalOptions, truth_path: Path | None, wall_s: float
+    coord: FlightRunner, opts: RehearsalOptions, truth_path: Path | None, wall_s: float
 ) -> dict[str, Any]:
     """The flight as data: arrivals (true when the simulator is ours), separations, events."""
     assert coord.start_utc_s is not None
@@ -447,15 +525,17 @@ def flight_record(
     until: dict[int, float] = {}
     tracks: dict[int, list[TruthSample]] = {}
     for m in coord.members.values():
-        sysid = m.vehicle.system_id
+        sysid = coord.vehicles[m.vehicle_id].system_id
         target_utc = start + m.target_s
-        arrival = m.arrival_utc_s
+        telemetry_arrival = None if m.arrival_s is None else start + m.arrival_s
+        launched = None if m.launched_s is None else start + m.launched_s
+        arrival = telemetry_arrival
         track = m.track_log
         samples = truth.get(sysid)
         source = "simulator" if samples else "telemetry"
         if samples:
             glat, glon = frame.to_geodetic(*m.goal_en_m)
-            after = m.launched_utc_s
+            after = launched
             ca = closest_approach(
                 samples, float(glat), float(glon), coord.config.arrival_radius_m, after_utc_s=after
             )
@@ -491,9 +571,9 @@ def flight_record(
                 "error_s": None if arrival is None else round(arrival - target_utc, 3),
                 "arrival_source": source,
                 "telemetry_arrival_utc_s": None
-                if m.arrival_utc_s is None
-                else round(m.arrival_utc_s, 3),
-                "takeoff_utc_s": None if m.launched_utc_s is None else round(m.launched_utc_s, 3),
+                if telemetry_arrival is None
+                else round(telemetry_arrival, 3),
+                "takeoff_utc_s": None if launched is None else round(launched, 3),
                 "planned_paths": [
                     {"label": p["label"], "utc_s": round(start + p["t_s"], 3), "en_m": p["en_m"]}
                     for p in m.planned_paths
@@ -522,7 +602,7 @@ def flight_record(
             }
         )
     sep = min_separation(tracks, until_utc_s=until)
-    ids = {m.vehicle.system_id: m.vehicle_id for m in coord.members.values()}
+    ids = {v.system_id: vid for vid, v in coord.vehicles.items()}
     ref = coord.team_ref_s
     return {
         "format": FLIGHT_FORMAT,
@@ -554,6 +634,8 @@ def flight_record(
         "operator_threats": [
             t.model_dump(mode="json", exclude_none=True) for t in coord.operator_threats
         ],
+        # What an operator's screen showed last (the runner's snapshot at the end).
+        "snapshot": coord.snapshot(),
     }
 
 

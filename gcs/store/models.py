@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from typing import Any
 
-from sqlalchemy import JSON, Float, ForeignKey, Integer, String, Text
+from sqlalchemy import JSON, Float, ForeignKey, Integer, LargeBinary, String, Text
 from sqlalchemy.orm import DeclarativeBase, Mapped, mapped_column
 
 
@@ -37,6 +37,9 @@ class FlightRow(Base):
     version: Mapped[int] = mapped_column(Integer, default=1)
     start_utc_s: Mapped[float | None] = mapped_column(Float, nullable=True)
     resume: Mapped[dict[str, Any] | None] = mapped_column(JSON, nullable=True)
+    checkpoint: Mapped[bytes | None] = mapped_column(LargeBinary, nullable=True, deferred=True)
+    """The flight runner's checkpoint (its team controller), for a restart."""
+    checkpoint_utc_s: Mapped[float | None] = mapped_column(Float, nullable=True)
     created_utc_s: Mapped[float] = mapped_column(Float)
     updated_utc_s: Mapped[float] = mapped_column(Float)
 

@@ -27,6 +27,7 @@ from sqlalchemy.orm import Session
 
 from gcs.coordination.bus import Subscription
 from gcs.coordination.events import EventKind, FlightEvent
+from gcs.coordination.member import VehicleState
 from gcs.errors import GcsError
 from gcs.store.models import EventRow, FlightRow, FlightVehicleRow, ScenarioRow, UploadRow
 from planner.mission import MissionItem
@@ -34,6 +35,7 @@ from planner.mission import MissionItem
 __all__ = [
     "FLIGHT_STATES",
     "VEHICLE_PHASES",
+    "CheckpointWriter",
     "EventWriter",
     "FlightRecordRow",
     "Store",
@@ -43,16 +45,7 @@ __all__ = [
 ]
 
 FLIGHT_STATES = ("planned", "uploading", "ready", "running", "completed", "aborted", "failed")
-VEHICLE_PHASES = (
-    "waiting",
-    "climbing",
-    "joining",
-    "on_route",
-    "loitering",
-    "link_silent",
-    "arrived",
-    "aborted",
-)
+VEHICLE_PHASES = tuple(state.value for state in VehicleState)
 _MIGRATIONS = Path(__file__).with_name("migrations")
 
 
@@ -208,7 +201,10 @@ class Store:
             for vid, conn in vehicles.items():
                 session.add(
                     FlightVehicleRow(
-                        flight_id=fid, vehicle_id=vid, connection=conn, phase="waiting"
+                        flight_id=fid,
+                        vehicle_id=vid,
+                        connection=conn,
+                        phase=VehicleState.WAITING_TAKEOFF.value,
                     )
                 )
         return fid
@@ -270,6 +266,19 @@ class Store:
             row.version += 1
             row.updated_utc_s = time.time()
             return row.version
+
+    def save_checkpoint(self, flight_id: str, blob: bytes) -> None:
+        """Keep the flight's checkpoint (the newest replaces the one before)."""
+        with Session(self.engine) as session, session.begin():
+            row = _get(session, FlightRow, flight_id, f"flight {flight_id!r}")
+            row.checkpoint = blob
+            row.checkpoint_utc_s = time.time()
+
+    def checkpoint(self, flight_id: str) -> bytes | None:
+        """The flight's last checkpoint (None: never kept)."""
+        with Session(self.engine) as session:
+            row = _get(session, FlightRow, flight_id, f"flight {flight_id!r}")
+            return row.checkpoint
 
     def set_vehicle(
         self,
@@ -401,12 +410,41 @@ class Store:
             )
 
 
-_PHASE_OF = {
-    EventKind.LAUNCH: "climbing",
-    EventKind.ROUTE: "on_route",
-    EventKind.ARRIVED: "arrived",
-    EventKind.ABORT: "aborted",
-}
+class CheckpointWriter:
+    """Keeps a flight's newest checkpoint in the store from a worker thread: the control loop
+    hands it over and goes on; a checkpoint superseded before it was written is skipped."""
+
+    def __init__(self, store: Store, flight_id: str) -> None:
+        self.store = store
+        self.flight_id = flight_id
+        self.written = 0
+        self._latest: bytes | None = None
+        self._closing = False
+        self._wake = asyncio.Event()
+        self._task = asyncio.get_running_loop().create_task(self._run())
+
+    def offer(self, blob: bytes) -> None:
+        self._latest = blob
+        self._wake.set()
+
+    async def _run(self) -> None:
+        while not self._closing:
+            await self._wake.wait()
+            self._wake.clear()
+            await self._flush()
+
+    async def _flush(self) -> None:
+        blob, self._latest = self._latest, None
+        if blob is not None:
+            await asyncio.to_thread(self.store.save_checkpoint, self.flight_id, blob)
+            self.written += 1
+
+    async def close(self) -> None:
+        """Write what is pending, then stop."""
+        self._closing = True
+        self._wake.set()
+        await self._task
+        await self._flush()
 
 
 class EventWriter:
@@ -448,11 +486,11 @@ class EventWriter:
         return self.store.add_events(self.flight_id, kept)
 
     def _follow(self, e: FlightEvent) -> None:
-        """What an event changes in the flight's row: the team time, a vehicle's phase."""
+        """What an event changes in the flight's row: the team time, the flight's state, a
+        vehicle's phase."""
         if e.kind is EventKind.ARRIVAL and e.value is not None:
             self.store.update_flight(self.flight_id, team_time_s=e.value)
-        phase = _PHASE_OF.get(e.kind)
-        if phase is not None and e.vehicle is not None:
-            if e.kind is EventKind.LAUNCH and not e.payload.get("ok", True):
-                return  # still on the ground
-            self.store.set_vehicle(self.flight_id, e.vehicle, phase=phase)
+        if e.kind is EventKind.FLIGHT and "state" in e.payload:
+            self.store.update_flight(self.flight_id, state=str(e.payload["state"]))
+        if e.kind is EventKind.STATE and e.vehicle is not None:
+            self.store.set_vehicle(self.flight_id, e.vehicle, phase=str(e.payload["state"]))

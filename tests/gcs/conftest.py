@@ -1,24 +1,61 @@
-"""Shared helpers for gcs tests: free ports and a hand-driven MAVLink vehicle over TCP/UDP."""
+"""Shared helpers for gcs tests: free ports, a hand-driven MAVLink vehicle over TCP/UDP, the
+paper scenario planned once, the stub simulator started as an operator would, the stores."""
 
 from __future__ import annotations
 
 import asyncio
 import os
 import socket
+import sys
 import uuid
 from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
+import numpy as np
 import pytest
 from pymavlink.dialects.v20 import ardupilotmega as mavlink2
 from sqlalchemy import create_engine, text
 
 from gcs.store.repository import Store
+from planner.plan import World, build_world, plan
+from planner.retime import build_schedule
+from planner.scenario import Scenario, load_scenario
+from planner.schedule import Schedule
 
 PG_ADMIN = "postgresql+psycopg://postgres@127.0.0.1:5432/test"
 
 HOME = (-35.363261, 149.165230, 584.0)
+SCENARIOS = Path(__file__).resolve().parents[2] / "scenarios"
+PAPER = SCENARIOS / "paper_three_uav.yaml"
+
+
+@pytest.fixture(scope="module")
+def paper() -> tuple[Scenario, World, Schedule]:
+    """The paper scenario, its world and its schedule (planned with seed 1)."""
+    scenario = load_scenario(PAPER)
+    world = build_world(scenario)
+    p = plan(scenario, rng=np.random.default_rng(1), world=world)
+    return scenario, world, build_schedule(scenario, p, world=world)
+
+
+async def start_stub(
+    scenario: Path, base: int, truth: Path, *extra: str, speedup: float = 200.0
+) -> asyncio.subprocess.Process:
+    """``python -m sitl_stub --scenario`` as an operator would start it: on its own, homes
+    from the scenario (nose toward the goal), the scenario's airspeeds, default timeouts, one
+    TCP client per port as ArduPilot's SITL serves; ``extra`` options after those."""
+    proc = await asyncio.create_subprocess_exec(
+        sys.executable, "-m", "sitl_stub", "--scenario", str(scenario), "--vehicles", "3",
+        "--tcp-base", str(base), "--speedup", repr(speedup), "--truth", str(truth),
+        "--one-client-per-port", *extra,
+        stdout=asyncio.subprocess.PIPE, stderr=asyncio.subprocess.PIPE,
+    )  # fmt: skip
+    assert proc.stdout is not None
+    async with asyncio.timeout(30):
+        line = await proc.stdout.readline()
+    assert b"ready" in line, line
+    return proc
 
 
 def postgres_schema() -> Iterator[str]:

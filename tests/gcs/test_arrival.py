@@ -9,13 +9,11 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from gcs.coordination.arrival import (
-    ArrivalController,
+from gcs.coordination.arrival import ArrivalController, Decision, SpeedLimits
+from gcs.coordination.routetrack import (
     ArrivalInputError,
-    Decision,
     LoiterSpec,
     RouteTrack,
-    SpeedLimits,
     Wind,
     groundspeed_m_s,
 )

@@ -1,5 +1,6 @@
-"""The coordinator: mission splicing and in-flight re-timing (pure), the pre-launch refusal
-and the rehearsal CLI's input checks. Whole rehearsals are in ``test_rehearsals.py``."""
+"""The flight runner's pieces: mission splicing and in-flight re-timing (pure), the
+pre-launch refusal and the rehearsal CLI's input checks (the team controller is in
+``test_team.py``). Whole rehearsals are in ``test_rehearsals.py``."""
 
 from __future__ import annotations
 
@@ -9,31 +10,22 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from pydantic import TypeAdapter
 
 from gcs.__main__ import main
-from gcs.coordination.coordinator import Coordinator, InfeasibleRequest
 from gcs.coordination.missionclock import MissionClock
+from gcs.coordination.runner import FlightRunner, InfeasibleRequest
 from planner.atmosphere import eas2tas
 from planner.errors import PlannerError
 from planner.mission import MAV_CMD_DO_CHANGE_SPEED, MAV_CMD_NAV_LOITER_TURNS, MAV_CMD_NAV_WAYPOINT
-from planner.plan import World, build_world, plan
+from planner.plan import World
 from planner.popup import PopupOutcome, apply_popup, popup_zones
-from planner.retime import build_schedule, retime_vehicle
-from planner.scenario import Scenario, Threat, load_scenario
+from planner.retime import retime_vehicle
+from planner.scenario import Scenario, load_scenario
 from planner.schedule import Anchor, Schedule
 from planner.schedulefile import path_mission, splice_mission
 from planner.threats import active, build_threats
 
 PAPER = Path(__file__).resolve().parents[2] / "scenarios" / "paper_three_uav.yaml"
-
-
-@pytest.fixture(scope="module")
-def paper() -> tuple[Scenario, World, Schedule]:
-    scenario = load_scenario(PAPER)
-    world = build_world(scenario)
-    p = plan(scenario, rng=np.random.default_rng(1), world=world)
-    return scenario, world, build_schedule(scenario, p, world=world)
 
 
 def _route_waypoints(pm: object) -> list[int]:
@@ -127,7 +119,7 @@ def test_splice_refuses_an_item_that_is_not_a_route_waypoint(
 
 
 async def test_infeasible_request_is_refused_before_launch_naming_time_and_vehicle() -> None:
-    coord = Coordinator(load_scenario(PAPER), MissionClock(), required_arrival_s=5000.0)
+    coord = FlightRunner(load_scenario(PAPER), MissionClock(), required_arrival_s=5000.0)
     with pytest.raises(InfeasibleRequest) as err:
         await coord.prepare()
     text = str(err.value)
@@ -252,24 +244,3 @@ def test_popup_anchor_time_is_when_the_vehicle_reaches_the_splice_point(
         assert first_new.t_start_s == pytest.approx(t_p + ahead_s)
         _, s_then, _ = timed.schedule.vehicle(vid).state_at(t_p + ahead_s)
         assert s_then == pytest.approx(s_m, abs=1e-3)
-
-
-def test_a_threat_added_before_the_start_is_queued_for_its_time_and_not_planned_around() -> None:
-    scenario = load_scenario(PAPER)
-    coord = Coordinator(scenario, MissionClock())
-    box = [[185_600, 203_200], [189_600, 203_200], [189_600, 207_200], [185_600, 207_200]]
-    op1 = TypeAdapter(Threat).validate_python(
-        {"kind": "no_fly", "id": "OP1", "polygon": [{"east_m": e, "north_m": n} for e, n in box]}
-    )
-    coord.add_threat(op1, at_s=2500.0)
-    coord.add_threat(op1.model_copy(update={"id": "OP2"}))  # no time: at the start
-    assert [(t.id, t.appears.at_s if t.appears else None) for t in coord.operator_threats] == [
-        ("OP1", 2500.0),
-        ("OP2", 0.0),
-    ]
-    with pytest.raises(ValueError, match="OP1: a threat with this id is already"):
-        coord.add_threat(op1)
-    # Nothing is planned around them: they appear in flight, as pop-ups do.
-    assert {z.id for z in coord._due_popups(2499.0)} == {"OP2"}
-    assert {z.id for z in coord._due_popups(2500.0)} == {"OP1"}
-    assert all(t.id not in {"OP1", "OP2"} for t in coord.scenario.threats)

@@ -16,7 +16,6 @@ import json
 import math
 import re
 import signal
-import sys
 from pathlib import Path
 from typing import Any
 
@@ -27,7 +26,7 @@ from gcs.coordination.bus import EventBus
 from gcs.rehearsal.rehearse import Abort, RehearsalOptions, passed, rehearse
 from gcs.service.fleet import Fleet, VehicleBusy
 from planner.scenario import load_scenario
-from tests.gcs.conftest import assert_flight_kept, free_udp_port
+from tests.gcs.conftest import assert_flight_kept, free_udp_port, start_stub
 from tests.sitl_stub.conftest import free_port_base, mavproxy_router
 
 pytestmark = pytest.mark.slow  # about 35 s of wall time each
@@ -76,6 +75,13 @@ async def test_paper_rehearsal_holds_the_arrival_time(tmp_path: Path) -> None:
     # the vehicle the pop-up leaves early (UAV3, not re-planned) is the one that loiters
     loiterers = {v["id"] for v in record["vehicles"] if v["loiters"]}
     assert loiterers == {"UAV3"}
+    # The runner's last snapshot: every vehicle arrived, on the team time, the flight over.
+    snap = record["snapshot"]
+    assert snap["state"] == "completed" and "POPUP1" in snap["threats_in_force"]
+    assert snap["team_time_s"] == pytest.approx(record["required_arrival_s"], abs=1e-3)
+    for v in snap["vehicles"]:
+        assert v["state"] == "arrived" and abs(v["error_s"]) <= 1.0, v
+        assert v["link"]["armed"] is not None
     assert math.isfinite(record["wall_s"]) and record["wall_s"] < 180.0
 
 
@@ -237,32 +243,13 @@ def test_blackout_rehearsal_from_the_cli_recovers_and_arrives(
     assert gap is not None and 9.5 <= float(gap.group(1)) <= 13.0, back
 
 
-async def _start_stub(
-    scenario: Path, base: int, truth: Path, speedup: float = 200.0
-) -> asyncio.subprocess.Process:
-    """``python -m sitl_stub --scenario`` as an operator would start it: on its own, homes
-    from the scenario (nose toward the goal), the scenario's airspeeds, default timeouts, one
-    TCP client per port as ArduPilot's SITL serves."""
-    proc = await asyncio.create_subprocess_exec(
-        sys.executable, "-m", "sitl_stub", "--scenario", str(scenario), "--vehicles", "3",
-        "--tcp-base", str(base), "--speedup", repr(speedup), "--truth", str(truth),
-        "--one-client-per-port",
-        stdout=asyncio.subprocess.PIPE, stderr=asyncio.subprocess.PIPE,
-    )  # fmt: skip
-    assert proc.stdout is not None
-    async with asyncio.timeout(30):
-        line = await proc.stdout.readline()
-    assert b"ready" in line, line
-    return proc
-
-
 async def test_connect_rehearsal_flies_separately_started_vehicles_one_behind_mavproxy(
     tmp_path: Path,
 ) -> None:
     base = free_port_base(3)
     udp = free_udp_port()
     truth = tmp_path / "truth.jsonl"
-    proc = await _start_stub(PAPER, base, truth)
+    proc = await start_stub(PAPER, base, truth)
     try:
         async with mavproxy_router(
             f"tcp:127.0.0.1:{base}", f"udpout:127.0.0.1:{udp}", tmp_path, "--streamrate=-1"
@@ -318,7 +305,7 @@ async def test_two_flights_at_once_on_one_fleet_each_to_its_own_time(tmp_path: P
         bases[1] = free_port_base(3)
     truths = [tmp_path / "a.jsonl", tmp_path / "b.jsonl"]
     procs = [
-        await _start_stub(PAPER, b, t, speedup=100.0) for b, t in zip(bases, truths, strict=True)
+        await start_stub(PAPER, b, t, speedup=100.0) for b, t in zip(bases, truths, strict=True)
     ]
     conns = [[f"tcp:127.0.0.1:{b + 10 * i}" for i in range(3)] for b in bases]
     scenario = load_scenario(PAPER)

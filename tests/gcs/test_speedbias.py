@@ -7,7 +7,7 @@ import math
 import numpy as np
 import pytest
 
-from gcs.coordination.arrival import Wind, groundspeed_m_s
+from gcs.coordination.routetrack import Wind, groundspeed_m_s
 from gcs.coordination.speedbias import SpeedBiasEstimator
 
 

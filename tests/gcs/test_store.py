@@ -7,12 +7,24 @@ from __future__ import annotations
 import asyncio
 import math
 from collections.abc import Iterator
+from pathlib import Path
 
 import pytest
+from alembic import command
+from alembic.config import Config
+from sqlalchemy import text
 
 from gcs.coordination.bus import EventBus
 from gcs.coordination.events import EventKind, FlightEvent
-from gcs.store.repository import EventWriter, Store, StoreConflict, StoreError, StoreNotFound
+from gcs.store import repository
+from gcs.store.repository import (
+    CheckpointWriter,
+    EventWriter,
+    Store,
+    StoreConflict,
+    StoreError,
+    StoreNotFound,
+)
 from planner.mission import Waypoint, compile_mission
 
 SCENARIO = "name: demo\nvehicles: []\n"
@@ -51,7 +63,7 @@ def test_flight_state_and_team_time_move_with_a_version(store: Store) -> None:
     assert (f.state, f.version, f.vehicles["UAV1"]) == (
         "planned",
         1,
-        ("waiting", "tcp:127.0.0.1:5760", None),
+        ("waiting_takeoff", "tcp:127.0.0.1:5760", None),
     )
     v2 = store.update_flight(fid, expected_version=1, state="running", team_time_s=5234.1)
     assert v2 == 2 and store.flight(fid).team_time_s == 5234.1
@@ -129,3 +141,64 @@ def test_a_bad_url_or_an_unreachable_server_is_one_clear_error() -> None:
         Store.open("nosuch://x")
     with pytest.raises(StoreError, match="unreachable"):
         Store.open("postgresql+psycopg://postgres@127.0.0.1:1/test?connect_timeout=2")
+
+
+async def test_the_newest_checkpoint_is_kept_and_a_state_event_moves_the_rows(
+    store: Store,
+) -> None:
+    sid = store.save_scenario(SCENARIO, name="demo")
+    fid = store.create_flight(sid, {"UAV1": "tcp:127.0.0.1:5760"})
+    assert store.checkpoint(fid) is None
+    writer = CheckpointWriter(store, fid)
+    for k in range(50):  # offered faster than written: the last one wins
+        writer.offer(bytes([k]) * 100_000)
+    await writer.close()
+    assert store.checkpoint(fid) == bytes([49]) * 100_000
+    assert 1 <= writer.written <= 50
+    bus = EventBus()
+    events = bus.subscribe(after_seq=0)
+    bus.publish(
+        FlightEvent(
+            1.7e9, 0.0, None, EventKind.FLIGHT, "flight running", payload={"state": "running"}
+        )
+    )
+    bus.publish(
+        FlightEvent(
+            1.7e9, 1.0, "UAV1", EventKind.STATE, "climbing -> on_route",
+            payload={"state": "on_route", "was": "climbing"},
+        )
+    )  # fmt: skip
+    events.close()
+    await EventWriter(store, fid).run(events)
+    f = store.flight(fid)
+    assert f.state == "running" and f.vehicles["UAV1"][0] == "on_route"
+    with pytest.raises(StoreNotFound):
+        store.checkpoint("nope")
+
+
+def test_a_database_at_the_first_revision_is_brought_up_to_date(tmp_path: Path) -> None:
+    """A file made by the first schema keeps its rows and gains the checkpoint."""
+    url = f"sqlite:///{tmp_path / 'old.db'}"
+    old = Store.open(url, migrate=False)
+    cfg = Config()
+    cfg.set_main_option("script_location", str(Path(repository.__file__).with_name("migrations")))
+    with old.engine.begin() as connection:
+        cfg.attributes["connection"] = connection
+        command.upgrade(cfg, "0001")
+    with old.engine.begin() as connection:
+        connection.execute(
+            text("INSERT INTO scenarios VALUES ('s1', 'demo', 'application/yaml', 'x', 0.0);")
+        )
+        connection.execute(
+            text("INSERT INTO flights (id, scenario_id, state, version, created_utc_s, "
+                 "updated_utc_s) VALUES ('f1', 's1', 'running', 3, 0.0, 0.0)")
+        )  # fmt: skip
+    old.close()
+    store = Store.open(url)
+    try:
+        assert store.flight("f1").state == "running"
+        assert store.checkpoint("f1") is None
+        store.save_checkpoint("f1", b"kept")
+        assert store.checkpoint("f1") == b"kept"
+    finally:
+        store.close()

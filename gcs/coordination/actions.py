@@ -1,0 +1,253 @@
+"""What goes into the team controller and what comes out of it.
+
+Inputs are observations (a position fix, a tick of the mission clock, a link going silent)
+and the outcomes of actions the runner carried out (a launch, a speed command, an upload, a
+planning job). Actions are what the runner is asked to do on the vehicles, plus
+:class:`Report` (an event to publish) and :class:`Compute` (pure planning work to run off the
+control loop; its result comes back as :class:`Computed`). Every type here is plain data.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from typing import Any, Literal
+
+import numpy as np
+
+from gcs.coordination.events import EventKind
+from planner.plan import Method, World
+from planner.popup import apply_popup
+from planner.retime import retime_vehicle
+from planner.schedule import Adjustment, Anchor, Schedule, VehicleSchedule
+from planner.schedulefile import PathMission
+from planner.threats import ThreatZone
+
+AbortMode = Literal["rtl", "loiter"]
+
+# -- inputs ---------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class Tick:
+    """The mission clock moved on: launches, pop-ups and the overrun are checked."""
+
+
+@dataclass(frozen=True)
+class Fix:
+    """A position report of a vehicle, with what it says of its speeds and the wind."""
+
+    vehicle_id: str
+    utc_s: float
+    """When the position was taken, on the team clock."""
+    lat_deg: float
+    lon_deg: float
+    alt_amsl_m: float | None = None
+    airspeed_m_s: float | None = None
+    """What the autopilot reports (VFR_HUD: equivalent airspeed)."""
+    groundspeed_m_s: float | None = None
+    heading_deg: float | None = None
+    ve_m_s: float | None = None
+    vn_m_s: float | None = None
+    climb_m_s: float | None = None
+    mission_seq: int | None = None
+    wind_speed_m_s: float | None = None
+    wind_from_deg: float | None = None
+    airspeed_fresh: bool = True
+    """The airspeed was reported at the moment of the fix (a stale one teaches no bias)."""
+
+
+@dataclass(frozen=True)
+class LinkSilent:
+    vehicle_id: str
+
+
+@dataclass(frozen=True)
+class LinkBack:
+    vehicle_id: str
+
+
+@dataclass(frozen=True)
+class Launched:
+    """The outcome of :class:`Launch` (``error`` None: armed and in AUTO)."""
+
+    vehicle_id: str
+    error: str | None = None
+
+
+@dataclass(frozen=True)
+class SpeedCommanded:
+    """The outcome of :class:`CommandSpeed`."""
+
+    vehicle_id: str
+    airspeed_m_s: float
+    reason: str
+    decided_s: float
+    error: str | None = None
+
+
+@dataclass(frozen=True)
+class Installed:
+    """The outcome of :class:`Upload` (``skipped``: the vehicle had passed the splice
+    waypoint, so it was not sent)."""
+
+    upload: Upload
+    error: str | None = None
+    skipped: bool = False
+
+
+@dataclass(frozen=True)
+class Computed:
+    """The outcome of :class:`Compute`: the job's result, or the planner error it raised."""
+
+    job: LoiterJob | PopupJob
+    result: Any = None
+    error: Exception | None = None
+    wall_s: float = 0.0
+
+
+@dataclass(frozen=True)
+class PlanningLead:
+    """How far ahead (mission s) a changed mission may start: the runner's measure of
+    planning plus upload time at the clock's rate."""
+
+    lead_s: float
+
+
+# -- actions --------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class Report:
+    """An event to publish (times in mission s)."""
+
+    kind: EventKind
+    reason: str
+    vehicle: str | None = None
+    strategy: str | None = None
+    value: float | None = None
+    t_s: float | None = None
+    payload: Mapping[str, Any] = field(default_factory=dict)
+
+
+@dataclass(frozen=True)
+class Launch:
+    """Arm the vehicle and put it in AUTO."""
+
+    vehicle_id: str
+
+
+@dataclass(frozen=True)
+class CommandSpeed:
+    vehicle_id: str
+    airspeed_m_s: float
+    reason: str
+    decided_s: float
+
+
+@dataclass(frozen=True)
+class Upload:
+    """Upload ``mission`` (the vehicle's new ``schedule``); in flight, only if the vehicle
+    has not passed item ``keep_seq`` (the splice waypoint)."""
+
+    vehicle_id: str
+    mission: PathMission
+    schedule: VehicleSchedule
+    keep_seq: int | None
+    what: str
+    in_flight: bool
+    adjustments: tuple[Adjustment, ...] = ()
+    """Said once the mission is on board."""
+    decided_s: float = 0.0
+
+
+@dataclass(frozen=True)
+class SetMode:
+    vehicle_id: str
+    mode: str
+    """The flight mode by name (``RTL``, ``LOITER``)."""
+
+
+@dataclass(frozen=True)
+class Stop:
+    """The flight is over for the controller (every vehicle done, or it overran)."""
+
+    reason: str
+
+
+@dataclass(frozen=True)
+class LoiterJob:
+    """Re-time one vehicle from a splice waypoint with loiter turns (pure; may take a while)."""
+
+    vehicle_id: str
+    schedule: Schedule
+    keep_seq: int
+    now_s: float
+    s_m: float
+    speed_m_s: float
+    target_s: float
+    threats: tuple[ThreatZone, ...]
+    loiter_margin_m_s: float
+    decided_s: float
+
+    def run(self) -> tuple[VehicleSchedule, list[Adjustment]]:
+        vs, adjustments = retime_vehicle(
+            self.schedule,
+            self.vehicle_id,
+            now_s=self.now_s,
+            s_m=self.s_m,
+            speed_m_s=self.speed_m_s,
+            target_s=self.target_s,
+            threats=list(self.threats),
+            loiter_margin_m_s=self.loiter_margin_m_s,
+        )
+        return vs, list(adjustments)
+
+
+@dataclass(frozen=True)
+class PopupJob:
+    """Re-plan the team around a threat from waypoints ``lead_s`` ahead (pure; slow)."""
+
+    zone: ThreatZone
+    schedule: Schedule
+    world: World
+    threats: tuple[ThreatZone, ...]
+    anchors: Mapping[str, Anchor]
+    keeps: Mapping[str, int | None]
+    method: Method
+    rng: np.random.Generator
+    loiter_margin_m_s: float
+    decided_s: float
+    lead_s: float
+
+    def run(self) -> Any:
+        return apply_popup(
+            self.schedule,
+            self.zone,
+            at_s=self.decided_s + self.lead_s,
+            world=self.world,
+            threats=list(self.threats),
+            method=self.method,
+            rng=self.rng,
+            anchors=dict(self.anchors),
+            loiter_margin_m_s=self.loiter_margin_m_s,
+        )
+
+
+@dataclass(frozen=True)
+class Compute:
+    job: LoiterJob | PopupJob
+
+
+Input = (
+    Tick
+    | Fix
+    | LinkSilent
+    | LinkBack
+    | Launched
+    | SpeedCommanded
+    | Installed
+    | Computed
+    | PlanningLead
+)
+Action = Report | Launch | CommandSpeed | Upload | SetMode | Stop | Compute

@@ -1,0 +1,56 @@
+"""The knobs of a flight's closed loop."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from planner.plan import Method
+
+__all__ = ["FlightConfig"]
+
+
+@dataclass(frozen=True)
+class FlightConfig:
+    """Knobs of the closed loop (mission seconds unless named otherwise)."""
+
+    tolerance_s: float = 0.5
+    """An ETA within this of the target needs no loiter and no new team time."""
+    loiter_margin_m_s: float = 2.0
+    """Loiter turns leave the speed this far above the minimum (room to slow down after)."""
+    late_margin_s: float = 2.0
+    """A late vehicle moves the team time to its earliest arrival plus this."""
+    min_lead_s: float = 60.0
+    """Mission changes start at a waypoint at least this far ahead (more at high clock rates:
+    the planning and upload wall time scaled by the rate)."""
+    loiter_min_time_left_s: float = 300.0
+    """No loiter is inserted closer than this to the arrival (the speed trims the rest)."""
+    loiter_hold_off_s: float = 120.0
+    """At most one loiter insertion per vehicle this often."""
+    speed_reserve_m_s: float = 1.0
+    """Farther than ``loiter_min_time_left_s`` from the arrival, a vehicle whose required
+    airspeed is less than this above its minimum gets loiter turns as if it were early: its
+    last minutes keep room to slow down (a pop-up re-plan, timed in still air, can leave it
+    at the minimum in wind)."""
+    arrival_radius_m: float = 1000.0
+    """Goal passages are looked for within this distance of the goal."""
+    link_silence_s: float = 3.0
+    """A vehicle silent this long (mission s) is reported; its mission keeps it flying."""
+    link_silence_wall_s: float = 0.025
+    """...and at least this long in wall time: at 200x, 3 s of mission is 15 ms, less than a
+    busy two-core machine's scheduling jitter (25 ms wall is 5 s of mission at 200x)."""
+    runout_m: float = 300.0
+    """A last waypoint this far past the goal, so the aircraft flies through the goal."""
+    waypoint_spacing_m: float = 5000.0
+    """Long legs are split into waypoints this far apart: a mission change splices in at a
+    waypoint ahead, and the nearest one should not be half an hour away."""
+    off_route_m: float = 500.0
+    """A vehicle this far from its route is still joining it (after the climb-out, which
+    heads wherever the aircraft was pointing): its ETA along the route runs late until it is
+    on it, so it does not move the team time meanwhile (it is commanded its top speed)."""
+    final_m: float = 150.0
+    """No speed decisions closer than this to the goal (the autopilot could not act)."""
+    method: Method = "aco"
+    seed: int = 0
+    command_retries: int = 8
+    overrun_s: float = 900.0
+    """Give up this long after the latest target if a vehicle has not arrived."""

@@ -1,0 +1,183 @@
+"""One vehicle of a team in flight, as the team controller sees it (no link, no clock).
+
+A :class:`Member` holds the vehicle's schedule, the mission it flies, its route track and what
+was last seen of it (mission times are seconds since the mission start; UTC fields are the
+team clock's). :class:`VehicleState` is what an operator is shown.
+"""
+
+from __future__ import annotations
+
+import enum
+import math
+from dataclasses import dataclass, field
+from typing import Any, Literal
+
+import numpy as np
+
+from gcs.coordination.arrival import ArrivalController, Decision, SpeedLimits
+from gcs.coordination.routetrack import LoiterSpec, RouteTrack
+from gcs.coordination.speedbias import SpeedBiasEstimator
+from gcs.coordination.tracks import TruthSample
+from planner.mission import MAV_CMD_NAV_LOITER_TURNS
+from planner.schedule import VehicleSchedule
+from planner.schedulefile import PathMission
+
+__all__ = [
+    "FIRST_ROUTE_SEQ",
+    "Member",
+    "Phase",
+    "VehicleState",
+    "path_en",
+    "route_track",
+]
+
+Phase = Literal["ground", "takeoff", "route", "arrived", "aborted"]
+"""Where a vehicle is in its mission (the flight record's per-vehicle ``state``)."""
+DONE: frozenset[str] = frozenset({"arrived", "aborted"})
+FIRST_ROUTE_SEQ = 2
+"""Item 0 is home, item 1 the takeoff; the route starts at item 2."""
+
+
+class VehicleState(enum.StrEnum):
+    """What an operator is shown for a vehicle (finer than its :data:`Phase`)."""
+
+    WAITING_TAKEOFF = "waiting_takeoff"
+    CLIMBING = "climbing"
+    JOINING = "joining"
+    """Climbed out, but farther than ``off_route_m`` from its route."""
+    ON_ROUTE = "on_route"
+    LOITERING = "loitering"
+    LINK_SILENT = "link_silent"
+    """In the air with no position report for longer than the silence threshold."""
+    ARRIVED = "arrived"
+    ABORTED = "aborted"
+
+
+@dataclass
+class Member:
+    """One vehicle of the team in flight."""
+
+    vehicle_id: str
+    limits: SpeedLimits
+    offset_s: float
+    """Its slot: the team arrival time plus this."""
+    schedule: VehicleSchedule
+    mission: PathMission
+    track: RouteTrack
+    controller: ArrivalController
+    target_s: float
+    takeoff_s: float
+    phase: Phase = "ground"
+    launched_s: float | None = None
+    """Mission time it was armed and put in AUTO."""
+    level_m_s: float | None = None
+    """The airspeed it flies (commanded, or set by a DO_CHANGE_SPEED item it passed)."""
+    s_m: float | None = None
+    cross_track_m: float = 0.0
+    groundspeed_m_s: float = 0.0
+    airspeed_m_s: float | None = None
+    east_m: float | None = None
+    north_m: float | None = None
+    alt_amsl_m: float | None = None
+    heading_deg: float | None = None
+    joining: bool = False
+    """Off its route by more than ``off_route_m`` when last late (said once per episode)."""
+    link_silent: bool = False
+    last_seq: int | None = None
+    next_decision_s: float = -math.inf
+    busy_command: bool = False
+    busy_mission: bool = False
+    last_loiter_s: float = -math.inf
+    arrival_s: float | None = None
+    """Mission time it passed its goal (from its own telemetry)."""
+    near_goal: list[TruthSample] = field(default_factory=list)
+    goal_en_m: tuple[float, float] = (0.0, 0.0)
+    last_fix_s: float | None = None
+    last_decision: Decision | None = None
+    track_log: list[list[float]] = field(default_factory=list)
+    """``[utc_s, east_m, north_m, alt_m, airspeed_m_s, groundspeed_m_s]`` every 2 s."""
+    commanded: list[list[Any]] = field(default_factory=list)
+    planned_paths: list[dict[str, Any]] = field(default_factory=list)
+    loiter_log: list[dict[str, Any]] = field(default_factory=list)
+    bias: SpeedBiasEstimator = field(default_factory=SpeedBiasEstimator)
+    """What the aircraft really flies for a commanded airspeed, learnt from its fixes."""
+    state: VehicleState = VehicleState.WAITING_TAKEOFF
+    """The last state said (see :meth:`current_state`)."""
+
+    def tas_per_eas(self, s_m: float) -> float:
+        """True airspeed flown per unit commanded from ``s_m`` on: the route's atmosphere
+        (the autopilot commands equivalent airspeed) times the scale learnt in flight."""
+        return self.schedule.tas_per_eas(s_m) * self.bias.scale
+
+    @property
+    def done(self) -> bool:
+        return self.phase in DONE
+
+    def in_loiter(self) -> bool:
+        seq = self.last_seq
+        if seq is None:
+            return False
+        items = self.mission.items
+        return items[min(seq, len(items) - 1)].command == MAV_CMD_NAV_LOITER_TURNS
+
+    def loiters_done(self) -> int:
+        seq = self.last_seq or 0
+        return sum(
+            1
+            for k, it in enumerate(self.mission.items)
+            if it.command == MAV_CMD_NAV_LOITER_TURNS and k < seq
+        )
+
+    def loiter_turns_left(self) -> float:
+        """Loiter turns still ahead in its mission."""
+        seq = self.last_seq or 0
+        return float(
+            sum(
+                it.param1
+                for k, it in enumerate(self.mission.items)
+                if it.command == MAV_CMD_NAV_LOITER_TURNS and k >= seq
+            )
+        )
+
+    def current_state(self, off_route_m: float) -> VehicleState:
+        if self.phase == "arrived":
+            return VehicleState.ARRIVED
+        if self.phase == "aborted":
+            return VehicleState.ABORTED
+        if self.phase == "ground":
+            return VehicleState.WAITING_TAKEOFF
+        if self.link_silent:
+            return VehicleState.LINK_SILENT
+        if self.phase == "takeoff":
+            return VehicleState.CLIMBING
+        if self.in_loiter():
+            return VehicleState.LOITERING
+        if self.cross_track_m > off_route_m:
+            return VehicleState.JOINING
+        return VehicleState.ON_ROUTE
+
+
+def route_track(vs: VehicleSchedule) -> RouteTrack:
+    loiters = [
+        LoiterSpec(
+            lo.s_m,
+            lo.centre_east_m,
+            lo.centre_north_m,
+            lo.radius_m,
+            lo.turns,
+            lo.clockwise,
+            lo.detour_m,
+        )
+        for lo in sorted(vs.loiters, key=lambda x: x.s_m)
+    ]
+    return RouteTrack(vs.path, loiters)
+
+
+def path_en(vs: VehicleSchedule, step_m: float = 500.0) -> list[list[float]]:
+    """The planned path as ``[east_m, north_m]`` points ``step_m`` apart (for drawing)."""
+    n = max(2, int(vs.path.length_m / step_m) + 1)
+    out = []
+    for s in np.linspace(0.0, vs.path.length_m, n):
+        p = vs.path.pose_at(float(s))
+        out.append([round(p.east_m, 1), round(p.north_m, 1)])
+    return out

@@ -1,0 +1,437 @@
+"""Mission changes in flight: loiter turns for an early vehicle and re-plans around pop-up
+threats, each handed out as a planning job and installed by splicing the new mission in after
+a waypoint far enough ahead; and the threats of the mission (the operator's included).
+
+:class:`MissionChanges` is the part of :class:`~gcs.coordination.team.TeamController` that
+does this; it holds no state of its own.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from dataclasses import replace
+
+import numpy as np
+
+from gcs.coordination import actions as act
+from gcs.coordination.arrival import Decision
+from gcs.coordination.config import FlightConfig
+from gcs.coordination.events import EventKind
+from gcs.coordination.member import FIRST_ROUTE_SEQ, Member, path_en, route_track
+from gcs.coordination.routetrack import Wind
+from planner.errors import InfeasibleError
+from planner.mission import MAV_CMD_NAV_WAYPOINT
+from planner.plan import World
+from planner.popup import PopupOutcome, popup_zones
+from planner.scenario import Appearance, Scenario, Threat
+from planner.schedule import Adjustment, Anchor, Schedule, VehicleSchedule
+from planner.schedulefile import PathMission, path_mission, splice_mission
+from planner.threats import ThreatZone, active, build_threats
+
+__all__ = ["MissionChanges"]
+
+
+class MissionChanges:
+    """Loiter insertion, pop-up re-plans, installs and the mission's threats."""
+
+    scenario: Scenario
+    schedule: Schedule
+    world: World
+    config: FlightConfig
+    rng: np.random.Generator
+    members: dict[str, Member]
+    team_ref_s: float | None
+    version: int
+    lead_s: float
+    extra_threats: list[Threat]
+    removed_threats: set[str]
+    popups_done: set[str]
+    popups_running: set[str]
+    pending: dict[str, act.Upload]
+
+    # -- loiter turns --------------------------------------------------------------------------
+
+    def _keep_seq(self, m: Member, lead_m: float) -> int | None:
+        """The first route waypoint at least ``lead_m`` ahead of the vehicle."""
+        s_now = m.s_m or 0.0
+        seq = max(m.last_seq or FIRST_ROUTE_SEQ, FIRST_ROUTE_SEQ)
+        for k in range(seq, len(m.mission.items)):
+            it = m.mission.items[k]
+            s = m.mission.item_s_m[k]
+            if it.command == MAV_CMD_NAV_WAYPOINT and s is not None and s >= s_now + lead_m:
+                return k
+        return None
+
+    def _speed_now(self, m: Member) -> float:
+        return float(m.level_m_s or self.scenario.vehicle(m.vehicle_id).cruise_m_s)
+
+    def _loiter(
+        self, m: Member, d: Decision, t: float, s: float, wind: Wind, out: list[act.Action]
+    ) -> None:
+        gs = max(m.groundspeed_m_s, 10.0)
+        keep = self._keep_seq(m, gs * self.lead_s)
+        if keep is None:
+            return
+        s_k = m.mission.item_s_m[keep]
+        assert s_k is not None
+        t_k = t + (s_k - s) / gs
+        # The planner's loiter arithmetic (eq. 8) is in still air at the ISA true airspeed;
+        # give it the surplus the wind- and bias-aware ETA found, as a still-air target from
+        # the splice waypoint. The new mission replaces the loiters after that waypoint, so
+        # their time is kept too.
+        v_min = m.limits.airspeed_min_m_s
+        tas_min = v_min * m.tas_per_eas(s_k)
+        surplus = m.target_s - d.eta_max_s
+        track = m.track
+        before = sum(1 for lo in track.loiters if lo.s_m < s_k)
+        held_s = track.time_to_go_s(s_k, tas_min, wind, before) - track.time_to_go_s(
+            s_k, tas_min, wind, len(track.loiters)
+        )
+        planner_tas_min = v_min * m.schedule.tas_per_eas(s_k)
+        target_still_air = t_k + (track.length_m - s_k) / planner_tas_min + held_s + surplus
+        m.busy_mission = True
+        job = act.LoiterJob(
+            m.vehicle_id,
+            self.current_schedule(),
+            keep,
+            t_k,
+            s_k,
+            self._speed_now(m),
+            target_still_air,
+            tuple(self.in_force(t)),
+            self.config.loiter_margin_m_s,
+            t,
+        )
+        out.append(act.Compute(job))
+
+    def _loiter_computed(self, job: act.LoiterJob, r: act.Computed, out: list[act.Action]) -> None:
+        m = self.members[job.vehicle_id]
+        t = job.decided_s
+        if r.error is not None:
+            m.busy_mission = False
+            out.append(
+                act.Report(EventKind.LOITER, f"no loiter possible: {r.error}", m.vehicle_id, t_s=t)
+            )
+            return
+        vs, adjustments = r.result
+        if m.done or not vs.loiters or all(lo.s_m < job.s_m for lo in vs.loiters):
+            m.busy_mission = False
+            return
+        out.append(
+            act.Upload(
+                m.vehicle_id,
+                self._spliced(m, vs, job.keep_seq),
+                vs,
+                job.keep_seq,
+                "loiter inserted",
+                True,
+                tuple(adjustments),
+                t,
+            )
+        )
+
+    # -- missions -------------------------------------------------------------------------------
+
+    def _path_mission(self, vs: VehicleSchedule) -> PathMission:
+        return path_mission(
+            self.schedule,
+            vs,
+            self.world.terrain,
+            runout_m=self.config.runout_m,
+            max_spacing_m=self.config.waypoint_spacing_m,
+        )
+
+    def _spliced(self, m: Member, vs: VehicleSchedule, keep: int | None) -> PathMission:
+        new = self._path_mission(vs)
+        return new if keep is None else splice_mission(m.mission, keep, new)
+
+    def _installed(self, r: act.Installed, now: float, out: list[act.Action]) -> None:
+        up = r.upload
+        m = self.members[up.vehicle_id]
+        m.busy_mission = False
+        if self.pending.get(up.vehicle_id) is up:
+            del self.pending[up.vehicle_id]
+        if r.skipped:
+            out.append(
+                act.Report(
+                    EventKind.UPLOAD,
+                    f"{up.what}: the vehicle passed the splice waypoint; not installed",
+                    m.vehicle_id,
+                )
+            )
+            return
+        if r.error is not None:
+            kind = EventKind.LOITER if up.what == "loiter inserted" else EventKind.UPLOAD
+            flying = "; flying on" if up.in_flight else ""
+            out.append(
+                act.Report(
+                    kind, f"{up.what}: upload failed ({r.error}){flying}", m.vehicle_id,
+                    t_s=up.decided_s if up.in_flight else None,
+                )
+            )  # fmt: skip
+            return
+        out.append(
+            act.Report(
+                EventKind.UPLOAD,
+                f"{up.what}: {len(up.mission.items)} items",
+                m.vehicle_id,
+                payload={
+                    "what": up.what,
+                    "items": [dataclasses.asdict(it) for it in up.mission.items],
+                },
+            )
+        )
+        if up.keep_seq is None and not up.in_flight:
+            return  # the initial mission: nothing changes
+        self._adopt(m, up, now)
+        for a in up.adjustments:
+            out.append(self._adjustment(a, up.decided_s))
+
+    def _adopt(self, m: Member, up: act.Upload, now: float) -> None:
+        """The vehicle flies ``up``'s mission now."""
+        vs = up.schedule
+        m.mission = up.mission
+        m.schedule = vs
+        m.track = route_track(vs)
+        m.next_decision_s = -math.inf
+        keep = up.keep_seq
+        s_k = 0.0 if keep is None else (m.mission.item_s_m[keep] or 0.0)
+        m.loiter_log = [x for x in m.loiter_log if x["s_m"] < s_k]
+        for lo in vs.loiters:
+            if lo.s_m >= s_k:
+                m.loiter_log.append(
+                    {
+                        "s_m": lo.s_m,
+                        "centre_east_m": lo.centre_east_m,
+                        "centre_north_m": lo.centre_north_m,
+                        "radius_m": lo.radius_m,
+                        "turns": lo.turns,
+                        "buffer_id": lo.buffer_id,
+                        "t_s": now,
+                    }
+                )
+        self.schedule = replace(
+            self.schedule,
+            vehicles=tuple(
+                vs if x.vehicle_id == m.vehicle_id else x for x in self.schedule.vehicles
+            ),
+        )
+
+    @staticmethod
+    def _adjustment(a: Adjustment, t: float) -> act.Report:
+        if a.strategy == "loiter":
+            return act.Report(EventKind.LOITER, a.reason, a.vehicle, "loiter", a.value, t_s=t)
+        if a.strategy == "takeoff_delay":
+            return act.Report(
+                EventKind.TAKEOFF, a.reason, a.vehicle, "takeoff_delay", a.value, t_s=t
+            )
+        return act.Report(EventKind.PLAN, a.reason, a.vehicle, None, a.value, t_s=t)
+
+    def current_schedule(self) -> Schedule:
+        """The schedule with today's targets as its arrival times."""
+        vehicles = tuple(
+            replace(
+                self.members[vs.vehicle_id].schedule, arrival_s=self.members[vs.vehicle_id].target_s
+            )
+            for vs in self.schedule.vehicles
+        )
+        return replace(self.schedule, vehicles=vehicles, required_arrival_s=self.team_ref_s)
+
+    # -- threats --------------------------------------------------------------------------------
+
+    @property
+    def operator_threats(self) -> tuple[Threat, ...]:
+        """The threats added in flight (:meth:`add_threat`), with the time they appear."""
+        return tuple(t for t in self.extra_threats if t.id not in self.removed_threats)
+
+    def add_threat(self, threat: Threat, now_s: float, at_s: float | None = None) -> None:
+        """A threat for the mission: re-planned around when it appears.
+
+        It appears at mission time ``at_s`` if given, else when its own ``appears`` says (a
+        mission time, or a delay after a vehicle's takeoff), else now; a time already past is
+        now. Before the mission starts (``now_s`` 0) it is queued. Until it appears no plan
+        avoids it.
+
+        Raises
+        ------
+        ValueError
+            A threat with this id is already in the mission.
+        """
+        if threat.id in {t.id for t in (*self.scenario.threats, *self.extra_threats)}:
+            raise ValueError(f"threat {threat.id}: a threat with this id is already in the mission")
+        now = max(0.0, now_s)
+        if at_s is not None or threat.appears is None:
+            when = now if at_s is None else max(now, at_s)
+            threat = threat.model_copy(update={"appears": Appearance(at_s=when)})
+        elif threat.appears.at_s is not None and threat.appears.at_s < now:
+            threat = threat.model_copy(update={"appears": Appearance(at_s=now)})
+        self.extra_threats.append(threat)
+
+    def remove_threat(self, threat_id: str, now_s: float) -> list[act.Action]:
+        """Lift a threat: a queued one never appears; one in force no longer constrains a
+        re-plan (routes already flown around it are kept).
+
+        Raises
+        ------
+        KeyError
+            No threat with this id in the mission (named).
+        """
+        ids = {t.id for t in (*self.scenario.threats, *self.extra_threats)}
+        if threat_id not in ids or threat_id in self.removed_threats:
+            raise KeyError(f"no threat {threat_id!r} in the mission")
+        self.removed_threats.add(threat_id)
+        was = "in force" if threat_id in self.popups_done else "queued"
+        return [act.Report(EventKind.POPUP, f"threat {threat_id} removed ({was})", t_s=now_s)]
+
+    def _takeoffs_s(self) -> dict[str, float]:
+        """Mission time of each launch so far (pop-ups may be timed from them)."""
+        return {
+            m.vehicle_id: m.launched_s for m in self.members.values() if m.launched_s is not None
+        }
+
+    def zones(self) -> list[ThreatZone]:
+        """Every threat of the mission, the operator's included, timed from the launches."""
+        threats = [
+            t
+            for t in (*self.scenario.threats, *self.extra_threats)
+            if t.id not in self.removed_threats
+        ]
+        scenario = self.scenario.model_copy(update={"threats": threats})
+        return build_threats(scenario, self._takeoffs_s())
+
+    def in_force(self, t: float) -> list[ThreatZone]:
+        return list(active(self.zones(), t))
+
+    def _due_popups(self, now: float) -> list[ThreatZone]:
+        out = []
+        for z in popup_zones(self.zones()):
+            appears_s = math.inf if z.appears_at_s is None else z.appears_at_s
+            if z.id not in self.popups_done and appears_s <= now:
+                out.append(z)
+        return out
+
+    def _popup(self, zone: ThreatZone, t: float, lead: float, out: list[act.Action]) -> None:
+        """Hand out the re-plan around a new threat from waypoints ``lead`` s ahead."""
+        at_s = t + lead
+        anchors: dict[str, Anchor] = {}
+        keeps: dict[str, int | None] = {}
+        for m in self.members.values():
+            if m.done:
+                continue
+            if m.phase == "ground" and m.takeoff_s > at_s:
+                keeps[m.vehicle_id] = None
+                continue
+            gs = max(m.groundspeed_m_s, 10.0)
+            keep = self._keep_seq(m, gs * lead) if m.phase == "route" else None
+            if keep is None:
+                out.append(
+                    act.Report(
+                        EventKind.POPUP,
+                        f"{zone.id}: no waypoint far enough ahead to re-plan from",
+                        m.vehicle_id,
+                    )
+                )
+                continue
+            s_k = m.mission.item_s_m[keep]
+            assert s_k is not None
+            # The vehicle reaches the splice waypoint at its own time, not at t + lead: the
+            # waypoint is the first one at least that far ahead and may be much farther.
+            t_k = t + (s_k - (m.s_m or 0.0)) / gs
+            anchors[m.vehicle_id] = Anchor(s_k, self._speed_now(m), t_k)
+            keeps[m.vehicle_id] = keep
+        threats = self.in_force(t)
+        if zone.id not in {z.id for z in threats}:
+            threats.append(zone)
+        world = replace(self.world, threats=tuple(threats))
+        out.append(
+            act.Report(
+                EventKind.POPUP,
+                f"threat {zone.id} appears; re-planning from {lead:.0f} s ahead",
+                t_s=t,
+            )
+        )
+        self.popups_running.add(zone.id)
+        job = act.PopupJob(
+            zone,
+            self.current_schedule(),
+            world,
+            tuple(threats),
+            anchors,
+            keeps,
+            self.config.method,
+            self.rng,
+            self.config.loiter_margin_m_s,
+            t,
+            lead,
+        )
+        out.append(act.Compute(job))
+
+    def _popup_computed(self, job: act.PopupJob, r: act.Computed, out: list[act.Action]) -> None:
+        zone, t, lead = job.zone, job.decided_s, job.lead_s
+        err = r.error
+        if err is not None:
+            self.popups_running.discard(zone.id)
+            retry = (
+                isinstance(err, InfeasibleError)
+                and "inside forbidden zone" in str(err)
+                and lead > self.config.min_lead_s
+            )
+            if not retry:
+                out.append(
+                    act.Report(EventKind.POPUP, f"re-plan around {zone.id} failed: {err}", t_s=t)
+                )
+                return
+            lead = max(self.config.min_lead_s, lead / 2.0)
+            out.append(
+                act.Report(EventKind.POPUP, f"{err}; re-planning from {lead:.0f} s ahead", t_s=t)
+            )
+            self._popup(zone, t, lead, out)
+            return
+        self.popups_running.discard(zone.id)
+        outcome: PopupOutcome = r.result
+        new_ref = outcome.schedule.required_arrival_s
+        for ev in outcome.events:
+            # The re-timed team arrival is said with its time (the store keeps it).
+            value = new_ref if ev.kind == EventKind.ARRIVAL else None
+            out.append(act.Report(EventKind(ev.kind), ev.text, value=value, t_s=t))
+        if (
+            new_ref is not None
+            and self.team_ref_s is not None
+            and abs(new_ref - self.team_ref_s) > 1e-3
+        ):
+            self.team_ref_s = new_ref
+            self.version += 1
+        for a in outcome.adjustments:
+            out.append(self._adjustment(a, t))
+        for m in self.members.values():
+            vs = outcome.schedule.vehicle(m.vehicle_id)
+            if new_ref is not None:
+                m.target_s = new_ref + m.offset_s
+            m.next_decision_s = -math.inf
+            if vs is m.schedule or m.vehicle_id not in job.keeps or m.done:
+                continue
+            if m.vehicle_id in outcome.affected:
+                m.planned_paths.append({"label": f"after {zone.id}", "t_s": t, "en_m": path_en(vs)})
+            if m.phase == "ground":
+                m.takeoff_s = vs.takeoff_s
+            keep = job.keeps[m.vehicle_id]
+            m.busy_mission = True
+            out.append(
+                act.Upload(
+                    m.vehicle_id,
+                    self._spliced(m, vs, keep),
+                    vs,
+                    keep,
+                    f"after {zone.id}",
+                    m.phase != "ground",
+                    (),
+                    t,
+                )
+            )
+
+    def _computed(self, r: act.Computed, now: float, out: list[act.Action]) -> None:
+        if isinstance(r.job, act.LoiterJob):
+            self._loiter_computed(r.job, r, out)
+        else:
+            self._popup_computed(r.job, r, out)

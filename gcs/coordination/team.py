@@ -1,0 +1,694 @@
+"""The team controller: one flight's arrival-time policy, with no I/O.
+
+It is driven by :meth:`TeamController.handle` with an input and the mission time now (seconds
+since the mission start, from whatever clock the caller keeps) and returns the actions to carry
+out (:mod:`gcs.coordination.actions`). Operator requests are methods: :meth:`add_threat`,
+:meth:`remove_threat`, :meth:`move_team_time`, :meth:`abort`. Nothing here reads a clock,
+touches a socket or waits; planning work is handed out as :class:`~actions.Compute` jobs and
+comes back as :class:`~actions.Computed`.
+
+The policy: launches at the takeoff times (the takeoff strategy); closed-loop speed control on
+the remaining route (eqs. 6-7, wind from telemetry, quantised airspeed, commanded only on a
+level change); loiter turns when a vehicle would be early even at its minimum speed (eqs. 8-9,
+the fewest turns that fit, by replacing its mission after a waypoint ahead); a later team
+arrival when one would be late even at its maximum speed; pop-up threats re-planned for the
+vehicles whose routes they touch, from waypoints ahead, and the team re-timed.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import numpy as np
+
+from gcs.coordination import actions as act
+from gcs.coordination.arrival import ArrivalController, Decision, SpeedLimits
+from gcs.coordination.config import FlightConfig
+from gcs.coordination.events import EventKind
+from gcs.coordination.member import FIRST_ROUTE_SEQ, Member, path_en, route_track
+from gcs.coordination.replanning import MissionChanges
+from gcs.coordination.routetrack import Wind
+from gcs.coordination.tracks import TruthSample, closest_approach
+from gcs.errors import GcsError
+from planner.atmosphere import eas2tas
+from planner.mission import MAV_CMD_DO_CHANGE_SPEED
+from planner.plan import World
+from planner.scenario import Scenario, Threat
+from planner.schedule import Schedule
+from planner.timing import SpeedLimits as PlannerLimits
+from planner.timing import takeoff_time_s
+
+__all__ = ["TeamController", "TeamTimeRefused"]
+
+
+class TeamTimeRefused(GcsError):
+    """A team arrival time that some vehicle cannot make: names the earliest feasible time
+    and the vehicle that forces it."""
+
+    def __init__(self, requested_s: float, earliest_s: float, vehicle_id: str, why: str) -> None:
+        super().__init__(
+            f"team arrival {requested_s:.1f} s refused: {vehicle_id} cannot arrive before "
+            f"{earliest_s + 0.0:.1f} s ({why}); earliest feasible {earliest_s:.1f} s"
+        )
+        self.requested_s = requested_s
+        self.earliest_s = earliest_s
+        self.vehicle_id = vehicle_id
+
+
+def reported_wind(fix: act.Fix) -> Wind:
+    """The vehicle's wind estimate (WIND), else ground velocity minus true airspeed."""
+    if fix.wind_speed_m_s is not None and fix.wind_from_deg is not None:
+        return Wind.from_speed_from(fix.wind_speed_m_s, fix.wind_from_deg)
+    if (
+        fix.airspeed_m_s is not None
+        and fix.heading_deg is not None
+        and fix.vn_m_s is not None
+        and fix.ve_m_s is not None
+    ):
+        h = math.radians(fix.heading_deg)
+        tas = fix.airspeed_m_s * eas2tas(fix.alt_amsl_m or 0.0)
+        return Wind(fix.ve_m_s - tas * math.sin(h), fix.vn_m_s - tas * math.cos(h))
+    return Wind()
+
+
+class TeamController(MissionChanges):
+    """The policy of one flight: members, the team arrival time, threats, decisions.
+
+    Build it from a schedule (:meth:`__init__`), take :meth:`initial_uploads`, then
+    :meth:`start` at a UTC and feed inputs with :meth:`handle`.
+    """
+
+    def __init__(
+        self,
+        scenario: Scenario,
+        schedule: Schedule,
+        world: World,
+        config: FlightConfig | None = None,
+        *,
+        rng: np.random.Generator | None = None,
+    ) -> None:
+        self.scenario = scenario
+        self.schedule = schedule
+        self.world = world
+        self.config = config or FlightConfig()
+        self.rng = rng if rng is not None else np.random.default_rng(self.config.seed)
+        self.frame = scenario.frame()
+        self.team_ref_s: float | None = schedule.required_arrival_s
+        self.start_utc_s: float | None = None
+        self.lead_s = self.config.min_lead_s
+        self.members: dict[str, Member] = {}
+        self.extra_threats: list[Threat] = []
+        self.removed_threats: set[str] = set()
+        self.popups_done: set[str] = set()
+        self.popups_running: set[str] = set()
+        self.threats_appeared: list[dict[str, Any]] = []
+        self.stopped: str | None = None
+        self.pending: dict[str, act.Upload] = {}
+        """Uploads handed out and not yet answered, per vehicle (a restart compares the
+        vehicle's mission with these too)."""
+        self.version = 1
+        """Moves with every change of the team time (an operator's stale move is refused)."""
+        for vs in schedule.vehicles:
+            v = scenario.vehicle(vs.vehicle_id)
+            limits = SpeedLimits(v.speed_min_m_s, v.speed_max_m_s, schedule.step_m_s)
+            offset = schedule.offsets_s.get(v.id, 0.0)
+            target = vs.arrival_s if self.team_ref_s is None else self.team_ref_s + offset
+            goal = vs.path.end
+            m = Member(
+                v.id,
+                limits,
+                offset,
+                vs,
+                self._path_mission(vs),
+                route_track(vs),
+                ArrivalController(limits, tolerance_s=self.config.tolerance_s),
+                target,
+                vs.takeoff_s,
+                goal_en_m=(goal.east_m, goal.north_m),
+            )
+            m.planned_paths.append({"label": "initial", "t_s": 0.0, "en_m": path_en(vs)})
+            self.members[v.id] = m
+
+    # -- set-up --------------------------------------------------------------------------------
+
+    def initial_uploads(self) -> list[act.Upload]:
+        return [
+            act.Upload(m.vehicle_id, m.mission, m.schedule, None, "initial mission", False)
+            for m in self.members.values()
+        ]
+
+    def start(self, start_utc_s: float) -> list[act.Action]:
+        """The mission starts at this UTC (mission time 0)."""
+        self.start_utc_s = start_utc_s
+        reason = self.schedule.arrival_reason
+        return [
+            act.Report(
+                EventKind.START,
+                f"mission start at UTC {start_utc_s:.1f}; team arrival {self.fmt_ref()} ({reason})",
+                t_s=0.0,
+            )
+        ]
+
+    def fmt_ref(self) -> str:
+        return "per-vehicle" if self.team_ref_s is None else f"{self.team_ref_s:.1f} s"
+
+    @property
+    def finished(self) -> bool:
+        return self.stopped is not None or all(m.done for m in self.members.values())
+
+    def _t(self, utc_s: float) -> float:
+        assert self.start_utc_s is not None, "the mission has not started"
+        return utc_s - self.start_utc_s
+
+    # -- inputs ---------------------------------------------------------------------------------
+
+    def handle(self, event: act.Input, now_s: float) -> list[act.Action]:
+        """Take one input at mission time ``now_s``; return what to do."""
+        out: list[act.Action] = []
+        match event:
+            case act.Tick():
+                self._tick(now_s, out)
+            case act.Fix():
+                self._fix(event, out)
+            case act.LinkSilent(vehicle_id=vid):
+                self.members[vid].link_silent = True
+            case act.LinkBack(vehicle_id=vid):
+                m = self.members[vid]
+                m.link_silent = False
+                m.next_decision_s = -math.inf
+            case act.Launched():
+                self._launched(event, now_s, out)
+            case act.SpeedCommanded():
+                self._speed_commanded(event, out)
+            case act.Installed():
+                self._installed(event, now_s, out)
+            case act.Computed():
+                self._computed(event, now_s, out)
+            case act.PlanningLead(lead_s=lead):
+                self.lead_s = max(self.config.min_lead_s, lead)
+        self._states(out, now_s)
+        for a in out:
+            if isinstance(a, act.Upload):
+                self.pending[a.vehicle_id] = a
+        return out
+
+    def _states(self, out: list[act.Action], now_s: float) -> None:
+        """Say each vehicle's state when it changes."""
+        for m in self.members.values():
+            state = m.current_state(self.config.off_route_m)
+            if state is not m.state:
+                old, m.state = m.state, state
+                out.append(
+                    act.Report(
+                        EventKind.STATE,
+                        f"{old.value} -> {state.value}",
+                        m.vehicle_id,
+                        t_s=now_s,
+                        payload={"state": state.value, "was": old.value},
+                    )
+                )
+
+    def _deadline_s(self) -> float:
+        return max(m.target_s for m in self.members.values()) + self.config.overrun_s
+
+    def _tick(self, now: float, out: list[act.Action]) -> None:
+        if self.finished:
+            return
+        if now > self._deadline_s():
+            self.stopped = "mission overran its last target"
+            out.append(act.Report(EventKind.ABORT, f"{self.stopped}; stopping the loop", t_s=now))
+            out.append(act.Stop(self.stopped))
+            return
+        for m in self.members.values():
+            if m.phase == "ground" and now >= m.takeoff_s:
+                m.phase = "takeoff"
+                out.append(act.Launch(m.vehicle_id))
+        for zone in self._due_popups(now):
+            self.popups_done.add(zone.id)
+            self.threats_appeared.append({"id": zone.id, "t_s": now})
+            self._popup(zone, now, self.lead_s, out)
+
+    def _launched(self, r: act.Launched, now: float, out: list[act.Action]) -> None:
+        m = self.members[r.vehicle_id]
+        if r.error is not None:
+            if m.phase == "takeoff":
+                m.phase = "ground"  # launched again at the next tick
+            out.append(
+                act.Report(
+                    EventKind.LAUNCH,
+                    f"launch failed: {r.error}; retrying",
+                    m.vehicle_id,
+                    payload={"ok": False},
+                )
+            )
+            return
+        m.launched_s = now
+        out.append(
+            act.Report(
+                EventKind.LAUNCH,
+                f"armed and AUTO at {now:.1f} s (scheduled takeoff {m.takeoff_s:.1f} s)",
+                m.vehicle_id,
+                payload={"ok": True},
+            )
+        )
+
+    # -- fixes ----------------------------------------------------------------------------------
+
+    def _fix(self, fix: act.Fix, out: list[act.Action]) -> None:
+        m = self.members.get(fix.vehicle_id)
+        if m is None or self.start_utc_s is None or m.done:
+            return
+        t = self._t(fix.utc_s)
+        if m.last_fix_s is not None and t <= m.last_fix_s:
+            return
+        m.last_fix_s = t
+        e, n = self.frame.to_local(fix.lat_deg, fix.lon_deg)
+        e, n = float(e), float(n)
+        m.east_m, m.north_m, m.alt_amsl_m = e, n, fix.alt_amsl_m
+        m.airspeed_m_s, m.heading_deg = fix.airspeed_m_s, fix.heading_deg
+        m.groundspeed_m_s = fix.groundspeed_m_s or 0.0
+        if not m.track_log or fix.utc_s - m.track_log[-1][0] >= 2.0:
+            m.track_log.append(
+                [
+                    round(fix.utc_s, 3),
+                    round(e, 1),
+                    round(n, 1),
+                    round(fix.alt_amsl_m or 0.0, 1),
+                    round(fix.airspeed_m_s or 0.0, 2),
+                    round(fix.groundspeed_m_s or 0.0, 2),
+                ]
+            )
+        seq = fix.mission_seq
+        if m.phase == "takeoff":
+            if m.launched_s is not None and seq is not None and seq >= FIRST_ROUTE_SEQ:
+                m.phase = "route"
+                out.append(
+                    act.Report(
+                        EventKind.ROUTE, f"climb-out done at {t:.1f} s, on the route", m.vehicle_id
+                    )
+                )
+            else:
+                return
+        if m.phase != "route":
+            return
+        seq_changed = seq != m.last_seq
+        if seq_changed and seq is not None:
+            self._passed_items(m, m.last_seq, seq)
+            m.last_seq = seq
+        self._watch_goal(m, fix, e, n, out)
+        if m.phase != "route":
+            return
+        s, m.cross_track_m = m.track.locate(e, n, m.s_m)
+        m.s_m = s
+        self._learn_bias(m, t, fix)
+        if m.cross_track_m <= self.config.off_route_m:
+            m.joining = False
+        if m.in_loiter() or m.busy_mission:
+            return
+        if not seq_changed and t < m.next_decision_s:
+            return
+        if m.track.length_m - s < self.config.final_m:
+            return
+        self._decide(m, t, s, fix, out)
+
+    def _passed_items(self, m: Member, old: int | None, new: int) -> None:
+        """DO_CHANGE_SPEED items the vehicle ran set the airspeed it flies."""
+        lo = FIRST_ROUTE_SEQ if old is None else old
+        for k in range(lo, min(new, len(m.mission.items))):
+            it = m.mission.items[k]
+            if it.command == MAV_CMD_DO_CHANGE_SPEED and it.param2 > 0:
+                m.level_m_s = float(it.param2)
+                m.next_decision_s = -math.inf
+
+    def _wind(self, m: Member, fix: act.Fix) -> Wind:
+        """The wind to time with: the vehicle's estimate plus the error learnt in flight."""
+        return m.bias.corrected(reported_wind(fix))
+
+    def _learn_bias(self, m: Member, t: float, fix: act.Fix) -> None:
+        """Feed one fix to the airspeed-scale and wind-error estimate: predicted from the
+        airspeed the autopilot reports, only when it was reported at the moment of the fix
+        (a stale one, or one taken while a new speed settles, would teach a bias that is not
+        there)."""
+        if (
+            m.level_m_s is None
+            or not fix.airspeed_fresh
+            or fix.ve_m_s is None
+            or fix.vn_m_s is None
+            or fix.heading_deg is None
+            or fix.alt_amsl_m is None
+            or fix.airspeed_m_s is None
+        ):
+            return
+        m.bias.update(
+            t,
+            ve_m_s=fix.ve_m_s,
+            vn_m_s=fix.vn_m_s,
+            heading_rad=math.radians(fix.heading_deg),
+            predicted_tas_m_s=fix.airspeed_m_s * eas2tas(fix.alt_amsl_m),
+            wind=reported_wind(fix),
+            airspeed_m_s=fix.airspeed_m_s,
+            commanded_m_s=m.level_m_s,
+            climb_m_s=fix.climb_m_s or 0.0,
+        )
+
+    def _decide(self, m: Member, t: float, s: float, fix: act.Fix, out: list[act.Action]) -> None:
+        inputs: dict[str, Any] = {
+            "s_m": s,
+            "now_s": t,
+            "target_s": m.target_s,
+            "wind": self._wind(m, fix),
+            "current_level_m_s": m.level_m_s,
+            "loiters_done": m.loiters_done(),
+            "tas_per_eas": m.tas_per_eas(s),
+        }
+        d = m.controller.decide(m.track, **inputs)
+        m.last_decision = d
+        time_left = m.target_s - t
+        m.next_decision_s = t + ArrivalController.period_s(time_left)
+        if d.command_m_s is not None and not m.busy_command:
+            m.busy_command = True
+            out.append(act.CommandSpeed(m.vehicle_id, d.command_m_s, d.reason, t))
+        cfg = self.config
+        if d.verdict == "late" and m.cross_track_m > cfg.off_route_m:
+            if not m.joining:
+                m.joining = True
+                out.append(
+                    act.Report(
+                        EventKind.ARRIVAL,
+                        f"late by {d.eta_min_s - m.target_s:.1f} s at top speed, but "
+                        f"{m.cross_track_m:.0f} m off the route and joining it: the team time "
+                        "stays until it is on the route",
+                        m.vehicle_id,
+                        t_s=t,
+                    )
+                )
+        elif d.verdict == "late":
+            self._late(m, d, t, out)
+        elif time_left > cfg.loiter_min_time_left_s and t - m.last_loiter_s > cfg.loiter_hold_off_s:
+            # Early, or so little above the minimum speed that the last minutes would have no
+            # room to slow down: loiter turns now, while a buffer is ahead (judged as if the
+            # minimum were higher by the reserve; the turns leave the loiter margin above it).
+            reserve = cfg.speed_reserve_m_s
+            lo, hi = m.limits.airspeed_min_m_s, m.limits.airspeed_max_m_s
+            if d.verdict != "early" and reserve > 0.0 and d.required_m_s < min(lo + reserve, hi):
+                held = SpeedLimits(min(lo + reserve, hi), hi, m.limits.step_m_s)
+                d = ArrivalController(held, tolerance_s=cfg.tolerance_s).decide(m.track, **inputs)
+            if d.verdict == "early":
+                m.last_loiter_s = t
+                self._loiter(m, d, t, s, inputs["wind"], out)
+
+    def _speed_commanded(self, r: act.SpeedCommanded, out: list[act.Action]) -> None:
+        m = self.members[r.vehicle_id]
+        m.busy_command = False
+        if r.error is not None:
+            out.append(
+                act.Report(
+                    EventKind.SPEED, f"speed command failed ({r.error}); will retry", m.vehicle_id
+                )
+            )
+            m.next_decision_s = -math.inf
+            return
+        m.level_m_s = r.airspeed_m_s
+        assert self.start_utc_s is not None
+        m.commanded.append([round(self.start_utc_s + r.decided_s, 3), r.airspeed_m_s, "command"])
+        out.append(
+            act.Report(
+                EventKind.SPEED, r.reason, m.vehicle_id, "speed", r.airspeed_m_s, t_s=r.decided_s
+            )
+        )
+
+    # -- lateness: move the team time ---------------------------------------------------------
+
+    def _late(self, m: Member, d: Decision, t: float, out: list[act.Action]) -> None:
+        ref = self.team_ref_s
+        if ref is None:
+            return
+        new_ref = d.eta_min_s - m.offset_s + self.config.late_margin_s
+        if new_ref <= ref:
+            return
+        self._set_team_time(
+            new_ref,
+            t,
+            f"team arrival moved {ref:.1f} -> {new_ref:.1f} s: {m.vehicle_id} cannot arrive "
+            f"before {d.eta_min_s:.1f} s even at {m.limits.airspeed_max_m_s:g} m/s",
+            m.vehicle_id,
+            out,
+        )
+
+    def _set_team_time(
+        self, new_ref: float, t: float, reason: str, vehicle: str | None, out: list[act.Action]
+    ) -> None:
+        self.team_ref_s = new_ref
+        self.version += 1
+        out.append(act.Report(EventKind.ARRIVAL, reason, vehicle, value=new_ref, t_s=t))
+        for other in self.members.values():
+            other.target_s = new_ref + other.offset_s
+            other.next_decision_s = -math.inf
+            if other.phase == "ground":
+                self._retime_takeoff(other, t, out)
+
+    def _planner_limits(self, m: Member) -> PlannerLimits:
+        v = self.scenario.vehicle(m.vehicle_id)
+        return PlannerLimits(v.speed_min_m_s, v.speed_max_m_s, v.cruise_m_s, m.limits.step_m_s)
+
+    def _retime_takeoff(self, m: Member, t: float, out: list[act.Action]) -> None:
+        v = self.scenario.vehicle(m.vehicle_id)
+        window = (max(v.takeoff_window_s[0], t), max(v.takeoff_window_s[1], t))
+        new = takeoff_time_s(
+            m.schedule.path.length_m,
+            m.target_s,
+            self._planner_limits(m),
+            window,
+            m.schedule.tas_per_eas(),
+        )
+        if abs(new - m.takeoff_s) > 0.5:
+            m.takeoff_s = new
+            out.append(
+                act.Report(
+                    EventKind.TAKEOFF,
+                    f"take off at {new:.1f} s to arrive at {m.target_s:.1f} s (eq. 5)",
+                    m.vehicle_id,
+                    "takeoff_delay",
+                    round(new, 3),
+                    t_s=t,
+                )
+            )
+
+    def earliest_team_time_s(self, now_s: float) -> tuple[float, str, str]:
+        """The earliest team arrival every vehicle can still make: ``(time_s, vehicle,
+        why)``, the vehicle being the one that forces it."""
+        best: tuple[float, str, str] | None = None
+        for m in self.members.values():
+            if m.done:
+                continue
+            if m.phase == "ground":
+                v = self.scenario.vehicle(m.vehicle_id)
+                t0 = max(now_s, v.takeoff_window_s[0])
+                tas = v.speed_max_m_s * m.schedule.tas_per_eas()
+                earliest = t0 + m.schedule.path.length_m / tas
+                why = f"on the ground: taking off at {t0:.0f} s and flying at top speed"
+            elif m.last_decision is not None:
+                # The ETA at top speed from its last decision, moved on to now.
+                earliest = m.last_decision.eta_min_s
+                why = f"at {m.limits.airspeed_max_m_s:g} m/s from where it is"
+            else:
+                earliest = m.target_s  # climbing: no estimate yet; keep its slot
+                why = "still climbing out"
+            earliest -= m.offset_s
+            if best is None or earliest > best[0]:
+                best = (earliest, m.vehicle_id, why)
+        if best is None:
+            raise GcsError("no vehicle of the team is still flying to its slot")
+        return best
+
+    def move_team_time(
+        self, arrival_s: float, now_s: float, *, version: int | None = None
+    ) -> list[act.Action]:
+        """The operator moves the team arrival to ``arrival_s`` (mission s).
+
+        Raises
+        ------
+        TeamTimeRefused
+            A vehicle cannot arrive by then (the earliest feasible time and that vehicle).
+        GcsError
+            ``version`` is not the current one (someone moved it first), or the team has no
+            common arrival time (per-vehicle windows).
+        """
+        if self.team_ref_s is None:
+            raise GcsError("this flight's arrivals are per-vehicle windows: no team time to move")
+        if version is not None and version != self.version:
+            raise GcsError(f"team time version {version} is stale (now {self.version})")
+        if not math.isfinite(arrival_s):
+            raise GcsError(f"team arrival must be a number of seconds, got {arrival_s!r}")
+        earliest, vid, why = self.earliest_team_time_s(now_s)
+        if arrival_s < earliest - 1e-6:
+            raise TeamTimeRefused(arrival_s, earliest, vid, why)
+        out: list[act.Action] = []
+        old = self.team_ref_s
+        self._set_team_time(
+            arrival_s, now_s, f"team arrival moved {old:.1f} -> {arrival_s:.1f} s by the operator",
+            None, out,
+        )  # fmt: skip
+        self._states(out, now_s)
+        return out
+
+    # -- arrival --------------------------------------------------------------------------------
+
+    def _watch_goal(
+        self, m: Member, fix: act.Fix, e: float, n: float, out: list[act.Action]
+    ) -> None:
+        d = math.hypot(e - m.goal_en_m[0], n - m.goal_en_m[1])
+        if d > self.config.arrival_radius_m:
+            if m.near_goal:
+                self._arrive(m, out)
+            return
+        m.near_goal.append(
+            TruthSample(
+                fix.utc_s,
+                fix.lat_deg,
+                fix.lon_deg,
+                fix.alt_amsl_m or 0.0,
+                fix.airspeed_m_s or 0.0,
+                fix.groundspeed_m_s or 0.0,
+                True,
+            )
+        )
+        if len(m.near_goal) >= 3:
+            prev = m.near_goal[-2]
+            pe, pn = self.frame.to_local(prev.lat_deg, prev.lon_deg)
+            d_prev = math.hypot(float(pe) - m.goal_en_m[0], float(pn) - m.goal_en_m[1])
+            if d > d_prev + 1.0:
+                self._arrive(m, out)
+
+    def _arrive(self, m: Member, out: list[act.Action]) -> None:
+        glat, glon = self.frame.to_geodetic(*m.goal_en_m)
+        ca = closest_approach(m.near_goal, float(glat), float(glon), self.config.arrival_radius_m)
+        utc = ca[0] if ca is not None else m.near_goal[-1].utc_s
+        t = self._t(utc)
+        m.arrival_s = t
+        m.phase = "arrived"
+        out.append(
+            act.Report(
+                EventKind.ARRIVED,
+                f"passed the goal at {t:.2f} s (target {m.target_s:.2f} s, "
+                f"error {t - m.target_s:+.2f} s; telemetry)",
+                m.vehicle_id,
+                value=round(t - m.target_s, 3),
+                t_s=t,
+            )
+        )
+
+    # -- abort ----------------------------------------------------------------------------------
+
+    def abort(
+        self, vehicle_id: str | None, mode: act.AbortMode, now_s: float
+    ) -> tuple[dict[str, str | None], list[act.Action]]:
+        """Abort one vehicle (or every one): it leaves the team and flies home (``rtl``) or
+        circles where it is (``loiter``); one still on the ground stays there. Returns per
+        vehicle None (aborting) or why not, and the actions (a :class:`~actions.SetMode` per
+        vehicle in the air; its outcome comes back through :meth:`abort_done`).
+
+        Raises
+        ------
+        KeyError
+            No such vehicle in the flight (named).
+        """
+        if vehicle_id is not None and vehicle_id not in self.members:
+            raise KeyError(f"no vehicle {vehicle_id!r} in the flight")
+        chosen = [self.members[vehicle_id]] if vehicle_id else list(self.members.values())
+        results: dict[str, str | None] = {}
+        out: list[act.Action] = []
+        for m in chosen:
+            if m.done:
+                results[m.vehicle_id] = f"already {m.phase}"
+                continue
+            on_ground = m.phase == "ground"
+            m.phase = "aborted"
+            results[m.vehicle_id] = None
+            if on_ground:
+                why = "aborted on the ground: it will not take off"
+                out.append(act.Report(EventKind.ABORT, why, m.vehicle_id, t_s=now_s))
+                continue
+            out.append(act.SetMode(m.vehicle_id, "RTL" if mode == "rtl" else "LOITER"))
+        self._states(out, now_s)
+        return results, out
+
+    def abort_done(self, vehicle_id: str, mode: str, error: str | None, now_s: float) -> act.Report:
+        if error is not None:
+            return act.Report(
+                EventKind.ABORT,
+                f"aborted, but {mode} was not taken: {error}",
+                vehicle_id,
+                t_s=now_s,
+            )
+        what = "returning home (RTL)" if mode == "RTL" else "circling where it is (LOITER)"
+        return act.Report(
+            EventKind.ABORT, f"aborted: {what}; the others keep their time", vehicle_id, t_s=now_s
+        )
+
+    # -- what a UI shows --------------------------------------------------------------------------
+
+    def snapshot(self, now_s: float) -> dict[str, Any]:
+        """A serialisable view of the flight: the team time, every vehicle's position, state,
+        ETA and error against its slot, strategy in use, threats in force."""
+        vehicles = []
+        for m in self.members.values():
+            d = m.last_decision
+            eta = None if d is None else d.eta_s
+            if m.arrival_s is not None:
+                eta = m.arrival_s
+            if m.phase == "ground":
+                strategy = {"kind": "takeoff_wait", "takeoff_s": round(m.takeoff_s, 3)}
+            elif m.in_loiter() or m.loiter_turns_left() > 0:
+                strategy = {"kind": "loiter", "turns_left": m.loiter_turns_left()}
+            else:
+                strategy = {"kind": "speed", "level_m_s": m.level_m_s}
+            vehicles.append(
+                {
+                    "id": m.vehicle_id,
+                    "phase": m.phase,
+                    "state": m.state.value,
+                    "east_m": None if m.east_m is None else round(m.east_m, 1),
+                    "north_m": None if m.north_m is None else round(m.north_m, 1),
+                    "alt_amsl_m": m.alt_amsl_m,
+                    "heading_deg": m.heading_deg,
+                    "s_m": None if m.s_m is None else round(m.s_m, 1),
+                    "route_length_m": round(m.track.length_m, 1),
+                    "slot_s": round(m.target_s, 3),
+                    "eta_s": None if eta is None else round(eta, 3),
+                    "error_s": None if eta is None else round(eta - m.target_s, 3),
+                    "strategy": strategy,
+                    "commanded_m_s": m.level_m_s,
+                    "airspeed_m_s": m.airspeed_m_s,
+                    "groundspeed_m_s": m.groundspeed_m_s,
+                    "link_silent": m.link_silent,
+                    "last_fix_age_s": None
+                    if m.last_fix_s is None
+                    else round(max(0.0, now_s - m.last_fix_s), 2),
+                    "arrival_s": m.arrival_s,
+                }
+            )
+        return {
+            "t_s": round(now_s, 3),
+            "start_utc_s": self.start_utc_s,
+            "team_time_s": self.team_ref_s,
+            "team_time_version": self.version,
+            "arrival_reason": self.schedule.arrival_reason,
+            "vehicles": vehicles,
+            "threats_in_force": sorted(z.id for z in self.in_force(now_s)),
+            "threats_queued": sorted(
+                t.id for t in self.operator_threats if t.id not in self.popups_done
+            ),
+        }
+
+    # -- restart ----------------------------------------------------------------------------------
+
+    def __getstate__(self) -> dict[str, Any]:
+        """Everything but the world (rebuilt from the scenario on a restart)."""
+        state = dict(self.__dict__)
+        state["world"] = None
+        return state
+
+    def rebind_world(self, world: World) -> None:
+        self.world = world

@@ -1,0 +1,473 @@
+"""The team controller on its own: a fake clock (mission seconds passed in), synthetic fixes
+made from the planned routes, no sockets, no asyncio. Every decision it makes is checked
+against a computation of its own here (the route's length and the speeds, not the
+controller's figures)."""
+
+from __future__ import annotations
+
+import math
+import pickle
+from collections.abc import Sequence
+
+import numpy as np
+import pytest
+from pydantic import TypeAdapter
+
+from gcs.coordination import actions as act
+from gcs.coordination.config import FlightConfig
+from gcs.coordination.events import EventKind
+from gcs.coordination.member import FIRST_ROUTE_SEQ, Member, VehicleState
+from gcs.coordination.team import TeamController, TeamTimeRefused
+from planner.mission import MAV_CMD_NAV_LOITER_TURNS, MAV_CMD_NAV_WAYPOINT
+from planner.plan import World
+from planner.popup import popup_zones
+from planner.scenario import Scenario, Threat
+from planner.schedule import Schedule
+from planner.threats import build_threats
+
+START_UTC = 1_800_000_000.0
+
+
+@pytest.fixture
+def team(paper: tuple[Scenario, World, Schedule]) -> TeamController:
+    scenario, world, schedule = paper
+    t = TeamController(scenario, schedule, world, FlightConfig(), rng=np.random.default_rng(3))
+    t.start(START_UTC)
+    return t
+
+
+def of(actions: Sequence[act.Action], kind: type) -> list:  # type: ignore[type-arg]
+    return [a for a in actions if isinstance(a, kind)]
+
+
+def reports(actions: Sequence[act.Action], kind: EventKind) -> list[act.Report]:
+    return [a for a in actions if isinstance(a, act.Report) and a.kind is kind]
+
+
+def seq_ahead(team: TeamController, vid: str, s_m: float) -> int:
+    """The mission item the vehicle flies to from ``s_m``: the first waypoint beyond it."""
+    pm = team.members[vid].mission
+    for k, it in enumerate(pm.items):
+        s_k = pm.item_s_m[k]
+        is_waypoint = k >= FIRST_ROUTE_SEQ and it.command == MAV_CMD_NAV_WAYPOINT
+        if is_waypoint and s_k is not None and s_k > s_m:
+            return k
+    return len(pm.items) - 1
+
+
+def fix(team: TeamController, vid: str, s_m: float, t_s: float, airspeed_m_s: float) -> act.Fix:
+    """A fix on the planned route at ``s_m``, flying ``airspeed_m_s`` (equivalent) in
+    still air."""
+    m = team.members[vid]
+    pose = m.schedule.path.pose_at(s_m)
+    lat, lon = team.frame.to_geodetic(pose.east_m, pose.north_m)
+    gs = airspeed_m_s * m.schedule.tas_per_eas(s_m)
+    h = pose.heading_rad
+    return act.Fix(
+        vid,
+        START_UTC + t_s,
+        float(lat),
+        float(lon),
+        alt_amsl_m=float(m.schedule.alt_at(s_m)),
+        airspeed_m_s=airspeed_m_s,
+        groundspeed_m_s=gs,
+        heading_deg=math.degrees(h),
+        ve_m_s=gs * math.sin(h),
+        vn_m_s=gs * math.cos(h),
+        climb_m_s=0.0,
+        mission_seq=seq_ahead(team, vid, s_m),
+        wind_speed_m_s=0.0,
+        wind_from_deg=0.0,
+    )
+
+
+def airborne(team: TeamController, vid: str, t_s: float) -> None:
+    """Launch ``vid`` at ``t_s`` (its Launch answered at once)."""
+    m = team.members[vid]
+    if m.phase == "ground":
+        m.takeoff_s = min(m.takeoff_s, t_s)
+        for launch in of(team.handle(act.Tick(), t_s), act.Launch):
+            team.handle(act.Launched(launch.vehicle_id), t_s)
+    assert m.launched_s is not None
+
+
+def flying(team: TeamController, vid: str, after_s: float) -> tuple[Member, float]:
+    """``vid`` launched at its takeoff time, and the mission time ``after_s`` later."""
+    m = team.members[vid]
+    airborne(team, vid, m.takeoff_s)
+    return m, m.takeoff_s + after_s
+
+
+def still_air_eta_s(team: TeamController, vid: str, s_m: float, t_s: float, eas: float) -> float:
+    """When the vehicle arrives from ``s_m`` at ``eas``: the rest of the route and its
+    loiters at the route's true airspeed (the test's own arithmetic)."""
+    m = team.members[vid]
+    tas = eas * m.schedule.tas_per_eas(s_m)
+    rest = m.track.length_m - s_m
+    loiter_m = sum(lo.length_m for lo in m.track.loiters if lo.s_m >= s_m)
+    return t_s + (rest + loiter_m) / tas
+
+
+# -- launches -----------------------------------------------------------------------------------
+
+
+def test_vehicles_launch_at_their_takeoff_times_and_a_failed_launch_is_tried_again(
+    team: TeamController,
+) -> None:
+    takeoffs = {vid: m.takeoff_s for vid, m in team.members.items()}
+    first = min(takeoffs, key=lambda v: takeoffs[v])
+    assert of(team.handle(act.Tick(), takeoffs[first] - 0.1), act.Launch) == []
+    out = team.handle(act.Tick(), takeoffs[first])
+    assert of(out, act.Launch) == [act.Launch(first)]
+    assert team.members[first].state is VehicleState.CLIMBING
+    out = team.handle(act.Launched(first, "arm refused: PreArm: GPS"), takeoffs[first] + 1)
+    assert "launch failed: arm refused" in reports(out, EventKind.LAUNCH)[0].reason
+    assert team.members[first].phase == "ground"
+    assert of(team.handle(act.Tick(), takeoffs[first] + 2), act.Launch) == [act.Launch(first)]
+    team.handle(act.Launched(first), takeoffs[first] + 3)
+    assert team.members[first].launched_s == takeoffs[first] + 3
+    # on the route once its mission reaches the first route item
+    out = team.handle(fix(team, first, 2000.0, takeoffs[first] + 90, 25.0), takeoffs[first] + 90)
+    assert reports(out, EventKind.ROUTE)
+    assert team.members[first].state is VehicleState.ON_ROUTE
+
+
+# -- speed ---------------------------------------------------------------------------------------
+
+
+def test_speed_is_commanded_only_when_the_required_level_changes(team: TeamController) -> None:
+    vid = "UAV1"  # UAV2 sets the team time at its top speed; UAV1 has room
+    m = team.members[vid]
+    t0 = m.takeoff_s + 600.0
+    airborne(team, vid, m.takeoff_s)
+    # Held back 3 km from where its schedule has it, it must speed up.
+    s0 = m.schedule.state_at(t0)[1] - 3_000.0
+    out = team.handle(fix(team, vid, s0, t0, 25.0), t0)
+    cmd = of(out, act.CommandSpeed)
+    assert len(cmd) == 1
+    level = cmd[0].airspeed_m_s
+    # The level is the step nearest the speed that arrives on time from here (own arithmetic).
+    tas_per_eas = m.schedule.tas_per_eas(s0)
+    need = (m.track.length_m - s0) / (m.target_s - t0) / tas_per_eas
+    step = m.limits.step_m_s
+    assert abs(level - need) <= step / 2 + 1e-6
+    team.handle(act.SpeedCommanded(vid, level, cmd[0].reason, t0), t0 + 1)
+    # Flying exactly that level: later decisions keep it (no command).
+    t, s = t0, s0
+    for _ in range(6):
+        dt = max(m.next_decision_s - t, 1.0)
+        t += dt
+        s += dt * level * tas_per_eas
+        out = team.handle(fix(team, vid, s, t, level), t)
+        assert of(out, act.CommandSpeed) == [], (t, out)
+    # Held back well over a step's worth: the next decision commands a higher level.
+    dt = max(m.next_decision_s - t, 1.0)
+    behind_m = 3.0 * step * tas_per_eas * (m.target_s - t)
+    t += dt
+    s += dt * level * tas_per_eas - behind_m
+    out = team.handle(fix(team, vid, s, t, level), t)
+    (up,) = of(out, act.CommandSpeed)
+    assert up.airspeed_m_s >= level + step
+    need = (m.track.length_m - s) / (m.target_s - t) / tas_per_eas
+    assert abs(up.airspeed_m_s - need) <= step / 2 + 1e-6
+
+
+def test_a_failed_speed_command_is_reported_and_decided_again(team: TeamController) -> None:
+    vid = "UAV1"
+    m, t0 = flying(team, vid, 600.0)
+    s0 = m.schedule.state_at(t0)[1] - 3_000.0
+    (cmd,) = of(team.handle(fix(team, vid, s0, t0, 25.0), t0), act.CommandSpeed)
+    out = team.handle(act.SpeedCommanded(vid, cmd.airspeed_m_s, cmd.reason, t0, "no ACK"), t0)
+    assert "speed command failed (no ACK)" in reports(out, EventKind.SPEED)[0].reason
+    assert m.level_m_s != cmd.airspeed_m_s
+    out = team.handle(fix(team, vid, s0 + 30.0, t0 + 1.0, 25.0), t0 + 1.0)
+    assert len(of(out, act.CommandSpeed)) == 1  # at once, not at the next period
+
+
+# -- loiter turns -------------------------------------------------------------------------------
+
+
+def _early(team: TeamController, vid: str) -> tuple[float, float, act.LoiterJob]:
+    """``vid`` 300 s after its takeoff, 5 km along, with its slot moved 900 s later: even at
+    its minimum speed it would be early, so it asks for loiter turns (the job returned)."""
+    m = team.members[vid]
+    airborne(team, vid, m.takeoff_s)
+    t0, s0 = m.takeoff_s + 300.0, 5_000.0
+    m.target_s += 900.0
+    assert still_air_eta_s(team, vid, s0, t0, m.limits.airspeed_min_m_s) < m.target_s - 60.0
+    out = team.handle(fix(team, vid, s0, t0, 20.0), t0)
+    (job,) = [a.job for a in of(out, act.Compute)]
+    assert isinstance(job, act.LoiterJob)
+    return t0, s0, job
+
+
+def test_an_early_vehicle_gets_the_fewest_loiter_turns_that_absorb_its_surplus(
+    team: TeamController,
+) -> None:
+    vid = "UAV3"
+    m = team.members[vid]
+    t0, s0, job = _early(team, vid)
+    v_min = m.limits.airspeed_min_m_s
+    assert isinstance(job, act.LoiterJob) and job.vehicle_id == vid
+    assert m.busy_mission
+    # No second job while this one is out.
+    assert of(team.handle(fix(team, vid, s0 + 200.0, t0 + 10, 20.0), t0 + 10), act.Compute) == []
+    vs, adjustments = job.run()
+    out = team.handle(act.Computed(job, (vs, adjustments)), t0 + 12)
+    (up,) = of(out, act.Upload)
+    assert up.keep_seq == job.keep_seq and up.in_flight
+    new = [lo for lo in vs.loiters if lo.s_m >= job.s_m]
+    assert new
+    turns = sum(lo.turns for lo in new)
+    loiter_items = [it for it in up.mission.items if it.command == MAV_CMD_NAV_LOITER_TURNS]
+    assert sum(it.param1 for it in loiter_items) >= turns
+    # Fewest turns (own arithmetic): the route from the splice point flown at the fastest
+    # speed the loiter margin allows must fit with these turns, not with one fewer.
+    lo = new[0]
+    circle_m = 2.0 * math.pi * lo.radius_m
+    tas_per_eas = m.schedule.tas_per_eas(job.s_m)
+    v_hi = m.limits.airspeed_max_m_s * tas_per_eas
+    v_lo = (v_min + job.loiter_margin_m_s) * tas_per_eas
+    time_left = job.target_s - job.now_s
+    rest_m = vs.path.length_m - job.s_m + lo.detour_m
+
+    def fits(n: int) -> bool:
+        d = rest_m + n * circle_m
+        return d / v_hi <= time_left + 1.0 and d / v_lo >= time_left - 1.0
+
+    assert fits(turns)
+    assert not fits(turns - 1)
+    # Once on board: the vehicle flies it, the adjustments are said, the next job may come.
+    out = team.handle(act.Installed(up), t0 + 15)
+    assert m.mission is up.mission and m.schedule is vs
+    assert reports(out, EventKind.LOITER)
+    assert not m.busy_mission
+
+
+def test_a_loiter_upload_that_fails_keeps_the_old_mission_and_says_so(team: TeamController) -> None:
+    vid = "UAV3"
+    m = team.members[vid]
+    t0, _, job = _early(team, vid)
+    (up,) = of(team.handle(act.Computed(job, job.run()), t0 + 1), act.Upload)
+    old = m.mission
+    out = team.handle(act.Installed(up, "no MISSION_ACK"), t0 + 2)
+    assert m.mission is old
+    assert "upload failed (no MISSION_ACK); flying on" in reports(out, EventKind.LOITER)[0].reason
+    out = team.handle(act.Installed(up, skipped=True), t0 + 3)
+    assert "passed the splice waypoint; not installed" in reports(out, EventKind.UPLOAD)[0].reason
+
+
+# -- lateness ------------------------------------------------------------------------------------
+
+
+def test_a_late_vehicle_moves_the_team_time_with_the_reason_and_re_times_the_ground(
+    team: TeamController,
+) -> None:
+    vid = "UAV2"
+    m = team.members[vid]
+    airborne(team, vid, m.takeoff_s)
+    ground = [x for x in team.members.values() if x.phase == "ground"]
+    assert ground
+    old_ref = team.team_ref_s
+    assert old_ref is not None
+    t0 = m.takeoff_s + 600.0
+    s0 = 2_000.0  # far behind: even at top speed it comes after its slot
+    v_max = m.limits.airspeed_max_m_s
+    earliest = still_air_eta_s(team, vid, s0, t0, v_max)
+    assert earliest > m.target_s + 5.0
+    out = team.handle(fix(team, vid, s0, t0, 25.0), t0)
+    (moved,) = reports(out, EventKind.ARRIVAL)
+    assert moved.vehicle == vid
+    assert f"{vid} cannot arrive before" in moved.reason and f"{v_max:g} m/s" in moved.reason
+    new_ref = moved.value
+    assert new_ref is not None and new_ref == team.team_ref_s
+    assert new_ref == pytest.approx(earliest - m.offset_s + FlightConfig().late_margin_s, abs=1.0)
+    for x in team.members.values():
+        assert x.target_s == pytest.approx(new_ref + x.offset_s)
+    retimed = {r.vehicle for r in reports(out, EventKind.TAKEOFF)}
+    assert retimed == {x.vehicle_id for x in ground}
+    assert team.version == 2
+    cmds = of(out, act.CommandSpeed)
+    assert (cmds[0].airspeed_m_s if cmds else m.level_m_s) == v_max
+
+
+def test_a_vehicle_off_its_route_does_not_move_the_team_time_while_it_joins(
+    team: TeamController,
+) -> None:
+    vid = "UAV2"
+    m, t0 = flying(team, vid, 600.0)
+    f = fix(team, vid, 2_000.0, t0, 25.0)
+    pose = m.schedule.path.pose_at(2_000.0)
+    h = pose.heading_rad  # 2 km to the right of the route
+    lat, lon = team.frame.to_geodetic(
+        pose.east_m + 2000.0 * math.cos(h), pose.north_m - 2000.0 * math.sin(h)
+    )
+    out = team.handle(act.Fix(**{**f.__dict__, "lat_deg": float(lat), "lon_deg": float(lon)}), t0)
+    assert m.cross_track_m == pytest.approx(2000.0, abs=50.0)
+    assert team.team_ref_s == team.schedule.required_arrival_s
+    assert "joining it: the team time stays" in reports(out, EventKind.ARRIVAL)[0].reason
+    assert m.state is VehicleState.JOINING
+
+
+def test_the_operator_moves_the_team_time_or_is_told_the_earliest_and_who_forces_it(
+    team: TeamController,
+) -> None:
+    vid = "UAV2"
+    m, t0 = flying(team, vid, 600.0)
+    team.handle(fix(team, vid, 20_000.0, t0, 25.0), t0)
+    ref = team.team_ref_s
+    assert ref is not None
+    earliest = still_air_eta_s(team, vid, 20_000.0, t0, m.limits.airspeed_max_m_s) - m.offset_s
+    with pytest.raises(TeamTimeRefused) as refused:
+        team.move_team_time(earliest - 30.0, t0)
+    assert refused.value.vehicle_id == vid
+    assert refused.value.earliest_s == pytest.approx(earliest, abs=1.0)
+    assert "earliest feasible" in str(refused.value)
+    assert team.team_ref_s == ref  # unchanged
+    out = team.move_team_time(ref + 120.0, t0, version=1)
+    assert team.team_ref_s == ref + 120.0 and team.version == 2
+    assert "by the operator" in reports(out, EventKind.ARRIVAL)[0].reason
+    assert all(x.target_s == pytest.approx(ref + 120.0 + x.offset_s) for x in team.members.values())
+    with pytest.raises(Exception, match="version 1 is stale"):
+        team.move_team_time(ref + 200.0, t0, version=1)
+
+
+# -- threats ------------------------------------------------------------------------------------
+
+
+def _on_schedule(team: TeamController, t_s: float) -> None:
+    """Every vehicle launched and where its schedule has it at ``t_s``."""
+    for vid, m in team.members.items():
+        airborne(team, vid, m.takeoff_s)
+        phase, s_m, speed = m.schedule.state_at(t_s)
+        assert phase == "leg", vid
+        team.handle(act.SpeedCommanded(vid, speed, "plan", t_s), t_s)
+        team.handle(fix(team, vid, s_m, t_s, speed), t_s)
+        m.next_decision_s = math.inf  # only the pop-up is looked at here
+
+
+def test_a_popup_re_plans_the_vehicles_whose_routes_it_touches_and_no_other(
+    team: TeamController,
+) -> None:
+    zones = build_threats(team.scenario, {vid: m.takeoff_s for vid, m in team.members.items()})
+    (zone,) = popup_zones(zones)
+    t_p = float(zone.appears_at_s or 0.0)
+    _on_schedule(team, t_p - 1.0)
+    assert of(team.handle(act.Tick(), t_p - 0.5), act.Compute) == []
+    out = team.handle(act.Tick(), t_p)
+    (job,) = [a.job for a in of(out, act.Compute)]
+    assert isinstance(job, act.PopupJob) and job.zone.id == zone.id
+    assert set(job.keeps) == set(team.members)
+    # Which routes does the threat touch ahead of the splice points? (own geometry)
+    cx, cy = zone.east_m, zone.north_m
+    touched = set()
+    for vid, m in team.members.items():
+        s_k = job.anchors[vid].s_m
+        for s in np.arange(s_k, m.schedule.path.length_m, 200.0):
+            p = m.schedule.path.pose_at(float(s))
+            if math.hypot(p.east_m - cx, p.north_m - cy) < zone.radius_m:
+                touched.add(vid)
+                break
+    assert touched == {"UAV1", "UAV2"}
+    outcome = job.run()
+    out = team.handle(act.Computed(job, outcome), t_p + 1.0)
+    assert set(outcome.affected) == touched
+    uploads = {u.vehicle_id: u for u in of(out, act.Upload)}
+    for vid, m in team.members.items():
+        before = m.schedule.path
+        if vid in touched:
+            assert uploads[vid].schedule.path is not before
+            assert uploads[vid].schedule.path.length_m > before.length_m - 1.0
+        elif vid in uploads:  # re-timed for the new team time, on the same route
+            assert uploads[vid].schedule.path.length_m == pytest.approx(before.length_m)
+    assert all(u.keep_seq == job.keeps[u.vehicle_id] for u in uploads.values())
+    assert team.team_ref_s == outcome.schedule.required_arrival_s
+
+
+def test_a_threat_added_before_the_start_is_queued_for_its_time(
+    paper: tuple[Scenario, World, Schedule],
+) -> None:
+    scenario, world, schedule = paper
+    team = TeamController(scenario, schedule, world)
+    box = [[185_600, 203_200], [189_600, 203_200], [189_600, 207_200], [185_600, 207_200]]
+    op1 = TypeAdapter(Threat).validate_python(
+        {"kind": "no_fly", "id": "OP1", "polygon": [{"east_m": e, "north_m": n} for e, n in box]}
+    )
+    team.add_threat(op1, 0.0, at_s=2500.0)
+    team.add_threat(op1.model_copy(update={"id": "OP2"}), 0.0)  # no time: at the start
+    assert [(t.id, t.appears.at_s if t.appears else None) for t in team.operator_threats] == [
+        ("OP1", 2500.0),
+        ("OP2", 0.0),
+    ]
+    with pytest.raises(ValueError, match="OP1: a threat with this id is already"):
+        team.add_threat(op1, 0.0)
+    team.start(START_UTC)
+    for m in team.members.values():
+        m.takeoff_s = math.inf  # nobody launches here
+    jobs = [a.job for a in of(team.handle(act.Tick(), 0.0), act.Compute)]
+    assert [j.zone.id for j in jobs] == ["OP2"]
+    team.handle(act.Computed(jobs[0], None, RuntimeError("not flown here")), 0.5)
+    assert of(team.handle(act.Tick(), 2499.0), act.Compute) == []
+    jobs = [a.job for a in of(team.handle(act.Tick(), 2500.0), act.Compute)]
+    assert [j.zone.id for j in jobs] == ["OP1"]
+    assert all(t.id not in {"OP1", "OP2"} for t in team.scenario.threats)
+    # A removed threat never appears; removing an unknown one is named.
+    team.add_threat(op1.model_copy(update={"id": "OP3"}), 2500.0, at_s=3000.0)
+    team.remove_threat("OP3", 2600.0)
+    assert of(team.handle(act.Tick(), 3000.0), act.Compute) == []
+    with pytest.raises(KeyError, match="no threat 'OP9'"):
+        team.remove_threat("OP9", 3000.0)
+
+
+# -- abort ---------------------------------------------------------------------------------------
+
+
+def test_abort_sends_the_aircraft_home_and_the_rest_keep_their_time(team: TeamController) -> None:
+    airborne(team, "UAV2", team.members["UAV2"].takeoff_s)
+    t = team.members["UAV2"].takeoff_s + 100.0
+    ref = team.team_ref_s
+    results, out = team.abort("UAV2", "rtl", t)
+    assert results == {"UAV2": None}
+    assert of(out, act.SetMode) == [act.SetMode("UAV2", "RTL")]
+    assert team.members["UAV2"].state is VehicleState.ABORTED
+    results, out = team.abort(None, "loiter", t + 1)
+    assert results["UAV2"] == "already aborted"
+    assert of(out, act.SetMode) == []  # the others are on the ground: they stay there
+    assert {r.vehicle for r in reports(out, EventKind.ABORT)} == {"UAV1", "UAV3"}
+    assert team.team_ref_s == ref
+    assert team.finished
+    assert of(team.handle(act.Tick(), t + 1000.0), act.Launch) == []
+    with pytest.raises(KeyError, match="no vehicle 'UAV9'"):
+        team.abort("UAV9", "rtl", t)
+
+
+def test_the_loop_stops_when_the_mission_overruns(team: TeamController) -> None:
+    last = max(m.target_s for m in team.members.values())
+    for m in team.members.values():
+        m.takeoff_s = math.inf
+    out = team.handle(act.Tick(), last + FlightConfig().overrun_s + 1.0)
+    assert of(out, act.Stop) and team.finished
+    assert "overran" in reports(out, EventKind.ABORT)[0].reason
+
+
+# -- restart ------------------------------------------------------------------------------------
+
+
+def test_a_pickled_controller_decides_as_the_one_it_was_taken_from(
+    team: TeamController, paper: tuple[Scenario, World, Schedule]
+) -> None:
+    vid = "UAV2"
+    m, t0 = flying(team, vid, 600.0)
+    team.handle(fix(team, vid, 20_000.0, t0, 25.0), t0)
+    copy = pickle.loads(pickle.dumps(team))
+    assert copy.world is None  # rebuilt from the scenario on a restart
+    copy.rebind_world(paper[1])
+    t1 = t0 + 400.0
+    a = team.handle(fix(team, vid, 29_000.0, t1, 25.0), t1)
+    b = copy.handle(fix(copy, vid, 29_000.0, t1, 25.0), t1)
+    assert [type(x) for x in a] == [type(x) for x in b]
+    assert of(a, act.CommandSpeed) == of(b, act.CommandSpeed)
+    snap = copy.snapshot(t1)
+    assert {v["id"] for v in snap["vehicles"]} == set(team.members)
+    uav2 = next(v for v in snap["vehicles"] if v["id"] == vid)
+    assert uav2["state"] == "on_route" and uav2["slot_s"] == pytest.approx(m.target_s)
