@@ -5,7 +5,7 @@ PY := $(VENV)/bin/python
 STAMP := $(VENV)/.installed
 OUT ?= out
 
-.PHONY: test test-quick lint typecheck pytest demo bench clean
+.PHONY: test test-quick lint typecheck pytest demo serve bench clean
 
 $(PY):
 	$(PYTHON) -m venv $(VENV)
@@ -38,9 +38,13 @@ demo: $(STAMP)
 	$(PY) -m planner schedule scenarios/paper_three_uav.yaml --popup --seed 1 --out $(OUT)/schedule.json --plot $(OUT)/speeds.png
 	$(PY) -m planner export $(OUT)/schedule.json --vehicle UAV3 --format qgc --out $(OUT)/UAV3.plan
 	$(PY) -m planner export $(OUT)/schedule.json --vehicle UAV3 --format wpl --out $(OUT)/UAV3.waypoints
-	$(PY) -m gcs rehearse scenarios/paper_three_uav.yaml --speedup 200 --wind 5,270 --loss 0.1 --seed 1 --json $(OUT)/rehearsal.json --report $(OUT)/rehearsal
+	$(PY) -m gcs demo --report $(OUT)/demo-report
 	@echo "demo: plan in $(OUT)/plan.json, plot in $(OUT)/paths.png, schedule in $(OUT)/schedule.json, speeds in $(OUT)/speeds.png"
-	@echo "demo: rehearsal (paper scenario flown against stub vehicles) in $(OUT)/rehearsal.json; report: $(OUT)/rehearsal/index.html"
+	@echo "demo: the paper flight through the service (REST API and stream) against stub vehicles: $(OUT)/demo-report/flight.json; report: $(OUT)/demo-report/index.html"
+
+# The coordinator service until interrupted (TCGCS_* settings; an admin token in tcgcs-data/admin.token).
+serve: $(STAMP)
+	$(PY) -m gcs serve
 
 bench: $(STAMP)
 	$(PY) bench/bench_planner.py

@@ -65,6 +65,17 @@ class Subscription:
             await self._wake.wait()
         return self._queue.popleft()
 
+    async def get_within(self, timeout_s: float) -> FlightEvent | None:
+        """The next event, waiting at most ``timeout_s`` (None: none came, or closed)."""
+        event = self.get_nowait()
+        if event is not None or self.closed or timeout_s <= 0.0:
+            return event
+        try:
+            async with asyncio.timeout(timeout_s):
+                return await self.get()
+        except TimeoutError:
+            return None
+
     def __aiter__(self) -> AsyncIterator[FlightEvent]:
         return self._iterate()
 
@@ -132,6 +143,11 @@ class EventBus:
     def since(self, after_seq: int) -> list[FlightEvent]:
         """The kept events with ``seq > after_seq``, in order."""
         return [e for e in self._history if e.seq > after_seq]
+
+    @property
+    def first_kept_seq(self) -> int:
+        """The sequence number of the oldest event still kept (the next one's, before any)."""
+        return self._history[0].seq if self._history else self._first_seq
 
     @property
     def last_seq(self) -> int:

@@ -151,6 +151,8 @@ class FlightRunner:
         """Called with a pickled controller after every change worth keeping (see
         :data:`CHECKPOINT_WALL_S`); :meth:`resume` takes it back."""
         self.resumed = False
+        self.upload_results: dict[str, str | None] = {}
+        """Per vehicle, after :meth:`upload_all`: None (on board) or why it failed."""
         self._checkpoint_wall_s = -math.inf
         self._checkpoint_dirty = False
         self._group: asyncio.TaskGroup | None = None
@@ -279,13 +281,34 @@ class FlightRunner:
         """
         t0 = time.perf_counter()
         schedule, world = await asyncio.to_thread(self._plan)
-        self.plan_wall_s = time.perf_counter() - t0
+        self._adopt_schedule(schedule, world, time.perf_counter() - t0)
+        return schedule
+
+    @classmethod
+    def planned(
+        cls,
+        scenario: Scenario,
+        schedule: Schedule,
+        world: World,
+        clock: MissionClock,
+        *,
+        config: FlightConfig | None = None,
+        bus: EventBus | None = None,
+        plan_wall_s: float = 1.0,
+    ) -> FlightRunner:
+        """A runner for a schedule planned already (``plan_wall_s``: how long that took, the
+        first estimate of a re-plan's wall time)."""
+        runner = cls(scenario, clock, config=config, bus=bus)
+        runner._adopt_schedule(schedule, world, plan_wall_s)
+        return runner
+
+    def _adopt_schedule(self, schedule: Schedule, world: World, plan_wall_s: float) -> None:
+        self.plan_wall_s = plan_wall_s
         self.team = TeamController(self.scenario, schedule, world, self.config, rng=self.rng)
         for a in schedule.adjustments:
             self._publish(
                 act.Report(EventKind.PLAN, a.reason, a.vehicle, a.strategy, a.value, a.time_s)
             )
-        return schedule
 
     def _plan(self) -> tuple[Schedule, World]:
         scenario = self.scenario
@@ -518,7 +541,7 @@ class FlightRunner:
         self._set_state(FlightState.UPLOADING)
         uploads = team.initial_uploads()
         errors = await asyncio.gather(*(self._outcome(self._upload(u)) for u in uploads))
-        results: dict[str, str | None] = {}
+        results = self.upload_results
         for u, err in zip(uploads, errors, strict=True):
             results[u.vehicle_id] = err
             self._feed(act.Installed(u, err))

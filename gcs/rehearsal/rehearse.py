@@ -107,7 +107,7 @@ class RehearsalOptions:
     or uploaded again that is already so."""
 
 
-def _stub_homes(coord: FlightRunner) -> list[str]:
+def stub_homes(coord: FlightRunner) -> list[str]:
     assert coord.schedule is not None
     scenario = coord.scenario
     frame = scenario.frame()
@@ -123,7 +123,7 @@ def _stub_homes(coord: FlightRunner) -> list[str]:
     return out
 
 
-def _stub_args(
+def stub_args(
     opts: RehearsalOptions, coord: FlightRunner, truth: Path, start_utc_s: float
 ) -> list[str]:
     scenario = opts.scenario
@@ -143,7 +143,7 @@ def _stub_args(
         "--mission-timeout",
         "0.05",
     ]
-    for home in _stub_homes(coord):
+    for home in stub_homes(coord):
         cmd += ["--home", home]
     for v in scenario.vehicles:
         cmd += ["--airspeed", f"{v.speed_min_m_s:g},{v.cruise_m_s:g},{v.speed_max_m_s:g}"]
@@ -302,7 +302,7 @@ async def _rehearse(
             stub_start = time.time()
             stub = await StubProcess.start(
                 len(opts.scenario.vehicles),
-                _stub_args(opts, coord, truth_path, stub_start),
+                stub_args(opts, coord, truth_path, stub_start),
                 control=bool(opts.blackouts),
             )
             conns = stub.connections

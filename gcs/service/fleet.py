@@ -16,6 +16,7 @@ from dataclasses import dataclass
 
 from gcs.errors import GcsError
 from gcs.mavlink.link import Link
+from gcs.mavlink.signing import SigningConfig
 from gcs.mavlink.vehicle import Vehicle
 from gcs.service.stubs import StubProcess
 
@@ -50,15 +51,33 @@ class Fleet:
         self._stack = contextlib.AsyncExitStack()
         self._lock = asyncio.Lock()
 
-    async def vehicle(self, connection: str, system_id: int | None = None) -> FleetVehicle:
-        """The vehicle at ``connection``, its link opened (and its HEARTBEAT heard) the first
-        time it is asked for."""
+    async def vehicle(
+        self,
+        connection: str,
+        system_id: int | None = None,
+        *,
+        signing: SigningConfig | None = None,
+    ) -> FleetVehicle:
+        """The vehicle at ``connection``, its link opened (signed with ``signing``) and its
+        HEARTBEAT heard the first time it is asked for.
+
+        Raises
+        ------
+        ValueError
+            A malformed connection string.
+        """
         async with self._lock:
             held = self._vehicles.get(connection)
             if held is not None:
                 return held
-            link = await self._stack.enter_async_context(Link.open(connection))
-            peer = await link.wait_vehicle(system_id, timeout_s=self.wait_s)
+            link = Link.open(connection, signing=signing)
+            await link.start()
+            try:
+                peer = await link.wait_vehicle(system_id, timeout_s=self.wait_s)
+            except BaseException:
+                await link.close()
+                raise
+            self._stack.push_async_callback(link.close)
             held = FleetVehicle(connection, link, Vehicle(link, peer.system_id, peer.component_id))
             self._vehicles[connection] = held
             return held
@@ -104,6 +123,10 @@ class Fleet:
         for held in self._vehicles.values():
             if held.flight_id == flight_id:
                 held.flight_id = None
+
+    def held(self, connection: str) -> FleetVehicle | None:
+        """The vehicle at ``connection`` if its link is open."""
+        return self._vehicles.get(connection)
 
     def flight_of(self, connection: str) -> str | None:
         held = self._vehicles.get(connection)

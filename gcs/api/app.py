@@ -1,0 +1,140 @@
+"""``create_app(settings)``: the FastAPI app, with a lifespan that owns the engine.
+
+Errors are one JSON shape (:class:`~gcs.api.schemas.Problem`): the engine's errors by their
+status, a body that does not validate as 422 with the field paths. ``/v1/health`` says the
+process lives; ``/v1/ready`` that the database answers and the engine runs; ``/metrics`` is
+Prometheus text.
+"""
+
+from __future__ import annotations
+
+import logging
+from collections.abc import AsyncIterator
+from contextlib import asynccontextmanager
+from typing import Any
+
+from fastapi import APIRouter, FastAPI, Request
+from fastapi.exceptions import RequestValidationError
+from fastapi.responses import JSONResponse, Response
+from sqlalchemy import text
+from starlette.exceptions import HTTPException as StarletteHTTPException
+
+from gcs.api.auth import TokenTable, admin_token_file
+from gcs.api.idempotency import IdempotencyMiddleware
+from gcs.api.metrics import metrics_text
+from gcs.api.routes import flights, resources
+from gcs.api.routes.common import ERRORS
+from gcs.api.settings import Settings
+from gcs.service.engine import Engine, Infeasible, InvalidInput, ServiceError
+from gcs.store.repository import Store, StoreConflict, StoreError, StoreNotFound
+
+__all__ = ["create_app"]
+
+log = logging.getLogger(__name__)
+
+
+def create_app(settings: Settings | None = None) -> FastAPI:
+    settings = settings or Settings()
+
+    @asynccontextmanager
+    async def lifespan(app: FastAPI) -> AsyncIterator[None]:
+        settings.data_dir.mkdir(parents=True, exist_ok=True)
+        tokens = dict(settings.tokens)
+        if not tokens:
+            token, path = admin_token_file(settings.data_dir)
+            tokens = {token: ["admin"]}
+            log.warning("no TCGCS_TOKENS: an admin token is in %s", path)
+        app.state.tokens = TokenTable(tokens)
+        store = Store.open(settings.db_url())
+        engine = Engine(store, settings.data_dir)
+        app.state.engine = engine
+        app.state.store = store
+        try:
+            yield
+        finally:
+            await engine.close()
+            store.close()
+
+    app = FastAPI(
+        title="tcgcs",
+        summary="Time-coordinated ground control for teams of fixed-wing UAVs",
+        version="1",
+        openapi_url="/v1/openapi.json",
+        docs_url="/v1/docs",
+        redoc_url=None,
+        lifespan=lifespan,
+    )
+    app.add_middleware(IdempotencyMiddleware)
+    _errors(app)
+    v1 = APIRouter(prefix="/v1")
+    v1.include_router(resources.router)
+    v1.include_router(flights.router)
+
+    @v1.get("/health", tags=["ops"])
+    async def health() -> dict[str, str]:
+        """The process is alive."""
+        return {"status": "ok"}
+
+    @v1.get("/ready", tags=["ops"], responses={503: ERRORS[400]})
+    async def ready(request: Request) -> Response:
+        """The database answers and the engine runs."""
+        store: Store = request.app.state.store
+        try:
+            with store.engine.connect() as conn:
+                conn.execute(text("select 1"))
+        except Exception as err:
+            return JSONResponse({"detail": f"database: {type(err).__name__}"}, 503)
+        return JSONResponse({"status": "ready", "flights": len(request.app.state.engine.flights)})
+
+    app.include_router(v1)
+
+    @app.get("/metrics", tags=["ops"], response_class=Response)
+    async def metrics(request: Request) -> Response:
+        """Prometheus text: links, messages, malformed frames, commands, uploads, arrival
+        errors, event-bus drops, flights."""
+        return Response(metrics_text(request.app.state.engine), media_type="text/plain")
+
+    return app
+
+
+def _errors(app: FastAPI) -> None:
+    def problem(status: int, detail: str, **extra: Any) -> JSONResponse:
+        return JSONResponse({"detail": detail, **extra}, status_code=status)
+
+    @app.exception_handler(ServiceError)
+    async def service_error(request: Request, err: ServiceError) -> JSONResponse:
+        if isinstance(err, Infeasible):
+            return problem(
+                err.status, str(err), earliest_feasible_s=err.earliest_s, vehicle=err.vehicle
+            )
+        if isinstance(err, InvalidInput):
+            return problem(err.status, str(err), errors=err.errors or None)
+        return problem(err.status, str(err))
+
+    @app.exception_handler(StoreError)
+    async def store_error(request: Request, err: StoreError) -> JSONResponse:
+        if isinstance(err, StoreNotFound):
+            return problem(404, str(err))
+        if isinstance(err, StoreConflict):
+            return problem(409, str(err))
+        return problem(400, str(err))
+
+    @app.exception_handler(RequestValidationError)
+    async def invalid(request: Request, err: RequestValidationError) -> JSONResponse:
+        errors = [
+            {
+                "loc": [str(x) for x in e.get("loc", ())],
+                "msg": str(e.get("msg")),
+                "type": e.get("type"),
+            }
+            for e in err.errors()
+        ]
+        first = errors[0] if errors else {"loc": [], "msg": "invalid"}
+        where = ".".join(first["loc"][1:] if first["loc"][:1] == ["body"] else first["loc"])
+        return problem(422, f"{where or 'body'}: {first['msg']}", errors=errors)
+
+    @app.exception_handler(StarletteHTTPException)
+    async def http_error(request: Request, err: StarletteHTTPException) -> JSONResponse:
+        return JSONResponse(
+            {"detail": str(err.detail)}, status_code=err.status_code, headers=err.headers
+        )

@@ -1,0 +1,69 @@
+"""Bearer tokens with scopes: every mutating route needs one (401 without, 403 with a token
+that lacks the scope); tokens are compared in constant time and never logged or returned."""
+
+from __future__ import annotations
+
+import hmac
+import os
+import secrets
+from collections.abc import Callable, Mapping, Sequence
+from pathlib import Path
+
+from fastapi import Depends, HTTPException, Request
+from fastapi.security import HTTPAuthorizationCredentials, HTTPBearer
+
+__all__ = ["TokenTable", "admin_token_file", "require"]
+
+_bearer = HTTPBearer(auto_error=False, description="a token of the service (TCGCS_TOKENS)")
+_credentials = Depends(_bearer)
+
+
+class TokenTable:
+    """The service's tokens and their scopes."""
+
+    def __init__(self, tokens: Mapping[str, Sequence[str]]) -> None:
+        self._tokens = [(t.encode(), frozenset(s)) for t, s in tokens.items()]
+
+    def scopes(self, token: str) -> frozenset[str] | None:
+        """The token's scopes, or None for an unknown token (every token is compared, in
+        constant time, whichever matches)."""
+        given = token.encode()
+        found: frozenset[str] | None = None
+        for known, scopes in self._tokens:
+            if hmac.compare_digest(known, given):
+                found = scopes
+        return found
+
+
+def admin_token_file(data_dir: Path) -> tuple[str, Path]:
+    """The admin token kept in ``DATA_DIR/admin.token`` (made, mode 0600, the first time)."""
+    path = data_dir / "admin.token"
+    if path.exists():
+        return path.read_text(encoding="utf-8").strip(), path
+    data_dir.mkdir(parents=True, exist_ok=True)
+    token = secrets.token_urlsafe(32)
+    fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o600)
+    with os.fdopen(fd, "w", encoding="utf-8") as f:
+        f.write(token + "\n")
+    return token, path
+
+
+def require(scope: str) -> Callable[..., None]:
+    """A route dependency: a bearer token holding ``scope`` (or ``admin``)."""
+
+    def check(
+        request: Request, credentials: HTTPAuthorizationCredentials | None = _credentials
+    ) -> None:
+        if credentials is None or credentials.scheme.lower() != "bearer":
+            raise HTTPException(
+                401, "a bearer token is required", headers={"WWW-Authenticate": "Bearer"}
+            )
+        table: TokenTable = request.app.state.tokens
+        scopes = table.scopes(credentials.credentials)
+        if scopes is None:
+            raise HTTPException(401, "unknown token", headers={"WWW-Authenticate": "Bearer"})
+        if scope not in scopes and "admin" not in scopes:
+            raise HTTPException(403, f"this token lacks the {scope!r} scope")
+
+    check.__name__ = f"require_{scope}"
+    return check

@@ -1,0 +1,273 @@
+"""Flights: create, upload, launch, steer (threats, team time, abort), read (snapshot, events,
+record, report) and the live stream (WebSocket, or SSE with ``Accept: text/event-stream``)."""
+
+from __future__ import annotations
+
+import asyncio
+import json
+from collections.abc import AsyncIterator
+from typing import Any
+
+from fastapi import APIRouter, Depends, Header, Query, Request, Response, WebSocket
+from fastapi.responses import FileResponse, StreamingResponse
+from starlette.websockets import WebSocketDisconnect
+
+from gcs.api.auth import require
+from gcs.api.routes.common import ERRORS, engine_of
+from gcs.api.schemas import AbortIn, FlightIn, LaunchIn, TeamTimeIn, TeamTimeOut, ThreatIn
+from gcs.coordination.events import FlightEvent
+from gcs.coordination.runner import ENDED
+from gcs.service.engine import Engine, InvalidInput, NotFound, PreconditionFailed, Rehearsal
+
+router = APIRouter(responses=ERRORS, tags=["flights"])
+observe = [Depends(require("observe"))]
+operate = [Depends(require("operate"))]
+
+TELEMETRY_WALL_S = 0.5
+"""The stream sends every vehicle's position, ETA and error at least this often (wall s)."""
+
+
+def event_json(e: FlightEvent) -> dict[str, Any]:
+    return {
+        "seq": e.seq,
+        "kind": e.kind.value,
+        "t_s": round(e.t_s, 3),
+        "utc_s": None if e.utc_s != e.utc_s else round(e.utc_s, 3),
+        "vehicle": e.vehicle,
+        "strategy": e.strategy,
+        "value": e.value,
+        "reason": e.reason,
+        "payload": {k: v for k, v in e.payload.items() if k != "items"},
+    }
+
+
+@router.post("/flights", status_code=201, dependencies=operate)
+async def create_flight(body: FlightIn, request: Request) -> dict[str, Any]:
+    """A flight of a schedule on registered vehicles, or on bundled simulator vehicles
+    (``rehearsal``); 409 names a vehicle already in a flight."""
+    r = body.rehearsal
+    rehearsal = None
+    if r is not None:
+        rehearsal = Rehearsal(r.speedup, r.wind_m_s, r.wind_from_deg, r.loss, r.seed)
+    engine = engine_of(request)
+    handle = await engine.create_flight(body.schedule_id, body.vehicles, rehearsal)
+    return engine.snapshot(handle.id)
+
+
+@router.get("/flights", dependencies=observe)
+async def flights(request: Request) -> list[dict[str, Any]]:
+    return engine_of(request).flight_views()
+
+
+@router.get("/flights/{flight_id}", dependencies=observe)
+async def snapshot(flight_id: str, request: Request) -> dict[str, Any]:
+    """Everything a UI shows: state, team time and its version, per vehicle position, state,
+    ETA and error against its slot, strategy, link; threats in force."""
+    return engine_of(request).snapshot(flight_id)
+
+
+@router.post("/flights/{flight_id}/upload", status_code=202, dependencies=operate)
+async def upload(flight_id: str, request: Request) -> dict[str, Any]:
+    """Upload every vehicle's mission (verified); per-vehicle results in the snapshot's
+    ``uploads`` and in ``upload`` events."""
+    return engine_of(request).upload(flight_id)
+
+
+@router.post("/flights/{flight_id}/launch", status_code=202, dependencies=operate)
+async def launch(flight_id: str, body: LaunchIn, request: Request) -> dict[str, Any]:
+    """Start the mission at a UTC (or ``delay_s`` from now): each vehicle is launched at its
+    takeoff time and the arrivals held."""
+    return engine_of(request).launch(flight_id, body.start_utc_s, body.delay_s)
+
+
+@router.post("/flights/{flight_id}/abort", dependencies=operate)
+async def abort(flight_id: str, body: AbortIn, request: Request) -> dict[str, Any]:
+    """Abort one vehicle (or all): RTL or LOITER; per vehicle None or why not."""
+    return await engine_of(request).abort(flight_id, body.vehicle, body.mode)
+
+
+@router.post("/flights/{flight_id}/threats", status_code=201, dependencies=operate)
+async def add_threat(flight_id: str, body: ThreatIn, request: Request) -> dict[str, Any]:
+    """A threat for the flight: re-planned around (the vehicles it touches) when it appears;
+    before the launch it is queued."""
+    return engine_of(request).add_threat(flight_id, body.threat, body.at_s)
+
+
+@router.delete("/flights/{flight_id}/threats/{threat_id}", status_code=204, dependencies=operate)
+async def remove_threat(flight_id: str, threat_id: str, request: Request) -> Response:
+    engine_of(request).remove_threat(flight_id, threat_id)
+    return Response(status_code=204)
+
+
+@router.get("/flights/{flight_id}/team-time", dependencies=observe)
+async def team_time(flight_id: str, request: Request, response: Response) -> TeamTimeOut:
+    out = engine_of(request).team_time(flight_id)
+    response.headers["ETag"] = f'"{out["version"]}"'
+    return TeamTimeOut(**out)
+
+
+@router.put("/flights/{flight_id}/team-time", dependencies=operate)
+async def move_team_time(
+    flight_id: str,
+    body: TeamTimeIn,
+    request: Request,
+    response: Response,
+    if_match: str | None = Header(default=None),
+) -> TeamTimeOut:
+    """Move the team arrival (mission s). ``If-Match`` with the version read (the ETag of
+    GET team-time): stale → 412; a time some vehicle cannot make → 409 with the earliest
+    feasible time and that vehicle."""
+    version = None
+    if if_match is not None:
+        try:
+            version = int(if_match.strip().strip('"'))
+        except ValueError:
+            raise PreconditionFailed(f"If-Match: {if_match!r} is not a version") from None
+    out = engine_of(request).move_team_time(flight_id, body.arrival_s, version)
+    response.headers["ETag"] = f'"{out["version"]}"'
+    return TeamTimeOut(**out)
+
+
+@router.get("/flights/{flight_id}/events", dependencies=observe)
+async def events(
+    flight_id: str,
+    request: Request,
+    after_seq: int = Query(default=0, ge=0, le=2**31),
+    limit: int = Query(default=500, ge=1, le=5000),
+) -> dict[str, Any]:
+    """The flight's events after ``after_seq``, in order (page on with ``next_after_seq``)."""
+    page = engine_of(request).events(flight_id, after_seq, limit)
+    out = [event_json(e) for e in page]
+    return {"events": out, "next_after_seq": out[-1]["seq"] if out else after_seq}
+
+
+@router.get("/flights/{flight_id}/record", dependencies=observe)
+async def record(flight_id: str, request: Request) -> dict[str, Any]:
+    """The flight record (``tcgcs-flight/1``) once the flight is over."""
+    handle = engine_of(request).flight(flight_id)
+    if handle.record is None:
+        raise NotFound(f"flight {flight_id} has no record yet (it is {handle.runner.state})")
+    return handle.record
+
+
+@router.get("/flights/{flight_id}/report/{name}", dependencies=observe)
+async def report_file(flight_id: str, name: str, request: Request) -> FileResponse:
+    """A file of the flight's report (index.html, arrivals.md, paths.png, ...)."""
+    handle = engine_of(request).flight(flight_id)
+    if handle.report_dir is None:
+        raise NotFound(f"flight {flight_id} has no report yet")
+    path = handle.report_dir / name
+    if "/" in name or name.startswith(".") or not path.is_file():
+        raise NotFound(f"no report file {name!r}")
+    return FileResponse(path)
+
+
+# -- the stream ---------------------------------------------------------------------------------
+
+
+async def stream(engine: Engine, flight_id: str, after_seq: int) -> AsyncIterator[dict[str, Any]]:
+    """A snapshot, then every event after ``after_seq`` in order, with a telemetry batch at
+    least every :data:`TELEMETRY_WALL_S`; ends after the flight has (or when this client falls
+    so far behind that an event would be lost: reconnect with the last ``seq`` seen)."""
+    handle = engine.flight(flight_id)
+    bus = handle.runner.bus
+    if after_seq < bus.first_kept_seq - 1:
+        backlog = engine.events(flight_id, after_seq, 100_000)
+    else:
+        backlog = []
+    yield {"type": "snapshot", "data": engine.snapshot(flight_id)}
+    last = after_seq
+    for e in backlog:
+        last = e.seq
+        yield {"type": "event", "data": event_json(e)}
+    sub = bus.subscribe(maxsize=10_000, after_seq=last)
+    loop = asyncio.get_running_loop()
+    next_telemetry = loop.time()
+    try:
+        while True:
+            timeout = max(0.0, next_telemetry - loop.time())
+            got = await sub.get_within(timeout)
+            if sub.dropped:
+                yield {"type": "behind", "data": {"after_seq": last}}
+                return
+            if got is not None:
+                if got.seq > last:
+                    last = got.seq
+                    yield {"type": "event", "data": event_json(got)}
+                continue
+            if sub.closed:
+                return
+            next_telemetry = loop.time() + TELEMETRY_WALL_S
+            snap = engine.snapshot(flight_id)
+            yield {"type": "telemetry", "data": _telemetry(snap)}
+            if handle.runner.state in ENDED and handle.record is not None:
+                yield {"type": "end", "data": {"state": handle.runner.state.value}}
+                return
+    finally:
+        sub.close()
+
+
+def _telemetry(snap: dict[str, Any]) -> dict[str, Any]:
+    keys = (
+        "id", "state", "east_m", "north_m", "alt_amsl_m", "heading_deg", "airspeed_m_s",
+        "commanded_m_s", "eta_s", "error_s", "slot_s", "link_silent", "last_fix_age_s",
+    )  # fmt: skip
+    return {
+        "t_s": snap["t_s"],
+        "state": snap["state"],
+        "team_time_s": snap["team_time_s"],
+        "vehicles": [{k: v.get(k) for k in keys} for v in snap["vehicles"]],
+    }
+
+
+@router.get(
+    "/flights/{flight_id}/stream",
+    dependencies=observe,
+    responses={200: {"content": {"text/event-stream": {}}, "description": "SSE"}},
+)
+async def stream_sse(
+    flight_id: str,
+    request: Request,
+    after_seq: int = Query(default=0, ge=0, le=2**31),
+    last_event_id: str | None = Header(default=None),
+) -> StreamingResponse:
+    """The stream as server-sent events (``event:`` the type, ``id:`` an event's seq)."""
+    if "text/event-stream" not in request.headers.get("accept", ""):
+        raise InvalidInput("stream: ask with Accept: text/event-stream, or open a WebSocket")
+    engine = engine_of(request)
+    engine.flight(flight_id)
+    if last_event_id is not None and last_event_id.isdigit():
+        after_seq = max(after_seq, int(last_event_id))
+
+    async def body() -> AsyncIterator[bytes]:
+        async for msg in stream(engine, flight_id, after_seq):
+            seq = msg["data"].get("seq") if msg["type"] == "event" else None
+            head = f"event: {msg['type']}\n" + (f"id: {seq}\n" if seq is not None else "")
+            yield (head + f"data: {json.dumps(msg['data'])}\n\n").encode()
+
+    return StreamingResponse(body(), media_type="text/event-stream")
+
+
+@router.websocket("/flights/{flight_id}/stream")
+async def stream_ws(websocket: WebSocket, flight_id: str, after_seq: int = 0) -> None:
+    """The stream over a WebSocket: JSON messages ``{"type", "data"}``. The token comes as
+    ``Authorization: Bearer`` or ``?token=`` (browsers cannot set headers on a WebSocket)."""
+    token = websocket.query_params.get("token")
+    auth = websocket.headers.get("authorization", "")
+    if auth.lower().startswith("bearer "):
+        token = auth[7:]
+    scopes = None if token is None else websocket.app.state.tokens.scopes(token)
+    if scopes is None:
+        await websocket.close(code=4401, reason="a bearer token is required")
+        return
+    engine: Engine = websocket.app.state.engine
+    if flight_id not in engine.flights:
+        await websocket.close(code=4404, reason=f"no flight {flight_id!r}")
+        return
+    await websocket.accept()
+    try:
+        async for msg in stream(engine, flight_id, after_seq):
+            await websocket.send_text(json.dumps(msg))
+        await websocket.close()
+    except WebSocketDisconnect:
+        return

@@ -1,0 +1,780 @@
+"""The service's engine: the fleet, the store, planning jobs and the flights, for the life of
+the process.
+
+Everything an API request does goes through :class:`Engine`: register a vehicle (or start
+bundled simulator vehicles), keep a scenario, plan a schedule as a job, create a flight on a
+schedule and vehicles, upload, launch, steer it (threats, team time, abort) and read it
+(snapshot, events, record, report). A flight is a :class:`~gcs.coordination.runner.FlightRunner`
+with its event and checkpoint writers to the store; its vehicles are claimed from the fleet
+for as long as it runs. Errors are :class:`ServiceError` subclasses that name what is wrong;
+the API maps them to status codes.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import json
+import logging
+import math
+import time
+import uuid
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Literal
+
+import numpy as np
+import yaml
+from pydantic import ValidationError
+
+from gcs.coordination.bus import EventBus, Subscription
+from gcs.coordination.config import FlightConfig
+from gcs.coordination.events import FlightEvent
+from gcs.coordination.missionclock import MissionClock
+from gcs.coordination.runner import ENDED, FlightRunner, FlightState
+from gcs.coordination.team import TeamTimeRefused
+from gcs.errors import GcsError
+from gcs.mavlink.signing import SigningConfig
+from gcs.rehearsal.rehearse import RehearsalOptions, flight_record, stub_args
+from gcs.rehearsal.report import write_report
+from gcs.service.fleet import Fleet, FleetVehicle, VehicleBusy
+from gcs.service.stubs import StubProcess
+from gcs.store.repository import CheckpointWriter, EventWriter, Store, StoreNotFound
+from planner.errors import InfeasibleError, PlannerError
+from planner.missionfile import to_qgc_plan, to_wpl
+from planner.plan import World, build_world, plan
+from planner.retime import build_schedule
+from planner.scenario import Scenario, Threat
+from planner.schedule import Schedule
+from planner.schedulefile import path_mission
+
+__all__ = [
+    "Conflict",
+    "Engine",
+    "Infeasible",
+    "InvalidInput",
+    "NotFound",
+    "PreconditionFailed",
+    "ServiceError",
+]
+
+log = logging.getLogger(__name__)
+
+JobState = Literal["queued", "running", "succeeded", "failed"]
+
+
+class ServiceError(GcsError):
+    status = 400
+
+
+class NotFound(ServiceError):
+    status = 404
+
+
+class Conflict(ServiceError):
+    status = 409
+
+
+class Infeasible(Conflict):
+    """A time no vehicle set can make: names the earliest feasible time and the vehicle."""
+
+    def __init__(self, message: str, earliest_s: float | None, vehicle: str | None) -> None:
+        super().__init__(message)
+        self.earliest_s = earliest_s
+        self.vehicle = vehicle
+
+
+class PreconditionFailed(ServiceError):
+    status = 412
+
+
+class InvalidInput(ServiceError):
+    """A body that does not validate: the field path and what is wrong with it."""
+
+    status = 422
+
+    def __init__(self, message: str, errors: Sequence[Mapping[str, Any]] = ()) -> None:
+        super().__init__(message)
+        self.errors = list(errors)
+
+
+def parse_scenario_text(body: str, media_type: str) -> Scenario:
+    """A scenario from YAML or JSON text.
+
+    Raises
+    ------
+    InvalidInput
+        Not YAML/JSON (with line and column), or a field that does not validate (its path).
+    """
+    try:
+        data = json.loads(body) if "json" in media_type else yaml.safe_load(body)
+    except json.JSONDecodeError as err:
+        where = f"line {err.lineno} column {err.colno}"
+        raise InvalidInput(f"not valid JSON: {err.msg} at {where}") from None
+    except yaml.YAMLError as err:
+        mark = getattr(err, "problem_mark", None)
+        where = "" if mark is None else f" at line {mark.line + 1} column {mark.column + 1}"
+        problem = getattr(err, "problem", None) or type(err).__name__
+        raise InvalidInput(f"not valid YAML: {problem}{where}") from None
+    try:
+        return Scenario.model_validate(data)
+    except ValidationError as err:
+        errors = [
+            {"loc": [str(x) for x in e["loc"]], "msg": e["msg"], "type": e["type"]}
+            for e in err.errors(include_url=False, include_context=False, include_input=False)
+        ]
+        first = errors[0]
+        raise InvalidInput(
+            f"scenario: {'.'.join(first['loc']) or '(top level)'}: {first['msg']}", errors
+        ) from None
+
+
+@dataclass
+class Job:
+    """Long work (a schedule): polled until it has succeeded or failed."""
+
+    id: str
+    kind: str
+    state: JobState = "queued"
+    progress: float = 0.0
+    result: dict[str, Any] | None = None
+    error: dict[str, Any] | None = None
+    created_utc_s: float = field(default_factory=time.time)
+
+    def view(self) -> dict[str, Any]:
+        return {
+            "id": self.id,
+            "kind": self.kind,
+            "state": self.state,
+            "progress": self.progress,
+            "result": self.result,
+            "error": self.error,
+            "created_utc_s": self.created_utc_s,
+        }
+
+
+@dataclass
+class PlannedSchedule:
+    id: str
+    scenario_id: str
+    scenario: Scenario
+    schedule: Schedule
+    world: World
+    seed: int
+    plan_wall_s: float
+
+    def view(self) -> dict[str, Any]:
+        s = self.schedule
+        return {
+            "id": self.id,
+            "scenario_id": self.scenario_id,
+            "seed": self.seed,
+            "required_arrival_s": s.required_arrival_s,
+            "arrival_reason": s.arrival_reason,
+            "plan_wall_s": round(self.plan_wall_s, 3),
+            "vehicles": [
+                {
+                    "id": vs.vehicle_id,
+                    "takeoff_s": round(vs.takeoff_s, 3),
+                    "arrival_s": round(vs.arrival_s, 3),
+                    "path_length_m": round(vs.path.length_m, 1),
+                    "loiter_turns": sum(lo.turns for lo in vs.loiters),
+                }
+                for vs in s.vehicles
+            ],
+        }
+
+
+@dataclass
+class Rehearsal:
+    """Bundled simulator vehicles for a flight: speed-up, wind, loss, seed."""
+
+    speedup: float = 200.0
+    wind_m_s: float | None = None
+    wind_from_deg: float = 0.0
+    loss: float = 0.0
+    seed: int = 0
+
+
+@dataclass
+class FlightHandle:
+    id: str
+    schedule: PlannedSchedule
+    runner: FlightRunner
+    vehicles: dict[str, FleetVehicle]
+    connections: dict[str, str]
+    rehearsal: Rehearsal | None = None
+    stub: StubProcess | None = None
+    truth_path: Path | None = None
+    uploads: dict[str, dict[str, Any]] = field(default_factory=dict)
+    task: asyncio.Task[None] | None = None
+    writer: asyncio.Task[None] | None = None
+    kept: Subscription | None = None
+    checkpoints: CheckpointWriter | None = None
+    record: dict[str, Any] | None = None
+    report_dir: Path | None = None
+    wall0: float = field(default_factory=time.perf_counter)
+
+
+class Engine:
+    """The fleet, the store, jobs and flights of one service process."""
+
+    def __init__(self, store: Store, data_dir: Path, *, config: FlightConfig | None = None):
+        self.store = store
+        self.data_dir = data_dir
+        self.config = config or FlightConfig()
+        self.fleet = Fleet()
+        self.jobs: dict[str, Job] = {}
+        self.schedules: dict[str, PlannedSchedule] = {}
+        self.flights: dict[str, FlightHandle] = {}
+        self.vehicle_ids: dict[str, str] = {}
+        """Vehicle id (the API's) -> connection string."""
+        self._tasks: set[asyncio.Task[Any]] = set()
+        self._stubs: list[StubProcess] = []
+
+    async def close(self) -> None:
+        for handle in list(self.flights.values()):
+            for task in (handle.task,):
+                if task is not None and not task.done():
+                    task.cancel()
+                    with contextlib.suppress(BaseException):
+                        await task
+            await self._stop_writers(handle)
+            if handle.stub is not None:
+                await handle.stub.stop()
+        for task in list(self._tasks):
+            task.cancel()
+        await self.fleet.close()
+        for stub in self._stubs:
+            await stub.stop()
+
+    def _spawn(self, coro: Any) -> asyncio.Task[Any]:
+        task = asyncio.get_running_loop().create_task(coro)
+        self._tasks.add(task)
+        task.add_done_callback(self._tasks.discard)
+        return task
+
+    # -- vehicles -------------------------------------------------------------------------------
+
+    async def add_vehicle(
+        self, connection: str, *, system_id: int | None = None, signing_key: str | None = None
+    ) -> dict[str, Any]:
+        """Register a live vehicle by connection string (its link opened, HEARTBEAT heard).
+
+        Raises
+        ------
+        InvalidInput
+            A malformed connection string or signing key.
+        ServiceError
+            No vehicle answered there.
+        """
+        for vid, conn in self.vehicle_ids.items():
+            if conn == connection:
+                return self.vehicle_view(vid)
+        try:
+            signing = None if signing_key is None else _signing(signing_key)
+            held = await self.fleet.vehicle(connection, system_id, signing=signing)
+        except ValueError as err:
+            raise InvalidInput(f"connection: {err}") from None
+        except (GcsError, TimeoutError, OSError) as err:
+            raise ServiceError(f"no vehicle answered at {connection}: {err}") from None
+        vid = f"v{len(self.vehicle_ids) + 1}"
+        self.vehicle_ids[vid] = held.connection
+        return self.vehicle_view(vid)
+
+    def _held(self, vehicle_id: str) -> FleetVehicle:
+        conn = self.vehicle_ids.get(vehicle_id)
+        held = None if conn is None else self.fleet.held(conn)
+        if held is None:
+            raise NotFound(f"no vehicle {vehicle_id!r}")
+        return held
+
+    def vehicle_view(self, vehicle_id: str) -> dict[str, Any]:
+        held = self._held(vehicle_id)
+        st = held.vehicle.state
+        c = held.link.counters
+        age = None
+        if st.last_heartbeat_rx_s is not None:
+            age = max(0.0, time.monotonic() - st.last_heartbeat_rx_s)
+        return {
+            "id": vehicle_id,
+            "connection": held.connection,
+            "system_id": held.vehicle.system_id,
+            "flight_id": held.flight_id,
+            "link": {
+                "heartbeat_age_s": None if age is None else round(age, 3),
+                "healthy": age is not None and age < 3.0,
+                "received": c.received,
+                "sent": c.sent,
+                "malformed": c.malformed + c.crc_errors,
+                "rtt_s": c.rtt_s,
+            },
+            "mode": st.mode,
+            "armed": st.armed,
+            "lat_deg": st.lat_deg,
+            "lon_deg": st.lon_deg,
+            "alt_amsl_m": st.alt_amsl_m,
+            "battery_pct": st.battery_remaining_pct,
+        }
+
+    def vehicle_views(self) -> list[dict[str, Any]]:
+        return [self.vehicle_view(vid) for vid in self.vehicle_ids]
+
+    # -- scenarios ------------------------------------------------------------------------------
+
+    def add_scenario(self, body: str, media_type: str) -> dict[str, Any]:
+        scenario = parse_scenario_text(body, media_type)
+        sid = self.store.save_scenario(body, name=scenario.name, media_type=media_type)
+        return self.scenario_view(sid)
+
+    def scenario(self, scenario_id: str) -> Scenario:
+        try:
+            row = self.store.scenario(scenario_id)
+        except StoreNotFound:
+            raise NotFound(f"no scenario {scenario_id!r}") from None
+        return parse_scenario_text(row.body, row.media_type)
+
+    def scenario_view(self, scenario_id: str) -> dict[str, Any]:
+        s = self.scenario(scenario_id)
+        return {
+            "id": scenario_id,
+            "name": s.name,
+            "vehicles": [v.id for v in s.vehicles],
+            "arrival": s.arrival.model_dump(mode="json"),
+            "threats": [t.id for t in s.threats],
+        }
+
+    # -- schedules (jobs) -----------------------------------------------------------------------
+
+    def submit_schedule(
+        self,
+        scenario_id: str,
+        *,
+        required_arrival_s: float | None = None,
+        seed: int = 0,
+        dry_run: bool = False,
+    ) -> Job:
+        scenario = self.scenario(scenario_id)
+        if required_arrival_s is not None:
+            scenario = _with_arrival(scenario, required_arrival_s)
+        job = Job(uuid.uuid4().hex, "dry_run" if dry_run else "schedule")
+        self.jobs[job.id] = job
+        self._spawn(self._run_schedule(job, scenario_id, scenario, seed, dry_run))
+        return job
+
+    async def _run_schedule(
+        self, job: Job, scenario_id: str, scenario: Scenario, seed: int, dry_run: bool
+    ) -> None:
+        job.state = "running"
+        job.progress = 0.1
+        t0 = time.perf_counter()
+        try:
+            schedule, world = await asyncio.to_thread(_plan, scenario, seed, self.config)
+        except Infeasible as err:
+            job.state = "failed"
+            job.error = {
+                "status": 409,
+                "detail": str(err),
+                "earliest_feasible_s": err.earliest_s,
+                "vehicle": err.vehicle,
+            }
+            return
+        except (PlannerError, GcsError, ValueError) as err:
+            job.state, job.error = "failed", {"status": 422, "detail": str(err)}
+            return
+        except Exception as err:
+            log.exception("schedule job failed")
+            job.state, job.error = "failed", {"status": 500, "detail": type(err).__name__}
+            return
+        wall = time.perf_counter() - t0
+        entry = PlannedSchedule(
+            uuid.uuid4().hex, scenario_id, scenario, schedule, world, seed, wall
+        )
+        if not dry_run:
+            self.schedules[entry.id] = entry
+        job.result = entry.view() if not dry_run else {**entry.view(), "id": None}
+        job.progress = 1.0
+        job.state = "succeeded"
+
+    def job(self, job_id: str) -> Job:
+        job = self.jobs.get(job_id)
+        if job is None:
+            raise NotFound(f"no job {job_id!r}")
+        return job
+
+    def planned(self, schedule_id: str) -> PlannedSchedule:
+        entry = self.schedules.get(schedule_id)
+        if entry is None:
+            raise NotFound(f"no schedule {schedule_id!r}")
+        return entry
+
+    def mission_file(self, schedule_id: str, vehicle: str, fmt: str) -> str:
+        entry = self.planned(schedule_id)
+        vs = entry.schedule.vehicle(vehicle)
+        if vs is None:
+            raise NotFound(f"no vehicle {vehicle!r} in schedule {schedule_id}")
+        items = list(path_mission(entry.schedule, vs, entry.world.terrain).items)
+        if fmt == "plan":
+            return json.dumps(to_qgc_plan(items), indent=1) + "\n"
+        return to_wpl(items)
+
+    # -- flights --------------------------------------------------------------------------------
+
+    async def create_flight(
+        self,
+        schedule_id: str,
+        vehicles: Mapping[str, str] | None,
+        rehearsal: Rehearsal | None,
+    ) -> FlightHandle:
+        """A flight of ``schedule_id`` on registered vehicles (scenario vehicle -> vehicle
+        id), or, with ``rehearsal`` and no vehicles, on bundled simulator vehicles started for
+        it (on the ground at each start, nose along its path).
+
+        Raises
+        ------
+        NotFound
+            No such schedule or vehicle.
+        Conflict
+            A vehicle is already in a flight (named, with that flight).
+        InvalidInput
+            A scenario vehicle without a vehicle, or one named that the scenario lacks.
+        """
+        entry = self.planned(schedule_id)
+        ids = [v.id for v in entry.scenario.vehicles]
+        fid = uuid.uuid4().hex
+        clock = MissionClock()
+        bus = EventBus()
+        runner = FlightRunner.planned(
+            entry.scenario,
+            entry.schedule,
+            entry.world,
+            clock,
+            config=FlightConfig(seed=entry.seed),
+            bus=bus,
+            plan_wall_s=entry.plan_wall_s,
+        )
+        stub: StubProcess | None = None
+        truth: Path | None = None
+        flight_dir = self.data_dir / "flights" / fid
+        if vehicles is None:
+            if rehearsal is None:
+                raise InvalidInput("a flight needs vehicles, or rehearsal options for stubs")
+            flight_dir.mkdir(parents=True, exist_ok=True)
+            truth = flight_dir / "truth.jsonl"
+            opts = self._options(entry, rehearsal, flight_dir, None)
+            stub = await self.fleet.start_stubs(
+                len(ids), stub_args(opts, runner, truth, time.time())
+            )
+            conns = dict(zip(ids, stub.connections, strict=True))
+            sysids: list[int | None] = list(range(1, len(ids) + 1))
+        else:
+            unknown = sorted(set(vehicles) - set(ids))
+            if unknown:
+                raise InvalidInput(f"vehicles: {', '.join(unknown)} not in the scenario")
+            missing = [i for i in ids if i not in vehicles]
+            if missing:
+                raise InvalidInput(f"vehicles: no vehicle for {', '.join(missing)}")
+            conns = {i: self._held(vehicles[i]).connection for i in ids}
+            sysids = [self._held(vehicles[i]).vehicle.system_id for i in ids]
+        try:
+            held = await self.fleet.claim(list(conns.values()), fid, sysids)
+        except VehicleBusy as err:
+            raise Conflict(str(err)) from None
+        handle = FlightHandle(
+            fid,
+            entry,
+            runner,
+            dict(zip(ids, held, strict=True)),
+            conns,
+            rehearsal=rehearsal,
+            stub=stub,
+            truth_path=truth,
+        )
+        for h in held:
+            if h.connection not in self.vehicle_ids.values():
+                self.vehicle_ids[f"v{len(self.vehicle_ids) + 1}"] = h.connection
+        runner.bind({vid: h.vehicle for vid, h in handle.vehicles.items()})
+        self.store.create_flight(entry.scenario_id, conns, flight_id=fid)
+        handle.kept = bus.subscribe(maxsize=1_000_000, after_seq=0)
+        handle.writer = asyncio.get_running_loop().create_task(
+            EventWriter(self.store, fid).run(handle.kept)
+        )
+        handle.checkpoints = CheckpointWriter(self.store, fid)
+        runner.on_checkpoint = handle.checkpoints.offer
+        self.flights[fid] = handle
+        return handle
+
+    def _options(
+        self,
+        entry: PlannedSchedule,
+        rehearsal: Rehearsal | None,
+        flight_dir: Path,
+        connections: Sequence[str] | None,
+    ) -> RehearsalOptions:
+        """The flight as the rehearsal's record describes one (``connections`` None: on
+        bundled simulator vehicles)."""
+        scenario_file = flight_dir / "scenario.yaml"
+        if not scenario_file.exists():
+            flight_dir.mkdir(parents=True, exist_ok=True)
+            scenario_file.write_text(self.store.scenario(entry.scenario_id).body, encoding="utf-8")
+        r = rehearsal or Rehearsal()
+        wind = None if r.wind_m_s is None else (r.wind_m_s, r.wind_from_deg)
+        return RehearsalOptions(
+            scenario_path=scenario_file,
+            scenario=entry.scenario,
+            speedup=r.speedup,
+            wind=wind,
+            loss=r.loss,
+            seed=r.seed,
+            connect=() if connections is None else tuple(connections),
+        )
+
+    def flight(self, flight_id: str) -> FlightHandle:
+        handle = self.flights.get(flight_id)
+        if handle is None:
+            raise NotFound(f"no flight {flight_id!r}")
+        return handle
+
+    async def _wait_clock(self, handle: FlightHandle) -> None:
+        clock = handle.runner.clock
+        try:
+            async with asyncio.timeout(15.0):
+                while not clock.synced:
+                    await asyncio.sleep(0.02)
+        except TimeoutError:
+            raise ServiceError(f"flight {handle.id}: no SYSTEM_TIME from its vehicles") from None
+
+    def upload(self, flight_id: str) -> dict[str, Any]:
+        """Start the upload of every vehicle's mission; per-vehicle results in the snapshot.
+
+        Raises
+        ------
+        Conflict
+            The flight is not planned (already uploaded, running or over).
+        """
+        handle = self.flight(flight_id)
+        state = handle.runner.state
+        if state is not FlightState.PLANNED or handle.task is not None:
+            raise Conflict(f"flight {flight_id} is {state.value}: nothing to upload")
+        handle.uploads = {vid: {"state": "pending"} for vid in handle.vehicles}
+        handle.task = self._spawn(self._upload(handle))
+        return {"flight_id": flight_id, "state": "uploading", "vehicles": handle.uploads}
+
+    async def _upload(self, handle: FlightHandle) -> None:
+        runner = handle.runner
+        try:
+            await self._wait_clock(handle)
+            await runner.upload_all()
+        except GcsError as err:
+            log.info("flight %s: upload failed: %s", handle.id, err)
+        finally:
+            handle.task = None
+            for vid, why in runner.upload_results.items():
+                handle.uploads[vid] = {"state": "ok" if why is None else "failed", "error": why}
+
+    def launch(
+        self, flight_id: str, start_utc_s: float | None, delay_s: float | None
+    ) -> dict[str, Any]:
+        """Start the flight at a UTC (or ``delay_s`` mission seconds from now).
+
+        Raises
+        ------
+        Conflict
+            Not uploaded yet, or already launched or over.
+        """
+        handle = self.flight(flight_id)
+        runner = handle.runner
+        if runner.state is not FlightState.READY or handle.task is not None:
+            raise Conflict(f"flight {flight_id} is {runner.state.value}: it cannot be launched")
+        clock = runner.clock
+        if start_utc_s is None:
+            wait = max(10.0, clock.rate) if delay_s is None else delay_s
+            start_utc_s = clock.now_utc_s() + wait
+        elif not math.isfinite(start_utc_s) or start_utc_s < clock.now_utc_s():
+            raise InvalidInput(f"start_utc_s: {start_utc_s!r} is not a UTC in the future")
+        self.store.update_flight(flight_id, start_utc_s=start_utc_s, team_time_s=runner.team_ref_s)
+        handle.task = self._spawn(self._fly(handle, start_utc_s))
+        return {"flight_id": flight_id, "start_utc_s": start_utc_s}
+
+    async def _fly(self, handle: FlightHandle, start_utc_s: float) -> None:
+        runner = handle.runner
+        try:
+            await runner.run(start_utc_s)
+        except Exception:
+            log.exception("flight %s failed", handle.id)
+        finally:
+            await runner.close()
+            await self._finish(handle)
+
+    async def _finish(self, handle: FlightHandle) -> None:
+        """The record and the report, the writers flushed, the vehicles released."""
+        runner = handle.runner
+        try:
+            if handle.stub is not None and handle.truth_path is not None:
+                await asyncio.sleep(1.5)  # the simulator flushes its truth log each second
+            flight_dir = self.data_dir / "flights" / handle.id
+            conns = None if handle.stub is not None else list(handle.connections.values())
+            opts = self._options(handle.schedule, handle.rehearsal, flight_dir, conns)
+            if runner.start_utc_s is not None:
+                record = flight_record(
+                    runner, opts, handle.truth_path, time.perf_counter() - handle.wall0
+                )
+                record["flight_id"] = handle.id
+                handle.record = record
+                (flight_dir / "flight.json").write_text(json.dumps(record, indent=1) + "\n")
+                report = flight_dir / "report"
+                await asyncio.to_thread(write_report, record, report)
+                handle.report_dir = report
+        except Exception:
+            log.exception("flight %s: record or report failed", handle.id)
+        await self._stop_writers(handle)
+        self.fleet.release(handle.id)
+        if handle.stub is not None:
+            await handle.stub.stop()
+
+    async def _stop_writers(self, handle: FlightHandle) -> None:
+        handle.runner.on_checkpoint = None
+        if handle.checkpoints is not None:
+            await handle.checkpoints.close()
+            handle.checkpoints = None
+        if handle.kept is not None:
+            handle.kept.close()  # the writer drains what is queued, then ends
+        if handle.writer is not None:
+            with contextlib.suppress(BaseException):
+                await handle.writer
+            handle.writer = None
+
+    # -- steering -------------------------------------------------------------------------------
+
+    def _running(self, flight_id: str) -> FlightHandle:
+        handle = self.flight(flight_id)
+        if handle.runner.state in ENDED:
+            raise Conflict(f"flight {flight_id} is {handle.runner.state.value}")
+        return handle
+
+    def add_threat(self, flight_id: str, threat: Threat, at_s: float | None) -> dict[str, Any]:
+        handle = self._running(flight_id)
+        try:
+            handle.runner.add_threat(threat, at_s)
+        except ValueError as err:
+            raise Conflict(str(err)) from None
+        return {"id": threat.id, "flight_id": flight_id}
+
+    def remove_threat(self, flight_id: str, threat_id: str) -> None:
+        handle = self._running(flight_id)
+        try:
+            handle.runner.remove_threat(threat_id)
+        except KeyError as err:
+            raise NotFound(str(err.args[0])) from None
+
+    def team_time(self, flight_id: str) -> dict[str, Any]:
+        handle = self.flight(flight_id)
+        team = handle.runner.team
+        assert team is not None
+        return {"team_time_s": team.team_ref_s, "version": team.version}
+
+    def move_team_time(
+        self, flight_id: str, arrival_s: float, version: int | None
+    ) -> dict[str, Any]:
+        """Move the team arrival (mission s).
+
+        Raises
+        ------
+        PreconditionFailed
+            ``version`` is not the current one.
+        Infeasible
+            Some vehicle cannot make it (the earliest feasible time and that vehicle).
+        """
+        handle = self._running(flight_id)
+        team = handle.runner.team
+        assert team is not None
+        if version is not None and version != team.version:
+            raise PreconditionFailed(f"team time version {version} is stale (now {team.version})")
+        try:
+            handle.runner.move_team_time(arrival_s, version=version)
+        except TeamTimeRefused as err:
+            raise Infeasible(str(err), err.earliest_s, err.vehicle_id) from None
+        except GcsError as err:
+            raise Conflict(str(err)) from None
+        return self.team_time(flight_id)
+
+    async def abort(self, flight_id: str, vehicle: str | None, mode: str) -> dict[str, Any]:
+        handle = self._running(flight_id)
+        try:
+            results = await handle.runner.abort(vehicle, mode="rtl" if mode == "rtl" else "loiter")
+        except KeyError as err:
+            raise NotFound(str(err.args[0])) from None
+        return {"flight_id": flight_id, "vehicles": results}
+
+    # -- reading --------------------------------------------------------------------------------
+
+    def snapshot(self, flight_id: str) -> dict[str, Any]:
+        handle = self.flight(flight_id)
+        snap = handle.runner.snapshot()
+        snap["flight_id"] = flight_id
+        snap["schedule_id"] = handle.schedule.id
+        snap["uploads"] = handle.uploads
+        snap["record_ready"] = handle.record is not None
+        return snap
+
+    def flight_views(self) -> list[dict[str, Any]]:
+        return [
+            {"id": fid, "state": h.runner.state.value, "schedule_id": h.schedule.id}
+            for fid, h in self.flights.items()
+        ]
+
+    def events(self, flight_id: str, after_seq: int, limit: int) -> list[FlightEvent]:
+        self.flight(flight_id)
+        return self.store.events(flight_id, after_seq=after_seq, limit=limit)
+
+
+def _signing(key_hex: str) -> SigningConfig:
+    """A 32-byte signing key given as 64 hex digits."""
+    try:
+        key = bytes.fromhex(key_hex)
+    except ValueError:
+        raise InvalidInput("signing_key: not a hex string") from None
+    try:
+        return SigningConfig(secret_key=key)
+    except ValueError as err:
+        raise InvalidInput(f"signing_key: {err}") from None
+
+
+def _with_arrival(scenario: Scenario, required_arrival_s: float) -> Scenario:
+    arrival = scenario.arrival
+    if arrival.kind == "simultaneous":
+        arrival = arrival.model_copy(update={"required_s": required_arrival_s})
+    elif arrival.kind == "spaced":
+        arrival = arrival.model_copy(update={"first_s": required_arrival_s})
+    else:
+        raise InvalidInput("required_arrival_s: needs a team arrival kind (simultaneous, spaced)")
+    return scenario.model_copy(update={"arrival": arrival})
+
+
+def _plan(scenario: Scenario, seed: int, config: FlightConfig) -> tuple[Schedule, World]:
+    """Plan and schedule (a worker thread); an infeasible request names the earliest time."""
+    world = build_world(scenario)
+    try:
+        p = plan(scenario, method=config.method, rng=np.random.default_rng(seed), world=world)
+        schedule = build_schedule(scenario, p, world=world)
+    except InfeasibleError as err:
+        raise Infeasible(f"infeasible: {err}", None, None) from None
+    requested, ref = schedule.requested_arrival_s, schedule.required_arrival_s
+    if requested is not None and ref is not None and abs(ref - requested) > 1e-3:
+        forcing = _forcing_vehicle(schedule)
+        raise Infeasible(
+            f"required arrival {requested:.1f} s cannot be met; earliest feasible {ref:.1f} s "
+            f"({schedule.arrival_reason})",
+            ref,
+            forcing,
+        )
+    return schedule, world
+
+
+def _forcing_vehicle(schedule: Schedule) -> str | None:
+    """The vehicle the arrival reason names (the one that sets the earliest time)."""
+    for vs in schedule.vehicles:
+        if vs.vehicle_id in schedule.arrival_reason:
+            return vs.vehicle_id
+    return None
