@@ -215,6 +215,7 @@ class FlightHandle:
     record: dict[str, Any] | None = None
     report_dir: Path | None = None
     wall0: float = field(default_factory=time.perf_counter)
+    snapshot_cache: tuple[float, dict[str, Any]] | None = None
 
 
 class Engine:
@@ -709,8 +710,21 @@ class Engine:
 
     # -- reading --------------------------------------------------------------------------------
 
-    def snapshot(self, flight_id: str) -> dict[str, Any]:
+    def snapshot(self, flight_id: str, *, max_age_s: float = 0.0) -> dict[str, Any]:
+        """The flight's snapshot; with ``max_age_s``, one taken that recently may be given
+        again (many stream clients share one per flight)."""
         handle = self.flight(flight_id)
+        now = time.monotonic()
+        if max_age_s > 0.0 and handle.snapshot_cache is not None:
+            taken, snap = handle.snapshot_cache
+            if now - taken <= max_age_s:
+                return snap
+        snap = self._snapshot(handle)
+        handle.snapshot_cache = (now, snap)
+        return snap
+
+    def _snapshot(self, handle: FlightHandle) -> dict[str, Any]:
+        flight_id = handle.id
         snap = handle.runner.snapshot()
         snap["flight_id"] = flight_id
         snap["schedule_id"] = handle.schedule.id

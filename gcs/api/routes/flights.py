@@ -198,7 +198,7 @@ async def stream(engine: Engine, flight_id: str, after_seq: int) -> AsyncIterato
             if sub.closed:
                 return
             next_telemetry = loop.time() + TELEMETRY_WALL_S
-            snap = engine.snapshot(flight_id)
+            snap = engine.snapshot(flight_id, max_age_s=TELEMETRY_WALL_S / 2)
             yield {"type": "telemetry", "data": _telemetry(snap)}
             if handle.runner.state in ENDED and handle.record is not None:
                 yield {"type": "end", "data": {"state": handle.runner.state.value}}

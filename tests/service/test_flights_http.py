@@ -1,0 +1,239 @@
+"""The service end to end over HTTP only: ``python -m gcs serve`` in its own process on
+loopback, this test its client (httpx, server-sent events). Arrivals are the simulator's
+(the flight record's, from its truth log); the no-fly zone is checked against the flown
+tracks here."""
+
+from __future__ import annotations
+
+import asyncio
+import math
+from collections import Counter
+from typing import Any
+
+import httpx
+import numpy as np
+import pytest
+
+from gcs.api.demo import sse_messages
+from planner.plan import build_world, plan
+from planner.retime import build_schedule
+from planner.scenario import load_scenario
+from tests.gcs.conftest import PAPER
+from tests.service.conftest import Service
+
+pytestmark = pytest.mark.slow  # about 40 s of wall time each
+
+
+def _ok(r: httpx.Response, status: int = 200) -> Any:
+    assert r.status_code == status, (r.request.method, r.request.url, r.status_code, r.text)
+    return r.json() if r.content else None
+
+
+async def _flight(
+    client: httpx.AsyncClient, rehearsal: dict[str, Any], seed: int = 1
+) -> tuple[str, dict[str, Any]]:
+    """Scenario, schedule (a job), flight on simulator vehicles, upload: ready to launch."""
+    body = PAPER.read_text(encoding="utf-8")
+    sc = _ok(
+        await client.post(
+            "/v1/scenarios", content=body, headers={"Content-Type": "application/yaml"}
+        ),
+        201,
+    )
+    job = _ok(await client.post("/v1/schedules", json={"scenario_id": sc["id"], "seed": seed}), 202)
+    while job["state"] in ("queued", "running"):
+        await asyncio.sleep(0.1)
+        job = _ok(await client.get(f"/v1/jobs/{job['id']}"))
+    assert job["state"] == "succeeded", job
+    flight = _ok(
+        await client.post(
+            "/v1/flights", json={"schedule_id": job["result"]["id"], "rehearsal": rehearsal}
+        ),
+        201,
+    )
+    fid = flight["flight_id"]
+    _ok(await client.post(f"/v1/flights/{fid}/upload"), 202)
+    snap = flight
+    while snap["state"] in ("planned", "uploading"):
+        await asyncio.sleep(0.1)
+        snap = _ok(await client.get(f"/v1/flights/{fid}"))
+    assert snap["state"] == "ready", snap
+    assert {v: u["state"] for v, u in snap["uploads"].items()} == dict.fromkeys(
+        ("UAV1", "UAV2", "UAV3"), "ok"
+    )
+    return fid, job["result"]
+
+
+async def _until(client: httpx.AsyncClient, fid: str, t_s: float) -> dict[str, Any]:
+    """Poll the snapshot until mission time ``t_s``."""
+    while True:
+        snap = _ok(await client.get(f"/v1/flights/{fid}"))
+        if snap["t_s"] >= t_s or snap["state"] in ("completed", "failed", "aborted"):
+            return snap
+        await asyncio.sleep(0.05)
+
+
+async def _follow(client: httpx.AsyncClient, fid: str, after_seq: int = 0) -> list[int]:
+    """Every event's seq from the stream until it ends."""
+    seqs: list[int] = []
+    async for kind, data in sse_messages(
+        client, f"/v1/flights/{fid}/stream", {"after_seq": after_seq}
+    ):
+        if kind == "event":
+            seqs.append(data["seq"])
+        elif kind == "end":
+            return seqs
+        elif kind == "behind":
+            raise AssertionError("stream fell behind")
+    raise AssertionError("stream closed before the end")
+
+
+async def _interrupted(client: httpx.AsyncClient, fid: str) -> list[int]:
+    """Read 20 events, go away for 10 s, come back with ``after_seq``."""
+    seqs: list[int] = []
+    async for kind, data in sse_messages(client, f"/v1/flights/{fid}/stream"):
+        if kind == "event":
+            seqs.append(data["seq"])
+            if len(seqs) >= 20:
+                break
+    await asyncio.sleep(10.0)
+    return seqs + await _follow(client, fid, seqs[-1])
+
+
+async def _all_events(client: httpx.AsyncClient, fid: str) -> list[dict[str, Any]]:
+    out: list[dict[str, Any]] = []
+    after = 0
+    while True:
+        page = _ok(await client.get(f"/v1/flights/{fid}/events", params={"after_seq": after}))
+        out += page["events"]
+        if not page["events"]:
+            return out
+        after = page["next_after_seq"]
+
+
+def _uav3_box() -> list[tuple[float, float]]:
+    """A 3 km no-fly square on UAV3's planned route 75 % along it, at least 8 km from the
+    other two routes (the test's own plan of the same scenario and seed)."""
+    scenario = load_scenario(PAPER)
+    world = build_world(scenario)
+    schedule = build_schedule(
+        scenario, plan(scenario, rng=np.random.default_rng(1), world=world), world=world
+    )
+    vs = schedule.vehicle("UAV3")
+    assert vs is not None
+    p = vs.path.pose_at(0.75 * vs.path.length_m)
+    for other in ("UAV1", "UAV2"):
+        o = schedule.vehicle(other)
+        assert o is not None
+        d = min(
+            math.hypot(q.east_m - p.east_m, q.north_m - p.north_m)
+            for q in (o.path.pose_at(float(s)) for s in np.linspace(0, o.path.length_m, 400))
+        )
+        assert d > 8000.0, other
+    h = 1500.0
+    e, n = p.east_m, p.north_m
+    return [(e - h, n - h), (e + h, n - h), (e + h, n + h), (e - h, n + h)]
+
+
+def _inside(e: float, n: float, box: list[tuple[float, float]]) -> bool:
+    return box[0][0] <= e <= box[1][0] and box[0][1] <= n <= box[2][1]
+
+
+async def test_paper_flight_over_http_with_a_no_fly_zone_a_later_team_time_and_fifty_streams(
+    service: Service,
+) -> None:
+    box = _uav3_box()
+    async with service.client() as client:
+        fid, _ = await _flight(
+            client,
+            {"speedup": 200.0, "wind_m_s": 5.0, "wind_from_deg": 270.0, "loss": 0.1, "seed": 1},
+        )
+        streams = [asyncio.create_task(_follow(client, fid)) for _ in range(50)]
+        resumed = asyncio.create_task(_interrupted(client, fid))
+        _ok(await client.post(f"/v1/flights/{fid}/launch", json={}), 202)
+        await _until(client, fid, 1900.0)  # after the scenario's pop-up (about 1500 s)
+        threat = {
+            "kind": "no_fly",
+            "id": "OP1",
+            "polygon": [{"east_m": e, "north_m": n} for e, n in box],
+        }
+        _ok(await client.post(f"/v1/flights/{fid}/threats", json={"threat": threat}), 201)
+        await _until(client, fid, 2300.0)
+        tt = await client.get(f"/v1/flights/{fid}/team-time")
+        version = tt.headers["ETag"]
+        ref = _ok(tt)["team_time_s"]
+        stale = await client.put(
+            f"/v1/flights/{fid}/team-time",
+            json={"arrival_s": ref + 120.0},
+            headers={"If-Match": '"0"'},
+        )
+        assert stale.status_code == 412, stale.text
+        moved = _ok(
+            await client.put(
+                f"/v1/flights/{fid}/team-time",
+                json={"arrival_s": ref + 120.0},
+                headers={"If-Match": version},
+            )
+        )
+        assert moved["team_time_s"] == pytest.approx(ref + 120.0)
+        got = await asyncio.gather(*streams)
+        interrupted = await resumed
+        record = _ok(await client.get(f"/v1/flights/{fid}/record"))
+        events = await _all_events(client, fid)
+
+    assert record["arrival_source"] == "simulator"
+    errors = {v["id"]: v["error_s"] for v in record["vehicles"]}
+    assert all(e is not None and abs(e) <= 1.0 for e in errors.values()), errors
+    # The team time the vehicles met is the operator's (+120 s), or later if one forced it.
+    assert record["required_arrival_s"] >= ref + 120.0 - 1e-3
+    assert {a["strategy"] for a in record["adjustments"]} >= {"takeoff_delay", "speed", "loiter"}
+    # The no-fly zone: only UAV3's route was planned again, and no flown sample is inside it.
+    replanned = {
+        v["id"]
+        for v in record["vehicles"]
+        if any(p["label"] == "after OP1" for p in v["planned_paths"])
+    }
+    assert replanned == {"UAV3"}
+    for v in record["vehicles"]:
+        inside = [row for row in v["track"] if _inside(row[1], row[2], box)]
+        assert not inside, (v["id"], inside[:3])
+    # Every stream client, and the one that went away for 10 s, got every event once, in order.
+    seqs = [e["seq"] for e in events]
+    assert seqs == sorted(seqs) and len(set(seqs)) == len(seqs)
+    for s in got:
+        assert s == seqs
+    assert interrupted == seqs
+    assert Counter(e["kind"] for e in events)["arrived"] == 3
+
+
+async def test_an_aborted_vehicle_goes_home_over_http_and_the_others_arrive_on_time(
+    service: Service,
+) -> None:
+    async with service.client() as client:
+        fid, _ = await _flight(client, {"speedup": 200.0, "seed": 2})
+        _ok(await client.post(f"/v1/flights/{fid}/launch", json={}), 202)
+        await _until(client, fid, 1200.0)
+        out = _ok(
+            await client.post(f"/v1/flights/{fid}/abort", json={"vehicle": "UAV1", "mode": "rtl"})
+        )
+        assert out["vehicles"] == {"UAV1": None}
+        snap = _ok(await client.get(f"/v1/flights/{fid}"))
+        uav1 = next(v for v in snap["vehicles"] if v["id"] == "UAV1")
+        assert uav1["state"] == "aborted" and uav1["link"]["mode"] == "RTL"
+        again = await client.post(f"/v1/flights/{fid}/abort", json={"vehicle": "UAV9"})
+        assert again.status_code == 404 and "UAV9" in again.json()["detail"]
+        while _ok(await client.get(f"/v1/flights/{fid}"))["state"] not in ("completed", "failed"):
+            await asyncio.sleep(0.2)
+        while (r := await client.get(f"/v1/flights/{fid}/record")).status_code == 404:
+            await asyncio.sleep(0.2)
+        record = _ok(r)
+    by_id = {v["id"]: v for v in record["vehicles"]}
+    assert by_id["UAV1"]["state"] == "aborted" and by_id["UAV1"]["arrival_utc_s"] is None
+    for vid in ("UAV2", "UAV3"):
+        assert abs(by_id[vid]["error_s"]) <= 1.0, by_id[vid]
+    # UAV1 flew home: its last flown position is nearer its start than where it was aborted.
+    track = by_id["UAV1"]["track"]
+    home = track[0]
+    at_abort = min(track, key=lambda row: abs(row[0] - (record["start_utc_s"] + 1200.0)))
+    last = track[-1]
+    assert math.dist(last[1:3], home[1:3]) < math.dist(at_abort[1:3], home[1:3]) - 5000.0
