@@ -5,7 +5,7 @@ PY := $(VENV)/bin/python
 STAMP := $(VENV)/.installed
 OUT ?= out
 
-.PHONY: test test-quick lint typecheck pytest demo serve bench clean
+.PHONY: test test-quick browser lint typecheck pytest demo serve bench clean
 
 $(PY):
 	$(PYTHON) -m venv $(VENV)
@@ -15,7 +15,14 @@ $(STAMP): pyproject.toml | $(PY)
 	$(PY) -m pip install --quiet -e '.[dev]'
 	touch $(STAMP)
 
-test: $(STAMP) lint typecheck pytest
+test: $(STAMP) browser lint typecheck pytest
+
+# The browser tests drive Debian's Chromium (installed here when missing: CI runs as root).
+CHROMIUM ?= /usr/bin/chromium
+browser:
+	@test -x $(CHROMIUM) || { \
+	  if [ "$$(id -u)" = 0 ]; then apt-get update -q && DEBIAN_FRONTEND=noninteractive apt-get install -y -q chromium; \
+	  else echo "make: $(CHROMIUM) is missing: sudo apt-get install chromium" >&2; exit 1; fi; }
 
 lint: $(STAMP)
 	$(VENV)/bin/ruff check planner gcs sitl_stub tests bench
@@ -28,7 +35,7 @@ pytest: $(STAMP)
 	$(VENV)/bin/pytest -q
 
 # Everything but the whole rehearsals (marked slow): a few minutes less.
-test-quick: $(STAMP) lint typecheck
+test-quick: $(STAMP) browser lint typecheck
 	$(VENV)/bin/pytest -q -m "not slow"
 
 demo: $(STAMP)

@@ -11,11 +11,13 @@ from __future__ import annotations
 import logging
 from collections.abc import AsyncIterator
 from contextlib import asynccontextmanager
+from pathlib import Path
 from typing import Any
 
 from fastapi import APIRouter, FastAPI, Request
 from fastapi.exceptions import RequestValidationError
-from fastapi.responses import JSONResponse, Response
+from fastapi.responses import JSONResponse, RedirectResponse, Response
+from fastapi.staticfiles import StaticFiles
 from sqlalchemy import text
 from starlette.exceptions import HTTPException as StarletteHTTPException
 
@@ -31,6 +33,9 @@ from gcs.store.repository import Store, StoreConflict, StoreError, StoreNotFound
 __all__ = ["create_app"]
 
 log = logging.getLogger(__name__)
+
+STATIC = Path(__file__).with_name("static")
+"""The operator console (HTML, JS, CSS): no CDN, nothing fetched from outside the service."""
 
 
 def create_app(settings: Settings | None = None) -> FastAPI:
@@ -87,6 +92,12 @@ def create_app(settings: Settings | None = None) -> FastAPI:
         return JSONResponse({"status": "ready", "flights": len(request.app.state.engine.flights)})
 
     app.include_router(v1)
+
+    app.mount("/ui", StaticFiles(directory=STATIC, html=True), name="ui")
+
+    @app.get("/", include_in_schema=False)
+    async def root() -> RedirectResponse:
+        return RedirectResponse("/ui/")
 
     @app.get("/metrics", tags=["ops"], response_class=Response)
     async def metrics(request: Request) -> Response:

@@ -39,6 +39,7 @@ from gcs.mavlink.signing import SigningConfig
 from gcs.rehearsal.rehearse import RehearsalOptions, flight_record, stub_args
 from gcs.rehearsal.report import write_report
 from gcs.service.fleet import Fleet, FleetVehicle, VehicleBusy
+from gcs.service.mapview import flight_map, terrain_png
 from gcs.service.stubs import StubProcess
 from gcs.store.repository import CheckpointWriter, EventWriter, Store, StoreNotFound
 from planner.errors import InfeasibleError, PlannerError
@@ -232,6 +233,7 @@ class Engine:
         self.vehicle_ids: dict[str, str] = {}
         """Vehicle id (the API's) -> connection string."""
         self._tasks: set[asyncio.Task[Any]] = set()
+        self._terrain: dict[str, bytes] = {}
         self._stubs: list[StubProcess] = []
 
     async def close(self) -> None:
@@ -731,6 +733,23 @@ class Engine:
         snap["uploads"] = handle.uploads
         snap["record_ready"] = handle.record is not None
         return snap
+
+    def flight_map(self, flight_id: str) -> dict[str, Any]:
+        """What the map draws (:func:`gcs.service.mapview.flight_map`), with the flight's
+        scenario id (its terrain image)."""
+        handle = self.flight(flight_id)
+        team = handle.runner.team
+        assert team is not None
+        doc = flight_map(team, handle.runner.now_s())
+        doc["scenario_id"] = handle.schedule.scenario_id
+        return doc
+
+    def terrain_png(self, scenario_id: str) -> bytes:
+        png = self._terrain.get(scenario_id)
+        if png is None:
+            png = terrain_png(self.scenario(scenario_id))
+            self._terrain[scenario_id] = png
+        return png
 
     def flight_views(self) -> list[dict[str, Any]]:
         return [

@@ -66,6 +66,14 @@ async def snapshot(flight_id: str, request: Request) -> dict[str, Any]:
     return engine_of(request).snapshot(flight_id)
 
 
+@router.get("/flights/{flight_id}/map", dependencies=observe)
+async def flight_map(flight_id: str, request: Request) -> dict[str, Any]:
+    """What the map draws, in the scenario's local metres: the area (and the terrain image of
+    ``scenario_id``), threats (in force or queued, with when they appear), loiter buffers, each
+    vehicle's start, goal, planned route and loiter circles as they are now."""
+    return engine_of(request).flight_map(flight_id)
+
+
 @router.post("/flights/{flight_id}/upload", status_code=202, dependencies=operate)
 async def upload(flight_id: str, request: Request) -> dict[str, Any]:
     """Upload every vehicle's mission (verified); per-vehicle results in the snapshot's

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import asyncio
 from typing import Any, Literal
 
 from fastapi import APIRouter, Depends, Request, Response
@@ -78,6 +79,20 @@ async def scenario_schema() -> dict[str, Any]:
 @router.get("/scenarios/{scenario_id}", dependencies=observe, tags=["scenarios"])
 async def scenario(scenario_id: str, request: Request) -> dict[str, Any]:
     return engine_of(request).scenario_view(scenario_id)
+
+
+@router.get(
+    "/scenarios/{scenario_id}/terrain.png",
+    dependencies=observe,
+    tags=["scenarios"],
+    response_class=Response,
+    responses={200: {"content": {"image/png": {}}}},
+)
+async def terrain(scenario_id: str, request: Request) -> Response:
+    """A hillshade of the scenario's terrain over its area, north up (the map's base layer)."""
+    engine = engine_of(request)
+    png = await asyncio.to_thread(engine.terrain_png, scenario_id)
+    return Response(png, media_type="image/png", headers={"Cache-Control": "max-age=3600"})
 
 
 @router.post(
