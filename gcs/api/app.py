@@ -53,6 +53,8 @@ def create_app(settings: Settings | None = None) -> FastAPI:
         store = Store.open(settings.db_url())
         engine = Engine(store, settings.data_dir)
         app.state.engine = engine
+        for fid in engine.resume_kept():
+            log.warning("flight %s was running when the service stopped: flying it on", fid)
         app.state.store = store
         try:
             yield

@@ -587,6 +587,13 @@ class FlightRunner:
             self._checkpoint(True)
         return self.state
 
+    def fail(self, reason: str) -> None:
+        """The flight ends as failed (said as an event), e.g. when it cannot be resumed."""
+        self._stopped = True
+        self._set_state(FlightState.FAILED, reason)
+        if self._checkpoint_dirty:
+            self._checkpoint(True)
+
     def _over(self) -> bool:
         return self._stopped or self._team().finished
 

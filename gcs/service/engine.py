@@ -17,6 +17,8 @@ import contextlib
 import json
 import logging
 import math
+import os
+import signal
 import time
 import uuid
 from collections.abc import Mapping, Sequence
@@ -237,7 +239,12 @@ class Engine:
         self._stubs: list[StubProcess] = []
 
     async def close(self) -> None:
+        """Stop: flights on bundled simulator vehicles end (failed: their simulator stops
+        with the service); flights on live vehicles stay running in the store, and the next
+        service process flies them on (:meth:`resume_kept`)."""
         for handle in list(self.flights.values()):
+            if handle.stub is not None and handle.runner.state not in ENDED:
+                handle.runner.fail("the service stopped, and its simulator vehicles with it")
             for task in (handle.task,):
                 if task is not None and not task.done():
                     task.cancel()
@@ -499,14 +506,82 @@ class Engine:
                 self.vehicle_ids[f"v{len(self.vehicle_ids) + 1}"] = h.connection
         runner.bind({vid: h.vehicle for vid, h in handle.vehicles.items()})
         self.store.create_flight(entry.scenario_id, conns, flight_id=fid)
-        handle.kept = bus.subscribe(maxsize=1_000_000, after_seq=0)
-        handle.writer = asyncio.get_running_loop().create_task(
-            EventWriter(self.store, fid).run(handle.kept)
-        )
-        handle.checkpoints = CheckpointWriter(self.store, fid)
-        runner.on_checkpoint = handle.checkpoints.offer
+        for vid, h in handle.vehicles.items():
+            self.store.set_vehicle(fid, vid, system_id=h.vehicle.system_id)
+        if stub is not None:
+            (flight_dir / "stub.pid").write_text(f"{stub.proc.pid}\n", encoding="utf-8")
+        self._keep(handle)
         self.flights[fid] = handle
         return handle
+
+    def _keep(self, handle: FlightHandle) -> None:
+        """The flight's events and checkpoints go to the store as they happen."""
+        handle.kept = handle.runner.bus.subscribe(maxsize=1_000_000, after_seq=0)
+        handle.writer = asyncio.get_running_loop().create_task(
+            EventWriter(self.store, handle.id).run(handle.kept)
+        )
+        handle.checkpoints = CheckpointWriter(self.store, handle.id)
+        handle.runner.on_checkpoint = handle.checkpoints.offer
+
+    # -- restart --------------------------------------------------------------------------------
+
+    def resume_kept(self) -> list[str]:
+        """Fly on every flight the store says is running (its service process died): from its
+        checkpoint, on the vehicles it was flying (reached again by their connections), each
+        mission compared before anything is sent. Returns their ids; each goes on in a task
+        (a vehicle that cannot be reached fails the flight, with an event)."""
+        resumed = []
+        for fid in self.store.flights_in(("running",)):
+            blob = self.store.checkpoint(fid)
+            if blob is None or fid in self.flights:
+                continue
+            row = self.store.flight(fid)
+            events = self.store.events(fid)
+            bus = EventBus(first_seq=(events[-1].seq if events else 0) + 1)
+            runner = FlightRunner.resume(blob, MissionClock(), bus=bus, events=events)
+            team = runner.team
+            assert team is not None
+            entry = PlannedSchedule(
+                f"kept-{fid}", row.scenario_id, team.scenario, team.schedule, team.world,
+                team.config.seed, runner.plan_wall_s,
+            )  # fmt: skip
+            conns = {vid: str(v[1]) for vid, v in row.vehicles.items()}
+            flight_dir = self.data_dir / "flights" / fid
+            truth = flight_dir / "truth.jsonl"
+            handle = FlightHandle(
+                fid, entry, runner, {}, conns, truth_path=truth if truth.exists() else None
+            )
+            self.flights[fid] = handle
+            sysids = [row.vehicles[v.id][2] for v in team.scenario.vehicles]
+            handle.task = self._spawn(self._resume(handle, sysids))
+            resumed.append(fid)
+        return resumed
+
+    async def _resume(self, handle: FlightHandle, sysids: Sequence[int | None]) -> None:
+        runner = handle.runner
+        ids = [v.id for v in runner.scenario.vehicles]
+        self._keep(handle)
+        try:
+            held = await self.fleet.claim([handle.connections[i] for i in ids], handle.id, sysids)
+            handle.vehicles = dict(zip(ids, held, strict=True))
+            for h in held:
+                if h.connection not in self.vehicle_ids.values():
+                    self.vehicle_ids[f"v{len(self.vehicle_ids) + 1}"] = h.connection
+            runner.bind({vid: h.vehicle for vid, h in handle.vehicles.items()})
+            await self._wait_clock(handle)
+            await runner.reconcile()
+        except (GcsError, TimeoutError, OSError, ValueError) as err:
+            runner.fail(f"not resumed after a restart: {err}")
+            await self._stop_writers(handle)
+            self.fleet.release(handle.id)
+            handle.task = None
+            return
+        assert runner.start_utc_s is not None
+        await self._fly(handle, runner.start_utc_s)
+        pid_file = self.data_dir / "flights" / handle.id / "stub.pid"
+        if pid_file.exists():  # the simulator the dead process started for this flight
+            with contextlib.suppress(ValueError, OSError):
+                os.kill(int(pid_file.read_text()), signal.SIGINT)
 
     def _options(
         self,

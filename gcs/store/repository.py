@@ -209,6 +209,16 @@ class Store:
                 )
         return fid
 
+    def flights_in(self, states: Sequence[str]) -> list[str]:
+        """The ids of the flights in these states, oldest first."""
+        with Session(self.engine) as session:
+            query = (
+                select(FlightRow.id)
+                .where(FlightRow.state.in_(list(states)))
+                .order_by(FlightRow.created_utc_s)
+            )
+            return list(session.scalars(query))
+
     def flight(self, flight_id: str) -> FlightRecordRow:
         with Session(self.engine) as session:
             row = _get(session, FlightRow, flight_id, f"flight {flight_id!r}")
