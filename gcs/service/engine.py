@@ -243,7 +243,11 @@ class Engine:
         with the service); flights on live vehicles stay running in the store, and the next
         service process flies them on (:meth:`resume_kept`)."""
         for handle in list(self.flights.values()):
-            if handle.stub is not None and handle.runner.state not in ENDED:
+            simulated = (
+                handle.stub is not None
+                or (self.data_dir / "flights" / handle.id / "stub.pid").exists()
+            )
+            if simulated and handle.runner.state not in ENDED:
                 handle.runner.fail("the service stopped, and its simulator vehicles with it")
             for task in (handle.task,):
                 if task is not None and not task.done():
@@ -251,8 +255,7 @@ class Engine:
                     with contextlib.suppress(BaseException):
                         await task
             await self._stop_writers(handle)
-            if handle.stub is not None:
-                await handle.stub.stop()
+            await self._stop_simulator(handle)
         for task in list(self._tasks):
             task.cancel()
         await self.fleet.close()
@@ -578,10 +581,6 @@ class Engine:
             return
         assert runner.start_utc_s is not None
         await self._fly(handle, runner.start_utc_s)
-        pid_file = self.data_dir / "flights" / handle.id / "stub.pid"
-        if pid_file.exists():  # the simulator the dead process started for this flight
-            with contextlib.suppress(ValueError, OSError):
-                os.kill(int(pid_file.read_text()), signal.SIGINT)
 
     def _options(
         self,
@@ -708,8 +707,18 @@ class Engine:
             log.exception("flight %s: record or report failed", handle.id)
         await self._stop_writers(handle)
         self.fleet.release(handle.id)
+        await self._stop_simulator(handle)
+
+    async def _stop_simulator(self, handle: FlightHandle) -> None:
+        """The flight's bundled simulator: ours, or one an earlier process started for it
+        (its pid kept beside the flight's files)."""
         if handle.stub is not None:
             await handle.stub.stop()
+            return
+        pid_file = self.data_dir / "flights" / handle.id / "stub.pid"
+        if pid_file.exists():
+            with contextlib.suppress(ValueError, OSError):
+                os.kill(int(pid_file.read_text()), signal.SIGINT)
 
     async def _stop_writers(self, handle: FlightHandle) -> None:
         handle.runner.on_checkpoint = None

@@ -5,6 +5,8 @@ meanwhile), nothing launched twice, and the arrivals still held (the simulator's
 from __future__ import annotations
 
 import asyncio
+import contextlib
+import os
 import signal
 from pathlib import Path
 
@@ -16,8 +18,23 @@ from tests.service.test_flights_http import _all_events, _flight, _ok, _until
 pytestmark = pytest.mark.slow  # about 45 s of wall time
 
 
+def _stop_orphans(data: Path) -> None:
+    """The simulators the killed service started (they outlive it) are stopped whatever
+    the test found."""
+    for pid_file in data.glob("flights/*/stub.pid"):
+        with contextlib.suppress(ValueError, OSError):
+            os.kill(int(pid_file.read_text()), signal.SIGINT)
+
+
 async def test_a_killed_service_flies_its_flight_on_when_started_again(tmp_path: Path) -> None:
     data = tmp_path / "data"
+    try:
+        await _kill_and_restart(data)
+    finally:
+        _stop_orphans(data)
+
+
+async def _kill_and_restart(data: Path) -> None:
     async with serve(data) as first, first.client() as client:
         fid, _ = await _flight(client, {"speedup": 200.0, "wind_m_s": 4.0, "seed": 3})
         _ok(await client.post(f"/v1/flights/{fid}/launch", json={}), 202)
