@@ -17,6 +17,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
+from planner.errors import SeparationError
 from planner.schedule import VehicleSchedule
 
 FloatArray = NDArray[np.float64]
@@ -113,3 +114,29 @@ def separation(vehicles: Sequence[VehicleSchedule], required_m: float) -> Separa
             step = max(required_m / (10.0 * closing), 0.05)
             pairs.append(pair_separation(a, b, step_s=step))
     return Separation(required_m, tuple(pairs))
+
+
+def check_separation(sep: Separation) -> None:
+    """Refuse a team separation with a pair closer than ``d_s``.
+
+    Raises
+    ------
+    SeparationError
+        Names the closest pair, when and how close (``pair``, ``time_s``, ``distance_m``,
+        ``required_m``, ``conflicts``).
+    """
+    conflicts = sep.conflicts
+    if not conflicts:
+        return
+    worst = min(conflicts, key=lambda p: p.distance_m)
+    more = len(conflicts) - 1
+    tail = f"; {more} more pair{'s' if more > 1 else ''} in conflict" if more else ""
+    raise SeparationError(
+        f"vehicles {worst.a} and {worst.b} come within {worst.distance_m:.1f} m of each other "
+        f"at {worst.time_s:.1f} s, under the separation minimum d_s {sep.required_m:g} m{tail}",
+        pair=(worst.a, worst.b),
+        time_s=worst.time_s,
+        distance_m=worst.distance_m,
+        required_m=sep.required_m,
+        conflicts=len(conflicts),
+    )

@@ -211,13 +211,15 @@ def build_problem(
             if zone is not None:
                 raise InfeasibleError(
                     f"vehicle {v.id}: {name} ({e:.0f}, {n:.0f}) m "
-                    f"is inside forbidden zone {zone.id}"
+                    f"is inside forbidden zone {zone.id}",
+                    vehicle=v.id,
                 )
             node = _free_node(cmap, e, n)
             if node is None:
                 raise InfeasibleError(
                     f"vehicle {v.id}: {name} ({e:.0f}, {n:.0f}) m has no free grid node nearby "
-                    "(too close to a forbidden zone, or terrain above alt_max_m)"
+                    "(too close to a forbidden zone, or terrain above alt_max_m)",
+                    vehicle=v.id,
                 )
             nodes.append(node)
         tasks.append(

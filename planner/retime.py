@@ -21,7 +21,8 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from planner.errors import InfeasibleError
+from planner.deconflict import Separation, check_separation, separation
+from planner.errors import ArrivalTimeError, InfeasibleError
 from planner.flightpath import FlightPath
 from planner.plan import Plan, World, build_world, required_arrival_s
 from planner.scenario import Scenario, Spaced, Vehicle, Windows
@@ -48,6 +49,7 @@ from planner.timing import (
     flyable_loiter_radius_m,
     takeoff_time_s,
     team_arrival,
+    team_window,
     time_path,
     vehicle_window,
 )
@@ -392,7 +394,8 @@ def arrival_targets(
                 why = w.min_reason if w.t_min_s > hi_s else w.max_reason
                 raise InfeasibleError(
                     f"vehicle {w.vehicle_id}: window [{lo_s:g}, {hi_s:g}] s cannot be met: "
-                    f"{why}: short by {short:.1f} s"
+                    f"{why}: short by {short:.1f} s",
+                    vehicle=w.vehicle_id,
                 )
             out[w.vehicle_id] = min(max(natural_s[w.vehicle_id], lo), hi)
         return out, None, "each vehicle within its own arrival window"
@@ -439,7 +442,10 @@ def build_schedule(
     Raises
     ------
     InfeasibleError
-        The arrival constraint cannot be met; names the vehicle and the shortfall (s).
+        The arrival constraint cannot be met at any time; names the vehicle and the
+        shortfall (s). A requested time that cannot be met is moved to the earliest feasible
+        one (``required_arrival_s`` differs from ``requested_arrival_s``): a schedule to fly
+        as planned must pass :func:`check_feasible`.
     """
     world = world or build_world(scenario)
     threats = active(world.threats, None)
@@ -471,6 +477,11 @@ def build_schedule(
         for v, vs in zip(scenario.vehicles, base, strict=True)
     }
     targets, ref, reason = arrival_targets(scenario, windows, requested, natural)
+    bounds = (
+        None
+        if isinstance(scenario.arrival, Windows)
+        else team_window(windows, offsets_s=_offsets(scenario))
+    )
     events = [Event(0.0, "arrival", f"team arrival {format_arrival(ref)}: {reason}")]
     # The pre-plan picture of Fig. 6b: everyone leaves at the earliest common takeoff and
     # flies the constant speed that arrives on time, in range or not.
@@ -507,7 +518,79 @@ def build_schedule(
         tuple(events),
         step_m_s,
         _offsets(scenario),
+        bounds,
     )
+
+
+def check_arrival(schedule: Schedule) -> None:
+    """Refuse a schedule whose team arrival is not the one requested.
+
+    :func:`build_schedule` moves a requested time (``required_s``, or ``first_s`` of spaced
+    arrivals) that some vehicle cannot make to the earliest feasible one; for a schedule to
+    fly as planned that is infeasible. Check the schedule as built (a pop-up re-plan in
+    flight may move the team time on purpose; such a schedule is refused without a vehicle
+    named).
+
+    Raises
+    ------
+    ArrivalTimeError
+        Names the requested time, the earliest feasible one and the vehicle that forces it
+        (``requested_s``, ``earliest_s``, ``latest_s``, ``vehicle``).
+    """
+    requested, ref = schedule.requested_arrival_s, schedule.required_arrival_s
+    if requested is None or ref is None or abs(ref - requested) <= TIME_TOL_S:
+        return
+    what = "first arrival" if isinstance(schedule.scenario.arrival, Spaced) else "arrival"
+    w = schedule.team_window
+    if w is not None and requested < w.earliest_s - TIME_TOL_S:
+        message = (
+            f"requested {what} {requested:.1f} s is too early: earliest feasible "
+            f"{w.earliest_s:.1f} s, forced by vehicle {w.earliest_vehicle}: {w.earliest_reason}"
+        )
+        vehicle: str | None = w.earliest_vehicle
+    elif w is not None and requested > w.latest_s + TIME_TOL_S:
+        message = (
+            f"requested {what} {requested:.1f} s is too late: latest feasible "
+            f"{w.latest_s:.1f} s, forced by vehicle {w.latest_vehicle}: {w.latest_reason}; "
+            f"earliest feasible {w.earliest_s:.1f} s"
+        )
+        vehicle = w.latest_vehicle
+    else:
+        # Not built by build_schedule, or moved since (a pop-up re-plan): the reason says why.
+        message = (
+            f"requested {what} {requested:.1f} s is not held: the team arrives at {ref:.1f} s "
+            f"({schedule.arrival_reason})"
+        )
+        vehicle = None
+    earliest = ref if w is None else w.earliest_s
+    raise ArrivalTimeError(
+        message,
+        vehicle=vehicle,
+        requested_s=requested,
+        earliest_s=earliest,
+        latest_s=math.inf if w is None else w.latest_s,
+    )
+
+
+def check_feasible(schedule: Schedule, *, allow_conflicts: bool = False) -> Separation:
+    """Refuse a schedule that cannot be flown as planned: the requested team arrival moved
+    (:func:`check_arrival`) or, unless ``allow_conflicts``, two vehicles closer than the
+    scenario's ``separation_m`` (:func:`planner.deconflict.check_separation`).
+
+    Returns the team's separation (computed once; conflicts listed when allowed).
+
+    Raises
+    ------
+    ArrivalTimeError
+        The requested arrival cannot be met (an :class:`~planner.errors.InfeasibleError`).
+    SeparationError
+        A pair of vehicles too close (an :class:`~planner.errors.InfeasibleError`).
+    """
+    check_arrival(schedule)
+    sep = separation(schedule.vehicles, schedule.scenario.separation_m)
+    if not allow_conflicts:
+        check_separation(sep)
+    return sep
 
 
 def format_arrival(t: float | None) -> str:

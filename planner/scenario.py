@@ -39,7 +39,9 @@ MissionTimeS = Annotated[float, Field(ge=0.0)]
 
 
 class _Model(BaseModel):
-    model_config = ConfigDict(extra="forbid", frozen=True)
+    # NaN and infinities are refused wherever a number is expected (a NaN would pass every
+    # range check, since each comparison with it is false).
+    model_config = ConfigDict(extra="forbid", frozen=True, allow_inf_nan=False)
 
 
 class Point(_Model):
@@ -350,16 +352,18 @@ class Scenario(_Model):
                 if vid not in ids:
                     raise ValueError(f"buffer {b.id}: vehicles names unknown vehicle {vid!r}")
         arrival = self.arrival
-        if (
-            isinstance(arrival, Spaced)
-            and arrival.order is not None
-            and sorted(arrival.order) != sorted(ids)
-        ):
-            raise ValueError("arrival.order must name every vehicle exactly once")
+        if isinstance(arrival, Spaced) and arrival.order is not None:
+            named = [(f"arrival.order[{k}]", vid) for k, vid in enumerate(arrival.order)]
+            _names_every_vehicle(
+                "arrival.order", named, ids, rule="the order names each vehicle exactly once"
+            )
         if isinstance(arrival, Windows):
-            named = [w.vehicle for w in arrival.windows]
-            if sorted(named) != sorted(ids):
-                raise ValueError("arrival.windows must give exactly one window per vehicle")
+            named = [
+                (f"arrival.windows[{k}].vehicle", w.vehicle) for k, w in enumerate(arrival.windows)
+            ]
+            _names_every_vehicle(
+                "arrival.windows", named, ids, rule="each vehicle needs exactly one window"
+            )
         return self
 
     def vehicle(self, vehicle_id: str) -> Vehicle:
@@ -372,15 +376,70 @@ class Scenario(_Model):
         return self.area.frame()
 
 
-def _error_line(source: str, err: ValidationError) -> str:
+def _names_every_vehicle(
+    field: str, named: list[tuple[str, str]], ids: set[str], *, rule: str
+) -> None:
+    """``named`` (field path, vehicle id) must name each of ``ids`` exactly once; an error
+    names the path and the vehicle."""
+    seen: set[str] = set()
+    for where, vid in named:
+        if vid not in ids:
+            raise ValueError(f"{where}: unknown vehicle {vid!r}")
+        if vid in seen:
+            raise ValueError(f"{where}: vehicle {vid!r} is named twice")
+        seen.add(vid)
+    missing = sorted(ids - seen)
+    if missing:
+        raise ValueError(
+            f"{field}: vehicle{'s' if len(missing) > 1 else ''} "
+            f"{', '.join(repr(m) for m in missing)} missing ({rule})"
+        )
+
+
+def _not_finite(value: Any) -> str:
+    """Why a value the model refused as not finite is not a number: NaN or an infinity."""
+    try:
+        x = float(value)
+    except (TypeError, ValueError):
+        return "not a finite number"
+    return "not a number (NaN)" if math.isnan(x) else f"not a finite number ({x})"
+
+
+def _file_path(loc: tuple[int | str, ...], data: Any) -> list[int | str]:
+    """An error's location as the file has it: without the ``kind`` tags pydantic inserts
+    for a tagged union (``threats[0].radar.radius_m`` is ``threats[0].radius_m``)."""
+    out: list[int | str] = []
+    node = data
+    for key in loc:
+        if (
+            isinstance(key, str)
+            and isinstance(node, dict)
+            and key not in node
+            and node.get("kind") == key
+        ):
+            continue
+        out.append(key)
+        if isinstance(node, dict):
+            node = node.get(key)
+        elif isinstance(node, list | tuple) and isinstance(key, int) and 0 <= key < len(node):
+            node = node[key]
+        else:
+            node = None
+    return out
+
+
+def _error_line(source: str, err: ValidationError, data: Any = None) -> str:
     first = err.errors()[0]
-    loc = ".".join(str(p) if not isinstance(p, int) else f"[{p}]" for p in first["loc"])
+    path = _file_path(tuple(first["loc"]), data)
+    loc = ".".join(str(p) if not isinstance(p, int) else f"[{p}]" for p in path)
     loc = loc.replace(".[", "[")
     msg = first["msg"]
     if msg.startswith("Value error, "):
         msg = msg[len("Value error, ") :]
     if first["type"] == "extra_forbidden":
         msg = "unknown field"
+    if first["type"] == "finite_number":
+        msg = _not_finite(first.get("input"))
     more = err.error_count() - 1
     tail = f" (and {more} more error{'s' if more > 1 else ''})" if more else ""
     where = f"{source}: {loc}" if loc else source
@@ -394,25 +453,93 @@ def parse_scenario(data: Any, source: str = "scenario") -> Scenario:
     try:
         return Scenario.model_validate(data)
     except ValidationError as err:
-        raise ScenarioError(_error_line(source, err)) from None
+        raise ScenarioError(_error_line(source, err, data)) from None
+
+
+def scenario_text(data: bytes, source: str = "scenario") -> str:
+    """The text of a scenario file's bytes (UTF-8, an optional byte-order mark dropped).
+
+    Raises
+    ------
+    ScenarioError
+        One line naming ``source``: not a text file (NUL bytes), or not UTF-8 (the first
+        bad byte and its offset).
+    """
+    if b"\x00" in data:
+        raise ScenarioError(
+            f"{source}: not a text file (NUL byte at offset {data.index(0)}); "
+            "a scenario is YAML or JSON text"
+        )
+    try:
+        return data.decode("utf-8-sig")
+    except UnicodeDecodeError as err:
+        bad = data[err.start : err.start + 1].hex()
+        raise ScenarioError(
+            f"{source}: not UTF-8 text (byte 0x{bad} at offset {err.start}); "
+            "a scenario is YAML or JSON text in UTF-8"
+        ) from None
+
+
+def _yaml_error_line(source: str, err: yaml.YAMLError) -> str:
+    """One line for a YAML error: where (line, column) and what."""
+    if isinstance(err, yaml.MarkedYAMLError) and err.problem_mark is not None:
+        mark = err.problem_mark
+        problem = err.problem or err.context or type(err).__name__
+        context = ""
+        if err.context and err.problem and err.context_mark is not None:
+            cm = err.context_mark
+            context = f" ({err.context} at line {cm.line + 1}, column {cm.column + 1})"
+        where = f"line {mark.line + 1}, column {mark.column + 1}"
+        return f"{source}: {where}: not valid YAML: {problem}{context}"
+    if isinstance(err, yaml.reader.ReaderError):
+        return (
+            f"{source}: not valid YAML: unacceptable character #x{err.character:04x} "
+            f"at offset {err.position}"
+        )
+    first = str(err).strip().splitlines()[0] if str(err).strip() else type(err).__name__
+    return f"{source}: not valid YAML: {first}"
+
+
+def parse_scenario_text(text: str, source: str = "scenario", *, is_json: bool = False) -> Scenario:
+    """Parse and validate a scenario's YAML (or, ``is_json``, JSON) text.
+
+    Raises
+    ------
+    ScenarioError
+        One line naming ``source``: a syntax error with its line and column, or the first
+        field that does not validate (:func:`parse_scenario`).
+    """
+    try:
+        data = json.loads(text) if is_json else yaml.safe_load(text)
+    except json.JSONDecodeError as err:
+        raise ScenarioError(
+            f"{source}: line {err.lineno}, column {err.colno}: not valid JSON: {err.msg}"
+        ) from None
+    except yaml.YAMLError as err:
+        raise ScenarioError(_yaml_error_line(source, err)) from None
+    except RecursionError:
+        raise ScenarioError(f"{source}: nested too deeply") from None
+    return parse_scenario(data, source)
 
 
 def load_scenario(path: str | Path) -> Scenario:
-    """Read a YAML or JSON scenario file.
+    """Read a YAML or JSON (``.json``) scenario file.
 
     Relative terrain directories are resolved against the file's folder.
+
+    Raises
+    ------
+    ScenarioError
+        One line naming the file: unreadable, not UTF-8 text, a syntax error (line and
+        column) or the first field that does not validate.
     """
     p = Path(path)
     try:
-        text = p.read_text(encoding="utf-8")
+        data = p.read_bytes()
     except OSError as err:
         raise ScenarioError(f"{p}: cannot read scenario file ({err.strerror})") from None
-    try:
-        data = json.loads(text) if p.suffix.lower() == ".json" else yaml.safe_load(text)
-    except (yaml.YAMLError, json.JSONDecodeError) as err:
-        first = str(err).strip().splitlines()[0] if str(err).strip() else type(err).__name__
-        raise ScenarioError(f"{p}: not valid YAML/JSON: {first}") from None
-    scenario = parse_scenario(data, str(p))
+    text = scenario_text(data, str(p))
+    scenario = parse_scenario_text(text, str(p), is_json=p.suffix.lower() == ".json")
     if isinstance(scenario.terrain, SrtmTerrainSpec):
         directory = Path(scenario.terrain.directory)
         if not directory.is_absolute():

@@ -29,7 +29,7 @@ from numpy.typing import NDArray
 from planner.atmosphere import mean_eas2tas
 from planner.flightpath import FlightPath
 from planner.scenario import Scenario
-from planner.timing import SPEED_STEP_M_S
+from planner.timing import SPEED_STEP_M_S, TeamWindow
 
 FloatArray = NDArray[np.float64]
 Strategy = Literal["takeoff_delay", "speed", "loiter"]
@@ -215,6 +215,9 @@ class Schedule:
     events: tuple[Event, ...]
     step_m_s: float = SPEED_STEP_M_S
     offsets_s: Mapping[str, float] = field(default_factory=dict)
+    team_window: TeamWindow | None = None
+    """The reference arrival times the team could make when the schedule was built, and the
+    vehicles that bound them (None for per-vehicle windows); kept through pop-up re-plans."""
 
     def vehicle(self, vehicle_id: str) -> VehicleSchedule:
         for v in self.vehicles:

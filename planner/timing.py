@@ -130,6 +130,42 @@ def vehicle_window(
     return ArrivalWindow(vehicle_id, t_min, t_max, min_reason, max_reason)
 
 
+@dataclass(frozen=True, slots=True)
+class TeamWindow:
+    """The team reference arrival times every vehicle can make (the intersection of eq. 1's
+    windows, each shifted by its vehicle's offset), and the vehicles that bound it."""
+
+    earliest_s: float
+    latest_s: float
+    """inf when every vehicle can loiter."""
+    earliest_vehicle: str
+    latest_vehicle: str
+    earliest_reason: str
+    """Why ``earliest_vehicle`` cannot arrive sooner."""
+    latest_reason: str
+    """Why ``latest_vehicle`` cannot arrive later."""
+
+
+def team_window(
+    windows: Sequence[ArrivalWindow], *, offsets_s: Mapping[str, float] | None = None
+) -> TeamWindow:
+    """The team's feasible reference arrival times; vehicle ``i`` arrives at
+    ``reference + offsets_s[i]``. It may be empty (``earliest_s > latest_s``)."""
+    if not windows:
+        raise ValueError("team_window needs at least one window")
+    off = offsets_s or {}
+    lo = max(windows, key=lambda w: w.t_min_s - off.get(w.vehicle_id, 0.0))
+    hi = min(windows, key=lambda w: w.t_max_s - off.get(w.vehicle_id, 0.0))
+    return TeamWindow(
+        lo.t_min_s - off.get(lo.vehicle_id, 0.0),
+        hi.t_max_s - off.get(hi.vehicle_id, 0.0),
+        lo.vehicle_id,
+        hi.vehicle_id,
+        lo.min_reason,
+        hi.max_reason,
+    )
+
+
 def team_arrival(
     windows: Sequence[ArrivalWindow],
     requested_s: float | None,
@@ -141,7 +177,8 @@ def team_arrival(
     Vehicle ``i`` arrives at ``reference + offsets_s[i]`` (0 for simultaneous arrivals; the
     slot offset for spaced ones). The requested time is kept when every shifted window holds
     it; otherwise the earliest time of the windows' intersection, the reason naming the vehicle
-    that forced it.
+    that forced it (a schedule whose reference is not the requested time fails
+    :func:`planner.retime.check_arrival`).
 
     Raises
     ------
@@ -151,25 +188,23 @@ def team_arrival(
     """
     if not windows:
         raise ValueError("team_arrival needs at least one window")
-    off = offsets_s or {}
-    lo = max(windows, key=lambda w: w.t_min_s - off.get(w.vehicle_id, 0.0))
-    hi = min(windows, key=lambda w: w.t_max_s - off.get(w.vehicle_id, 0.0))
-    t_lo = lo.t_min_s - off.get(lo.vehicle_id, 0.0)
-    t_hi = hi.t_max_s - off.get(hi.vehicle_id, 0.0)
+    w = team_window(windows, offsets_s=offsets_s)
+    t_lo, t_hi = w.earliest_s, w.latest_s
     if t_lo > t_hi + TIME_TOL_S:
         raise InfeasibleError(
-            f"vehicle {hi.vehicle_id}: {hi.max_reason}, but {lo.min_reason}: "
-            f"short by {t_lo - t_hi:.1f} s"
+            f"vehicle {w.latest_vehicle}: {w.latest_reason}, but {w.earliest_reason}: "
+            f"short by {t_lo - t_hi:.1f} s",
+            vehicle=w.latest_vehicle,
         )
     if requested_s is not None and t_lo - TIME_TOL_S <= requested_s <= t_hi + TIME_TOL_S:
         return requested_s, "requested arrival time is feasible for every vehicle"
     if requested_s is None:
-        return t_lo, f"earliest common arrival: {lo.min_reason}"
+        return t_lo, f"earliest common arrival: {w.earliest_reason}"
     if requested_s < t_lo:
-        return t_lo, f"requested {requested_s:.1f} s is too early: {lo.min_reason}"
+        return t_lo, f"requested {requested_s:.1f} s is too early: {w.earliest_reason}"
     return t_lo, (
-        f"requested {requested_s:.1f} s is too late: {hi.max_reason}; earliest common arrival: "
-        f"{lo.min_reason}"
+        f"requested {requested_s:.1f} s is too late: {w.latest_reason}; earliest common "
+        f"arrival: {w.earliest_reason}"
     )
 
 
@@ -379,7 +414,8 @@ def time_path(
         raise InfeasibleError(
             f"vehicle {vehicle_id}: {km:.1f} km need at least {fastest:.1f} s at "
             f"{vmax:g} m/s but only {duration_s:.1f} s are left: short by "
-            f"{fastest - duration_s:.1f} s"
+            f"{fastest - duration_s:.1f} s",
+            vehicle=vehicle_id,
         )
     if duration_s <= slowest + TIME_TOL_S:
         pieces = split_speeds(remaining_m, duration_s, limits, current_m_s=current_m_s)
@@ -388,7 +424,8 @@ def time_path(
         raise InfeasibleError(
             f"vehicle {vehicle_id}: must lose {duration_s - slowest:.1f} s more than its minimum "
             f"speed {vmin:g} m/s allows and no buffer area on its path allows a loiter: short by "
-            f"{duration_s - slowest:.1f} s"
+            f"{duration_s - slowest:.1f} s",
+            vehicle=vehicle_id,
         )
     try:
         n = fewest_turns(remaining_m, duration_s, limits, site, loiter_margin_m_s)
@@ -396,14 +433,16 @@ def time_path(
         raise InfeasibleError(
             f"vehicle {vehicle_id}: loiter turns of "
             f"{2 * math.pi * site.radius_m * tas_per_eas:.0f} m cannot "
-            f"be trimmed to {duration_s:.1f} s within [{vmin:g}, {vmax:g}] m/s"
+            f"be trimmed to {duration_s:.1f} s within [{vmin:g}, {vmax:g}] m/s",
+            vehicle=vehicle_id,
         ) from None
     loiter_m = site.detour_m + 2.0 * math.pi * site.radius_m * n
     split = _loiter_split(remaining_m, duration_s, limits, site.at_m, loiter_m, current_m_s)
     if split is None:
         raise InfeasibleError(
             f"vehicle {vehicle_id}: no pair of discrete speeds flies {n} loiter turns "
-            f"and {km:.1f} km in {duration_s:.1f} s"
+            f"and {km:.1f} km in {duration_s:.1f} s",
+            vehicle=vehicle_id,
         )
     return Timing(split, n)
 

@@ -47,13 +47,79 @@ def test_plan_paper_scenario_writes_the_contract_fields(tmp_path: Path) -> None:
 def _bad(tmp_path: Path, data: dict[str, Any]) -> str:
     f = tmp_path / "bad.yaml"
     f.write_text(yaml.safe_dump(data))
-    proc = run("plan", str(f), "--out", str(tmp_path / "p.json"))
-    assert proc.returncode == 1
+    return _bad_file(f)
+
+
+def _bad_file(f: Path, command: str = "plan") -> str:
+    out = f.with_name("p.json")
+    proc = run(command, str(f), "--out", str(out))
+    assert proc.returncode == 1, proc.stderr
     assert proc.stdout == ""
     lines = proc.stderr.strip().splitlines()
     assert len(lines) == 1, proc.stderr  # one clear line, no traceback
-    assert not (tmp_path / "p.json").exists()
+    assert not out.exists()
     return lines[0]
+
+
+def _nan_speed() -> bytes:
+    data = small_scenario()
+    data["vehicles"][1]["speed_max_m_s"] = float("nan")
+    return yaml.safe_dump(data).encode()
+
+
+def _named(arrival: dict[str, Any]) -> bytes:
+    return yaml.safe_dump(small_scenario(arrival=arrival)).encode()
+
+
+@pytest.mark.parametrize("command", ["plan", "schedule"])
+@pytest.mark.parametrize(
+    ("name", "content", "expected"),
+    [
+        (
+            "s.yaml",
+            b"\x89PNG\r\n\x1a\n\x00\x00\x00\rIHDR\x00\x00",
+            "s.yaml: not a text file (NUL byte at offset 8)",
+        ),
+        (
+            "s.yaml",
+            "name: café\n".encode("cp1252"),
+            "s.yaml: not UTF-8 text (byte 0xe9 at offset 9)",
+        ),
+        (
+            "s.yaml",
+            b"name: x\narea:\n  origin: {lat_deg: 1\n  width_m: 3\n",
+            "s.yaml: line 4, column 10: not valid YAML: expected ',' or '}'",
+        ),
+        ("s.json", b'{"name": "x",\n "area": }', "s.json: line 2, column 10: not valid JSON"),
+        ("s.yaml", _nan_speed(), "s.yaml: vehicles[1].speed_max_m_s: not a number (NaN)"),
+        (
+            "s.yaml",
+            _named({"kind": "spaced", "interval_s": 60, "order": ["B", "UAV9"]}),
+            "s.yaml: arrival.order[1]: unknown vehicle 'UAV9'",
+        ),
+        (
+            "s.yaml",
+            _named(
+                {
+                    "kind": "windows",
+                    "windows": [
+                        {"vehicle": "A", "earliest_s": 0, "latest_s": 9000},
+                        {"vehicle": "UAV9", "earliest_s": 0, "latest_s": 9000},
+                    ],
+                }
+            ),
+            "s.yaml: arrival.windows[1].vehicle: unknown vehicle 'UAV9'",
+        ),
+    ],
+)
+def test_bad_scenario_file_is_one_line(
+    tmp_path: Path, command: str, name: str, content: bytes, expected: str
+) -> None:
+    f = tmp_path / name
+    f.write_bytes(content)
+    line = _bad_file(f, command)
+    assert line.startswith(f"error: {f}: "), line  # the file is named
+    assert line.startswith(f"error: {tmp_path}/{expected}"), line
 
 
 def test_start_in_forbidden_zone_is_one_line(tmp_path: Path) -> None:
@@ -119,6 +185,14 @@ def test_missing_scenario_file_is_one_line(tmp_path: Path) -> None:
     assert proc.stderr.strip().endswith("cannot read scenario file (No such file or directory)")
 
 
-@pytest.mark.parametrize("args", [["plan"], ["plan", "x.yaml", "--method", "greedy", "--out", "p"]])
+@pytest.mark.parametrize(
+    "args",
+    [
+        ["plan"],
+        ["plan", "x.yaml", "--method", "greedy", "--out", "p"],
+        ["schedule", "x.yaml"],
+        ["schedule", "x.yaml", "--out", "s.json", "--allow-conflicts", "extra"],
+    ],
+)
 def test_bad_arguments_exit_2(args: list[str]) -> None:
     assert run(*args).returncode == 2

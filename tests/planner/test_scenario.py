@@ -1,6 +1,7 @@
 from __future__ import annotations
 
 import json
+import math
 from pathlib import Path
 from typing import Any
 
@@ -106,11 +107,120 @@ def test_yaml_and_json_load_alike(tmp_path: Path) -> None:
     assert load_scenario(tmp_path / "a.yaml") == load_scenario(tmp_path / "a.json")
 
 
-def test_broken_yaml_is_one_line(tmp_path: Path) -> None:
-    (tmp_path / "bad.yaml").write_text("area: [unclosed\n")
+def _load_error(path: Path) -> str:
     with pytest.raises(ScenarioError) as info:
-        load_scenario(tmp_path / "bad.yaml")
-    assert "not valid YAML/JSON" in str(info.value) and "\n" not in str(info.value)
+        load_scenario(path)
+    msg = str(info.value)
+    assert "\n" not in msg and msg.startswith(f"{path}: ")
+    return msg[len(f"{path}: ") :]
+
+
+@pytest.mark.parametrize(
+    ("text", "expected"),
+    [
+        ("area: [unclosed\n", "line 2, column 1: not valid YAML: expected ',' or ']'"),
+        (
+            "name: x\narea:\n  origin: {lat_deg: 1\n  width_m: 3\n",
+            "line 4, column 10: not valid YAML: expected ',' or '}', but got ':' "
+            "(while parsing a flow mapping at line 3, column 11)",
+        ),
+        ("name: x\narea:\n\tfoo: 1\n", "line 3, column 1: not valid YAML: found character '\\t'"),
+        ("name: x\n  area: 1\n", "line 2, column 7: not valid YAML: mapping values"),
+        ("a: &x 1\nb: *y\n", "line 2, column 4: not valid YAML: found undefined alias 'y'"),
+    ],
+)
+def test_yaml_syntax_error_names_line_and_column(tmp_path: Path, text: str, expected: str) -> None:
+    (tmp_path / "bad.yaml").write_text(text)
+    assert _load_error(tmp_path / "bad.yaml").startswith(expected)
+
+
+def test_json_syntax_error_names_line_and_column(tmp_path: Path) -> None:
+    (tmp_path / "bad.json").write_text('{"name": "x",\n "area": }\n')
+    assert (
+        _load_error(tmp_path / "bad.json") == "line 2, column 10: not valid JSON: Expecting value"
+    )
+
+
+def test_binary_file_is_not_a_text_file(tmp_path: Path) -> None:
+    png = b"\x89PNG\r\n\x1a\n\x00\x00\x00\rIHDR" + bytes(range(256))
+    (tmp_path / "s.yaml").write_bytes(png)
+    assert _load_error(tmp_path / "s.yaml").startswith("not a text file (NUL byte at offset 8)")
+
+
+def test_non_utf8_file_is_named(tmp_path: Path) -> None:
+    (tmp_path / "s.yaml").write_bytes("name: café\n".encode("latin-1"))
+    assert _load_error(tmp_path / "s.yaml").startswith("not UTF-8 text (byte 0xe9 at offset 9)")
+
+
+def test_utf8_byte_order_mark_is_accepted(tmp_path: Path) -> None:
+    (tmp_path / "s.json").write_bytes(b"\xef\xbb\xbf" + json.dumps(small_scenario()).encode())
+    assert load_scenario(tmp_path / "s.json").name == "small"
+
+
+@pytest.mark.parametrize(
+    ("path", "expected"),
+    [
+        (("separation_m",), "separation_m"),
+        (("vehicles", 0, "speed_max_m_s"), "vehicles[0].speed_max_m_s"),
+        (("vehicles", 1, "start", "east_m"), "vehicles[1].start.east_m"),
+        (("vehicles", 0, "alt_min_m"), "vehicles[0].alt_min_m"),
+        (("vehicles", 0, "takeoff_window_s", 1), "vehicles[0].takeoff_window_s[1]"),
+        (("threats", 0, "radius_m"), "threats[0].radius_m"),
+        (("terrain", "elevation_m"), "terrain.elevation_m"),
+    ],
+)
+def test_nan_is_not_a_number_naming_the_field(
+    tmp_path: Path, path: tuple[Any, ...], expected: str
+) -> None:
+    data = small_scenario()
+    node: Any = data
+    for key in path[:-1]:
+        node = node[key]
+    node[path[-1]] = float("nan")
+    # As a YAML file writes it (.nan), and as a string the model would otherwise convert.
+    (tmp_path / "s.yaml").write_text(yaml.safe_dump(data))
+    assert ".nan" in (tmp_path / "s.yaml").read_text()
+    assert _load_error(tmp_path / "s.yaml") == f"{expected}: not a number (NaN)"
+    node[path[-1]] = "nan"
+    assert _error(data) == f"s.yaml: {expected}: not a number (NaN)"
+
+
+def test_infinity_is_not_a_finite_number() -> None:
+    data = small_scenario()
+    data["vehicles"][0]["max_range_m"] = math.inf
+    assert _error(data) == "s.yaml: vehicles[0].max_range_m: not a finite number (inf)"
+
+
+def _spaced(order: list[str]) -> dict[str, Any]:
+    return small_scenario(arrival={"kind": "spaced", "interval_s": 60, "order": order})
+
+
+def _windows(*vehicles: str) -> dict[str, Any]:
+    windows = [{"vehicle": v, "earliest_s": 0, "latest_s": 9000} for v in vehicles]
+    return small_scenario(arrival={"kind": "windows", "windows": windows})
+
+
+@pytest.mark.parametrize(
+    ("data", "expected"),
+    [
+        (_spaced(["A", "Z"]), "arrival.order[1]: unknown vehicle 'Z'"),
+        (_spaced(["A", "A"]), "arrival.order[1]: vehicle 'A' is named twice"),
+        (
+            _spaced(["B"]),
+            "arrival.order: vehicle 'A' missing (the order names each vehicle exactly once)",
+        ),
+        (_windows("A", "Q"), "arrival.windows[1].vehicle: unknown vehicle 'Q'"),
+        (_windows("B", "B"), "arrival.windows[1].vehicle: vehicle 'B' is named twice"),
+        (
+            _windows("A"),
+            "arrival.windows: vehicle 'B' missing (each vehicle needs exactly one window)",
+        ),
+    ],
+)
+def test_arrival_vehicles_are_checked_naming_field_and_vehicle(
+    data: dict[str, Any], expected: str
+) -> None:
+    assert _error(data) == f"s.yaml: {expected}"
 
 
 def test_srtm_directory_is_relative_to_the_file(tmp_path: Path) -> None:

@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import math
+import pickle
+from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
@@ -11,10 +13,10 @@ import pytest
 
 from planner.atmosphere import eas2tas, mean_eas2tas
 from planner.deconflict import separation
-from planner.errors import InfeasibleError
+from planner.errors import ArrivalTimeError, InfeasibleError, SeparationError
 from planner.plan import build_world, plan
 from planner.popup import replay_popups
-from planner.retime import build_schedule
+from planner.retime import build_schedule, check_arrival, check_feasible
 from planner.scenario import load_scenario, parse_scenario
 from planner.schedule import Schedule
 from tests.planner.conftest import small_scenario
@@ -179,3 +181,131 @@ def test_legs_are_timed_at_the_true_airspeed_of_their_altitudes(
         for leg in vs.legs:
             flown = (leg.s_end_m - leg.s_start_m) / (leg.t_end_s - leg.t_start_s)
             assert lo_ratio - 1e-6 <= flown / leg.speed_m_s <= hi_ratio + 1e-6
+
+
+# --- feasibility: the requested arrival and the separation minimum ----------------------
+
+
+def test_too_early_request_is_moved_by_build_schedule_and_refused_by_check_arrival() -> None:
+    s = _small(arrival={"kind": "simultaneous", "required_s": 10})
+    # build_schedule keeps its contract: the reference moves to the earliest feasible time.
+    assert s.requested_arrival_s == 10
+    assert s.required_arrival_s is not None and s.required_arrival_s > 1000
+    with pytest.raises(ArrivalTimeError) as info:
+        check_arrival(s)
+    err = info.value
+    assert isinstance(err, InfeasibleError)
+    assert err.requested_s == 10
+    assert err.earliest_s == pytest.approx(s.required_arrival_s)
+    assert err.latest_s >= err.earliest_s
+    longest = max(s.vehicles, key=lambda v: v.path.length_m)
+    assert err.vehicle == longest.vehicle_id  # the same speed limits: the longest path
+    assert str(err).startswith(
+        f"requested arrival 10.0 s is too early: earliest feasible {err.earliest_s:.1f} s, "
+        f"forced by vehicle {err.vehicle}: {err.vehicle} cannot arrive before"
+    )
+    with pytest.raises(ArrivalTimeError):
+        check_feasible(s)
+
+
+def test_too_late_request_names_the_vehicle_that_cannot_wait() -> None:
+    # No buffer area to loiter in: the latest arrival is the slowest flight of the latest
+    # takeoff.
+    s = _small(arrival={"kind": "simultaneous", "required_s": 50000})
+    with pytest.raises(ArrivalTimeError) as info:
+        check_arrival(s)
+    err = info.value
+    assert err.requested_s == 50000 and err.latest_s < 50000
+    assert err.vehicle in ("A", "B") and math.isfinite(err.latest_s)
+    assert str(err).startswith(
+        f"requested arrival 50000.0 s is too late: latest feasible {err.latest_s:.1f} s, "
+        f"forced by vehicle {err.vehicle}: {err.vehicle} cannot arrive after"
+    )
+
+
+def test_too_early_first_spaced_slot_is_refused() -> None:
+    s = _small(arrival={"kind": "spaced", "interval_s": 120, "first_s": 100})
+    with pytest.raises(ArrivalTimeError, match=r"^requested first arrival 100\.0 s is too early"):
+        check_arrival(s)
+
+
+def test_feasible_request_passes_with_the_team_separation() -> None:
+    s = _small(arrival={"kind": "simultaneous", "required_s": 2200})
+    check_arrival(s)
+    sep = check_feasible(s)
+    assert not sep.conflicts and sep.min_separation_m > s.scenario.separation_m
+    assert s.team_window is not None
+    assert s.team_window.earliest_s <= 2200 <= s.team_window.latest_s
+
+
+def test_earliest_common_arrival_without_a_request_passes() -> None:
+    check_arrival(_small())
+    assert _small(arrival={"kind": "windows", "windows": _own_windows()}).team_window is None
+
+
+def _own_windows() -> list[dict[str, Any]]:
+    return [
+        {"vehicle": "A", "earliest_s": 2000, "latest_s": 2300},
+        {"vehicle": "B", "earliest_s": 1900, "latest_s": 2000},
+    ]
+
+
+def test_same_goal_is_a_separation_error_naming_pair_time_and_distance() -> None:
+    data = small_scenario()
+    data["vehicles"][1]["goal"] = dict(data["vehicles"][0]["goal"])
+    scenario = parse_scenario(data)
+    s = build_schedule(scenario, plan(scenario, "astar"))
+    with pytest.raises(SeparationError) as info:
+        check_feasible(s)
+    err = info.value
+    assert isinstance(err, InfeasibleError)
+    assert err.pair == ("A", "B") and err.required_m == 300 and err.conflicts == 1
+    assert err.distance_m < 1.0
+    assert s.required_arrival_s is not None
+    assert err.time_s == pytest.approx(s.required_arrival_s, abs=1.0)
+    assert str(err) == (
+        f"vehicles A and B come within {err.distance_m:.1f} m of each other at "
+        f"{err.time_s:.1f} s, under the separation minimum d_s 300 m"
+    )
+    # The operator's override: the conflicts are returned instead.
+    sep = check_feasible(s, allow_conflicts=True)
+    assert [(c.a, c.b) for c in sep.conflicts] == [("A", "B")]
+
+
+@pytest.mark.parametrize("name", ["paper_three_uav.yaml", "paper_spaced_60s.yaml"])
+def test_paper_scenarios_are_feasible_as_planned(name: str) -> None:
+    scenario = load_scenario(ROOT / "scenarios" / name)
+    world = build_world(scenario)
+    s = build_schedule(scenario, plan(scenario, "aco", rng=np.random.default_rng(1)), world=world)
+    sep = check_feasible(s)
+    assert sep.min_separation_m > 1400 and scenario.separation_m == 500
+
+
+def test_infeasibility_errors_survive_pickling() -> None:
+    errors: list[InfeasibleError] = [
+        ArrivalTimeError("a", vehicle="A", requested_s=1.0, earliest_s=2.0, latest_s=math.inf),
+        SeparationError("b", pair=("A", "B"), time_s=3.0, distance_m=4.0, required_m=5.0),
+        InfeasibleError("c", vehicle="C"),
+    ]
+    for err in errors:
+        back = pickle.loads(pickle.dumps(err))
+        assert type(back) is type(err) and str(back) == str(err)
+        assert back.__dict__ == err.__dict__
+
+
+def test_team_time_moved_after_the_build_is_refused_without_blaming_a_vehicle(
+    paper: tuple[Schedule, Schedule],
+) -> None:
+    """A schedule whose team time a pop-up re-plan moved no longer holds a request."""
+    _, after = paper
+    assert after.required_arrival_s is not None
+    requested = after.required_arrival_s - 100.0
+    assert after.team_window is not None and after.team_window.earliest_s <= requested
+    moved = replace(after, requested_arrival_s=requested)
+    with pytest.raises(ArrivalTimeError) as info:
+        check_arrival(moved)
+    assert info.value.vehicle is None and info.value.requested_s == requested
+    assert str(info.value).startswith(
+        f"requested arrival {requested:.1f} s is not held: the team arrives at "
+        f"{after.required_arrival_s:.1f} s ("
+    )

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import re
 from pathlib import Path
 
 import pytest
@@ -11,6 +12,7 @@ from planner.__main__ import main
 from planner.mission import MAV_CMD_DO_CHANGE_SPEED, MAV_CMD_NAV_LOITER_TURNS, items_equal
 from planner.missionfile import read_mission_file
 from planner.schedulefile import mission_from_json
+from tests.planner.conftest import small_scenario
 
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -88,8 +90,6 @@ def test_export_unknown_vehicle_is_one_line(
 def test_infeasible_schedule_exits_1_naming_the_vehicle(
     tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
-    from tests.planner.conftest import small_scenario
-
     data = small_scenario(arrival={"kind": "simultaneous", "required_s": 9000})
     data["vehicles"][0]["airborne"] = True
     data["vehicles"][1]["takeoff_window_s"] = [8000, 9000]
@@ -99,3 +99,58 @@ def test_infeasible_schedule_exits_1_naming_the_vehicle(
     assert main(args) == 1
     err = capsys.readouterr().err
     assert err.startswith("error: vehicle A:") and "short by" in err and err.count("\n") == 1
+
+
+def _schedule(
+    tmp_path: Path,
+    data: dict,
+    *extra: str,  # type: ignore[type-arg]
+) -> tuple[int, Path]:
+    scenario = tmp_path / "s.json"
+    scenario.write_text(json.dumps(data))
+    out = tmp_path / "o.json"
+    args = ["schedule", str(scenario), "--method", "astar", "--out", str(out), *extra]
+    return main(args), out
+
+
+def _refused(
+    tmp_path: Path,
+    data: dict,
+    capsys: pytest.CaptureFixture[str],  # type: ignore[type-arg]
+) -> str:
+    """Schedule ``data``: exit 1, nothing written, one line on stderr (returned)."""
+    code, out = _schedule(tmp_path, data)
+    captured = capsys.readouterr()
+    assert code == 1 and not out.exists()
+    assert captured.out == "" and captured.err.count("\n") == 1, captured.err
+    return captured.err
+
+
+def test_infeasible_requested_arrival_exits_1_naming_times_and_vehicle(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    data = small_scenario(arrival={"kind": "simultaneous", "required_s": 10})
+    err = _refused(tmp_path, data, capsys)
+    assert re.match(
+        r"error: requested arrival 10\.0 s is too early: earliest feasible \d+\.\d s, "
+        r"forced by vehicle [AB]: ",
+        err,
+    ), err
+
+
+def test_collision_exits_1_naming_pair_time_and_distance_unless_allowed(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    data = small_scenario()
+    data["vehicles"][1]["goal"] = dict(data["vehicles"][0]["goal"])
+    err = _refused(tmp_path, data, capsys)
+    assert re.match(
+        r"error: vehicles A and B come within 0\.\d m of each other at \d+\.\d s, under the "
+        r"separation minimum d_s 300 m \(--allow-conflicts writes the schedule anyway\)$",
+        err,
+    ), err
+    code, out = _schedule(tmp_path, data, "--allow-conflicts")
+    assert code == 0
+    doc = json.loads(out.read_text())
+    assert doc["min_separation_m"] < 1.0 and len(doc["conflicts"]) == 1
+    assert "conflict allowed: A and B within 0." in capsys.readouterr().out
