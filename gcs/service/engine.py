@@ -47,7 +47,7 @@ from gcs.store.repository import CheckpointWriter, EventWriter, Store, StoreNotF
 from planner.errors import InfeasibleError, PlannerError
 from planner.missionfile import to_qgc_plan, to_wpl
 from planner.plan import World, build_world, plan
-from planner.retime import build_schedule
+from planner.retime import build_schedule, check_feasible
 from planner.scenario import Scenario, Threat
 from planner.schedule import Schedule
 from planner.schedulefile import path_mission
@@ -875,23 +875,7 @@ def _plan(scenario: Scenario, seed: int, config: FlightConfig) -> tuple[Schedule
     try:
         p = plan(scenario, method=config.method, rng=np.random.default_rng(seed), world=world)
         schedule = build_schedule(scenario, p, world=world)
+        check_feasible(schedule)
     except InfeasibleError as err:
-        raise Infeasible(f"infeasible: {err}", None, None) from None
-    requested, ref = schedule.requested_arrival_s, schedule.required_arrival_s
-    if requested is not None and ref is not None and abs(ref - requested) > 1e-3:
-        forcing = _forcing_vehicle(schedule)
-        raise Infeasible(
-            f"required arrival {requested:.1f} s cannot be met; earliest feasible {ref:.1f} s "
-            f"({schedule.arrival_reason})",
-            ref,
-            forcing,
-        )
+        raise Infeasible(f"infeasible: {err}", err.earliest_s, err.vehicle) from None
     return schedule, world
-
-
-def _forcing_vehicle(schedule: Schedule) -> str | None:
-    """The vehicle the arrival reason names (the one that sets the earliest time)."""
-    for vs in schedule.vehicles:
-        if vs.vehicle_id in schedule.arrival_reason:
-            return vs.vehicle_id
-    return None
