@@ -57,23 +57,45 @@ async def command_rtt(c: Client) -> float:
     return loop.time() - t0
 
 
-async def answer_requests(c: Client, items: list[Any], *, first: Any, retry_s: float) -> int:
+async def answer_requests(
+    c: Client, items: list[Any], *, first: Any, retry_s: float
+) -> tuple[int, Counter[int]]:
     """The rest of an upload whose MISSION_COUNT was taken: answer every request (copies
-    too, as Client.upload does), resend the last item on silence; the ACK's result."""
+    too, as Client.upload does), resend the last item on silence. Returns the ACK's result
+    and how many times each item was sent."""
+    sent: Counter[int] = Counter()
+
+    def send(item: Any) -> None:
+        c.send(item)
+        sent[item.seq] += 1
+
     last = first
-    c.send(last)
+    send(last)
     async with asyncio.timeout(20.0):
         while True:
             msg = await c.try_recv(
                 lambda m: m.get_type() in ("MISSION_REQUEST_INT", "MISSION_ACK"), retry_s
             )
             if msg is None:
-                c.send(last)
+                send(last)
             elif msg.get_type() == "MISSION_ACK":
-                return int(msg.type)
+                return int(msg.type), sent
             elif 0 <= msg.seq < len(items):
                 last = items[msg.seq]
-                c.send(last)
+                send(last)
+
+
+async def vehicle_took(team: SimTeam, copies: int) -> None:
+    """Wait until vehicle 0 has handled ``copies`` messages (delayed copies included)."""
+    counters = team.vehicles[0].counters
+    async with asyncio.timeout(20.0):
+        while counters["received"] < copies:
+            await asyncio.sleep(0.005)
+
+
+def requests_seen(c: Client) -> Counter[int]:
+    """How many MISSION_REQUEST_INT of each seq the client has received."""
+    return Counter(m.seq for m in c.history if m.get_type() == "MISSION_REQUEST_INT")
 
 
 @pytest.fixture
@@ -113,37 +135,43 @@ async def test_latency_set_at_run_time_delays_both_directions(team: SimTeam) -> 
 
 
 async def test_duplication_set_at_run_time_keeps_upload_exact(team: SimTeam) -> None:
-    link = team.vehicles[0].link
+    vehicle = team.vehicles[0]
+    link = vehicle.link
     link.faults(duplicate=1.0)
     c = await Client.connect(team.ports[0])
     try:
         items = mission(8, 100.0)
-        # Item 0 goes out only once the vehicle has taken both copies of MISSION_COUNT (each
-        # copy is answered with a request for item 0, itself duplicated: four requests per
-        # COUNT sent). Under load the stub's delayed second copy can be handled after an item
-        # that arrived later, and a COUNT taken after item 0 restarts the upload, after which
-        # late copies of early items are accepted instead of ignored.
-        counts_sent = 1
+        # Every packet arrives twice, the copy 1 ms later. Item 0 goes out once the vehicle
+        # has handled both copies of the one MISSION_COUNT, counted where it handles them:
+        # the requests coming back do not tell, as the re-request timer sends them too. A
+        # COUNT copy taken after the items would start a new upload that the items' delayed
+        # copies, arriving in order, complete: accepted, not ignored.
         c.send(mavlink2.MAVLink_mission_count_message(1, 1, len(items), 0))
-        async with asyncio.timeout(20.0):
-            while (
-                sum(m.get_type() == "MISSION_REQUEST_INT" and m.seq == 0 for m in c.history)
-                < 4 * counts_sent
-            ):
-                if await c.try_recv("MISSION_REQUEST_INT", 0.5) is None:
-                    c.send(mavlink2.MAVLink_mission_count_message(1, 1, len(items), 0))
-                    counts_sent += 1
-        result = await answer_requests(c, items, first=items[0], retry_s=0.5)
+        await vehicle_took(team, 2)
+        result, sent = await answer_requests(c, items, first=items[0], retry_s=0.5)
         assert result == mavlink2.MAV_MISSION_ACCEPTED
+        # The COUNT and every item sent reached the vehicle twice; wait for the last copies.
+        packets = 1 + sum(sent.values())
+        await vehicle_took(team, 2 * packets)
+        assert vehicle.counters["received"] == 2 * packets
+        assert link.inbound.passed == link.inbound.duplicated == packets
         assert stored_matches(team, items)
+        # One upload: the first copy of each item was taken, every other copy of an item
+        # before the last was ignored (those of the last item are answered with the ACK).
+        last = len(items) - 1
+        assert set(sent) == set(range(len(items)))
+        assert vehicle.mission.counters["uploads"] == 1
+        assert vehicle.mission.counters["ignored"] == sum(
+            2 * n - 1 for seq, n in sent.items() if seq != last
+        )
         assert_download_matches(await c.download(retry_s=0.5), items)
-        # Every request reached the client twice (the last copy may still be on its way when
-        # the ACK is in); the vehicle ignored the second copy of each item.
-        requests = Counter(m.seq for m in c.history if m.get_type() == "MISSION_REQUEST_INT")
-        assert set(requests) == set(range(len(items)))
-        assert all(requests[seq] >= 2 for seq in range(len(items) - 1))
-        assert team.vehicles[0].mission.counters["ignored"] >= len(items) - 1
-        assert link.inbound.duplicated > 0 and link.outbound.duplicated > 0
+        # Every request reached the client twice, both COUNT copies were answered (read on
+        # until the last delayed copies are in).
+        async with asyncio.timeout(20.0):
+            while not ((r := requests_seen(c))[0] >= 4 and all(r[seq] >= 2 for seq in sent)):
+                await c.try_recv(lambda m: False, 0.05)
+        assert set(requests_seen(c)) == set(range(len(items)))
+        assert link.outbound.duplicated > 0
     finally:
         await c.close()
 
