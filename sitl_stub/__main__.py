@@ -1,6 +1,7 @@
 """CLI: ``python -m sitl_stub --vehicles N --tcp-base PORT --speedup S --home LAT,LON,ALT[,HDG]``.
 
-Runs until SIGINT/SIGTERM, then closes every socket (and the truth file) and exits 0.
+Runs until SIGINT/SIGTERM, then closes every socket (and the truth file), writes the final
+counters file and exits 0.
 """
 
 from __future__ import annotations
@@ -96,6 +97,14 @@ def parse_args(argv: Sequence[str] | None = None) -> argparse.Namespace:
         "--truth",
         metavar="FILE",
         help="write every vehicle's true state as JSON lines (format tcgcs-truth/1)",
+    )
+    ap.add_argument(
+        "--counters",
+        metavar="FILE",
+        help="keep every vehicle's counters in FILE as one JSON document (format "
+        "tcgcs-stub-counters/1: arms, auto_mode_changes, mission_uploads, mission_downloads, "
+        "failed_uploads, message and link counters), replaced whole about once a wall second "
+        "and at exit",
     )
     ap.add_argument(
         "--mission-timeout",
@@ -423,6 +432,7 @@ async def serve(
             mission_timeout_s=args.mission_timeout,
             truth_out=args.truth,
             truth_period_s=args.truth_period,
+            counters_out=args.counters,
         ) as team:
             if args.loss or args.latency_ms:
                 for v in team.vehicles:
@@ -465,8 +475,9 @@ def main(argv: Sequence[str] | None = None) -> int:
             math.isfinite(args.start_utc) and args.start_utc >= 0
         ):
             raise UsageError(f"--start-utc must be Unix seconds >= 0, got {args.start_utc}")
-        if args.truth and not Path(args.truth).resolve().parent.is_dir():
-            raise UsageError(f"--truth {args.truth}: directory does not exist")
+        for option, path in (("--truth", args.truth), ("--counters", args.counters)):
+            if path and not Path(path).resolve().parent.is_dir():
+                raise UsageError(f"{option} {path}: directory does not exist")
         if not (math.isfinite(args.truth_period) and args.truth_period > 0):
             raise UsageError(f"--truth-period must be a positive number, got {args.truth_period}")
         homes = homes_from_args(args)

@@ -9,8 +9,10 @@ Example::
         print(team.vehicles[0].true_state, team.sim_time_s, team.utc_s)
 
 ``SimTeam.start(..., truth_out="truth.jsonl")`` records every vehicle's true state as JSON
-lines (:mod:`sitl_stub.truth`); ``team.schedule_blackout(i, start_sim_s, duration_s)`` cuts a
-vehicle's link at a simulated time.
+lines (:mod:`sitl_stub.truth`); ``counters_out="counters.json"`` keeps a file of what the
+vehicles were made to do (arms, AUTO entries, mission transfers: :mod:`sitl_stub.counters`);
+``team.schedule_blackout(i, start_sim_s, duration_s)`` cuts a vehicle's link at a simulated
+time.
 """
 
 from __future__ import annotations
@@ -26,6 +28,7 @@ import numpy as np
 
 from sitl_stub.autopilot import Autopilot
 from sitl_stub.clock import DEFAULT_EPOCH_UTC_S, ClockStats, SimClock
+from sitl_stub.counters import DEFAULT_COUNTERS_PERIOD_S, CountersWriter
 from sitl_stub.link import FaultyLink
 from sitl_stub.model import AirframeParams, FlightState, Wind
 from sitl_stub.server import TeamServer
@@ -70,6 +73,7 @@ class SimTeam:
         self.clock = server.clock
         self.vehicles: list[Vehicle] = server.vehicles
         self.truth: TruthRecorder | None = None  # set by start(truth_out=...)
+        self.counters_file: CountersWriter | None = None  # set by start(counters_out=...)
 
     @classmethod
     @contextlib.asynccontextmanager
@@ -96,6 +100,8 @@ class SimTeam:
         run: bool = True,
         truth_out: str | Path | None = None,
         truth_period_s: float = DEFAULT_TRUTH_PERIOD_S,
+        counters_out: str | Path | None = None,
+        counters_period_s: float = DEFAULT_COUNTERS_PERIOD_S,
     ) -> AsyncIterator[SimTeam]:
         """Start the team; vehicle ``i`` has system id ``i + 1`` on ``tcp_base + 10*i``.
 
@@ -105,7 +111,10 @@ class SimTeam:
         MISSION_REQUEST instead of MISSION_REQUEST_INT (as older ArduPilot does). With
         ``truth_out`` the true state of every vehicle is written to that file every
         ``truth_period_s`` simulated seconds (:class:`~sitl_stub.truth.TruthRecorder`,
-        available as :attr:`truth`; flushed and closed when the team stops).
+        available as :attr:`truth`; flushed and closed when the team stops). With
+        ``counters_out`` the vehicles' counters are kept in that file, rewritten whole every
+        ``counters_period_s`` wall seconds and when the team stops
+        (:class:`~sitl_stub.counters.CountersWriter`, available as :attr:`counters_file`).
         """
         team = cls.create(
             homes=homes,
@@ -133,9 +142,19 @@ class SimTeam:
             team.truth.start()
             team.server.add_step_listener(team.truth.on_step)
         try:
+            if counters_out is not None:
+                writer = CountersWriter(
+                    counters_out, team.vehicles, team.clock, period_s=counters_period_s
+                )
+                writer.start()
+                team.counters_file = writer
+                team.server.add_step_listener(writer.on_step)
             await team.server.open()
         except BaseException:
-            team._close_truth()
+            try:
+                team._close_truth()
+            finally:
+                team._close_counters()
             raise
         try:
             async with asyncio.TaskGroup() as tg:
@@ -147,8 +166,11 @@ class SimTeam:
                         runner.cancel()
         finally:
             team._cancel_waiters()
-            team._close_truth()
-            await team.server.close()
+            try:
+                team._close_truth()
+                await team.server.close()
+            finally:
+                team._close_counters()  # after the last message was handled
 
     @classmethod
     def create(
@@ -338,3 +360,8 @@ class SimTeam:
         if self.truth is not None:
             self.server.remove_step_listener(self.truth.on_step)
             self.truth.close()
+
+    def _close_counters(self) -> None:
+        if self.counters_file is not None:
+            self.server.remove_step_listener(self.counters_file.on_step)
+            self.counters_file.close()

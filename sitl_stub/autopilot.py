@@ -374,6 +374,8 @@ class Autopilot:
         self._wp_dist = 0.0
         self._alt_error = 0.0
         self._xtrack = 0.0
+        # Arms from disarmed; changes into AUTO from another mode.
+        self.counters: dict[str, int] = {"arms": 0, "auto_mode_changes": 0}
 
     # ------------------------------------------------------------------ properties
     @property
@@ -463,6 +465,8 @@ class Autopilot:
     # ------------------------------------------------------------------ commands
     def arm(self, force: bool = False) -> tuple[bool, str]:
         """Arm (re-arming an armed vehicle succeeds, as on ArduPilot)."""
+        if not self._armed:
+            self.counters["arms"] += 1
         self._armed = True
         return True, ""
 
@@ -793,6 +797,8 @@ class Autopilot:
 
     def _enter_mode(self, mode: Mode, events: list[Event], start_at: int | None = None) -> None:
         was_auto = self._mode == _AUTO
+        if mode == _AUTO and not was_auto:
+            self.counters["auto_mode_changes"] += 1
         self._mode = mode
         self._new_airspeed_m_s = -1.0
         if was_auto and self._mission_state == _MISSION_RUNNING:

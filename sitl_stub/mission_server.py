@@ -21,7 +21,11 @@ Behaviour follows ArduPilot's ``MissionItemProtocol``:
 - Unlike ArduPilot, items are staged and committed only when the upload completes, so a failed
   upload never loses the stored mission (the mission protocol spec's recommendation).
 - Download is stateless: MISSION_REQUEST_LIST -> MISSION_COUNT, and any MISSION_REQUEST_INT /
-  MISSION_REQUEST for a valid seq is answered with MISSION_ITEM_INT / MISSION_ITEM.
+  MISSION_REQUEST for a valid seq is answered with MISSION_ITEM_INT / MISSION_ITEM. Only the
+  ``downloads`` counter follows it: a download counts once every item of the list announced
+  to that GCS has been served (a repeated MISSION_REQUEST_LIST for the same count goes on
+  with the same download; a new upload of that type ends it uncounted; an empty list does
+  not count).
 - Mission item 0 of the flown mission (type 0) is home: it is always read back as the current
   home, and the count is at least 1.
 - Fence and rally items are stored separately and never flown.
@@ -149,6 +153,18 @@ class _Upload:
     last_progress_s: float
     last_request_s: float
     retries: int = 0
+
+
+@dataclass(slots=True)
+class _Download:
+    """The items of a list announced to a GCS that it has not been sent yet (a counter's)."""
+
+    count: int
+    unsent: set[int]
+
+
+# A download is followed per link, GCS system, GCS component and mission type.
+_DownloadKey = tuple[LinkId, int, int, int]
 
 
 @dataclass(frozen=True, slots=True)
@@ -294,7 +310,17 @@ class MissionServer:
         self._upload: _Upload | None = None
         self._finished: _Finished | None = None
         self.last_result = Result.NONE
-        self.counters: dict[str, int] = {"ignored": 0, "uploads": 0, "failed_uploads": 0}
+        self._downloads: dict[_DownloadKey, _Download] = {}
+        # "uploads": every replacement of stored items (clears too); "accepted_uploads":
+        # uploads the protocol completed (MISSION_ACK accepted); "downloads": see the module
+        # docstring. Every mission type counts.
+        self.counters: dict[str, int] = {
+            "ignored": 0,
+            "uploads": 0,
+            "failed_uploads": 0,
+            "accepted_uploads": 0,
+            "downloads": 0,
+        }
         self._handlers: dict[str, Callable[[Any, LinkId, float, Reaction], None]] = {
             "MISSION_COUNT": self._on_count,
             "MISSION_WRITE_PARTIAL_LIST": self._on_partial,
@@ -428,6 +454,7 @@ class MissionServer:
         if count == 0:
             self._upload = None
             self._commit(r, mt, ())
+            self.counters["accepted_uploads"] += 1
             self._ack(r, link, src, comp, int(mavlink2.MAV_MISSION_ACCEPTED), mt)
             return
         self._upload = _Upload(
@@ -535,12 +562,14 @@ class MissionServer:
         self._upload = None
         self._finished = _Finished(link, up.gcs_system, up.gcs_component, mt, seq)
         self._commit(r, mt, new_items)
+        self.counters["accepted_uploads"] += 1
         self._ack(r, link, up.gcs_system, up.gcs_component, int(mavlink2.MAV_MISSION_ACCEPTED), mt)
 
     def _commit(self, r: Reaction, mission_type: int, items: tuple[MissionItem, ...]) -> None:
         self.store(items, mission_type)
         self.last_result = Result.SUCCESS
         self.counters["uploads"] += 1
+        self._downloads = {k: d for k, d in self._downloads.items() if k[3] != mission_type}
         r.events.append(MissionStored(mission_type, self.items(mission_type)))
 
     def _request(self, r: Reaction, up: _Upload) -> None:
@@ -561,9 +590,22 @@ class MissionServer:
         if mt not in self._stored:
             self._ack(r, link, src, comp, int(mavlink2.MAV_MISSION_UNSUPPORTED), mt)
             return
-        r.sends.append(
-            Send(link, mavlink2.MAVLink_mission_count_message(src, comp, self.count(mt), mt))
-        )
+        n = self.count(mt)
+        key = (link, src, comp, mt)
+        known = self._downloads.get(key)
+        if n > 0 and (known is None or known.count != n):
+            self._downloads[key] = _Download(n, set(range(n)))
+        r.sends.append(Send(link, mavlink2.MAVLink_mission_count_message(src, comp, n, mt)))
+
+    def _note_served(self, key: _DownloadKey, seq: int) -> None:
+        """Item ``seq`` went out; the last unsent item of a download counts the download."""
+        d = self._downloads.get(key)
+        if d is None:
+            return
+        d.unsent.discard(seq)
+        if not d.unsent:
+            del self._downloads[key]
+            self.counters["downloads"] += 1
 
     def _on_request(self, msg: Any, link: LinkId, now_s: float, r: Reaction) -> None:
         mt = int(msg.mission_type)
@@ -597,6 +639,7 @@ class MissionServer:
                 it.param1, it.param2, it.param3, it.param4, it.x, it.y, it.z, mt,
             )  # fmt: skip
         r.sends.append(Send(link, out))
+        self._note_served((link, src, comp, mt), seq)
 
     def _on_clear_all(self, msg: Any, link: LinkId, now_s: float, r: Reaction) -> None:
         mt = int(msg.mission_type)

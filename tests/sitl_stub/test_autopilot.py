@@ -556,3 +556,15 @@ def test_wind_and_params_can_be_changed() -> None:
     assert ap.params.wp_radius_m == 50.0
     assert ap.home == HOME
     assert ap.mission == ()
+
+
+def test_counters_count_arms_from_disarmed_and_changes_into_auto() -> None:
+    ap = make()
+    ap.replace_mission([home_item(), takeoff(1, 60.0), item(2, WP, 1500, 0, 100)])
+    assert ap.arm() == (True, "") and ap.arm() == (True, "")  # the second arm is no transition
+    assert ap.set_mode(Mode.AUTO) and ap.set_mode(Mode.AUTO)  # re-selecting AUTO is no change
+    assert ap.start_mission(1)  # already in AUTO: restarts the mission, no mode change
+    assert ap.set_mode(Mode.LOITER) and ap.start_mission(1)  # MISSION_START enters AUTO
+    assert ap.counters == {"arms": 1, "auto_mode_changes": 2}
+    assert ap.disarm(force=True) == (True, "") and ap.arm() == (True, "")
+    assert ap.counters["arms"] == 2

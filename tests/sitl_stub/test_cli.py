@@ -222,6 +222,7 @@ def test_speed_bias_parses_per_vehicle() -> None:
         (["--home", "0,0,0", "--speed-bias", "0"], "--speed-bias needs 2"),
         (["--home", "0,0,0", "--start-utc", "-5"], "--start-utc"),
         (["--home", "0,0,0", "--truth", "/no/such/dir/t.jsonl"], "--truth"),
+        (["--home", "0,0,0", "--counters", "/no/such/dir/c.json"], "--counters"),
     ],
 )
 def test_cli_rejects_bad_values_naming_the_option(

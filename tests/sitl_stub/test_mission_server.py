@@ -385,3 +385,56 @@ def test_cli_has_the_legacy_mission_requests_flag() -> None:
     home = ["--home", "-35.36,149.16,584"]
     assert parse_args([*home, "--legacy-mission-requests"]).legacy_mission_requests is True
     assert parse_args(home).legacy_mission_requests is False
+
+
+def request_list(mission_type: int = 0, sysid: int = GCS_SYS) -> Any:
+    return from_gcs(mavlink2.MAVLink_mission_request_list_message(1, 1, mission_type), sysid)
+
+
+def request_int(seq: int, mission_type: int = 0, sysid: int = GCS_SYS) -> Any:
+    return from_gcs(mavlink2.MAVLink_mission_request_int_message(1, 1, seq, mission_type), sysid)
+
+
+def test_accepted_uploads_count_completed_uploads_only(server: MissionServer) -> None:
+    upload(server, 3)
+    server.handle(item_int(2), LINK, 0.0)  # the last item again: the ACK again, no new upload
+    server.handle(count(3), LINK, 0.0)  # a failed upload: item 1 is not a mission command
+    server.handle(item_int(0), LINK, 0.0)
+    server.handle(item_int(1, command=mavlink2.MAV_CMD_NAV_FENCE_RETURN_POINT), LINK, 0.0)
+    upload(server, 0, mission_type=mavlink2.MAV_MISSION_TYPE_RALLY)  # an accepted empty list
+    server.handle(from_gcs(mavlink2.MAVLink_mission_clear_all_message(1, 1, 0)), LINK, 0)
+    c = server.counters
+    assert (c["accepted_uploads"], c["failed_uploads"], c["uploads"]) == (2, 1, 3)
+
+
+def test_a_download_counts_once_every_item_was_served(server: MissionServer) -> None:
+    upload(server, 3)
+    for _ in range(2):  # the second time the GCS re-reads a list whose count it had
+        server.handle(request_list(), LINK, 0.0)
+        for seq in (0, 1, 1, 2, 2):  # repeated requests (the answer was lost or duplicated)
+            server.handle(request_int(seq), LINK, 0.0)
+    assert server.counters["downloads"] == 2
+    server.handle(request_list(), LINK, 0.0)
+    server.handle(request_int(0), LINK, 0.0)
+    server.handle(request_list(), LINK, 0.0)  # a retransmitted list request: same download
+    server.handle(request_int(1), LINK, 0.0)
+    server.handle(request_int(2), LINK, 0.0)
+    assert server.counters["downloads"] == 3
+
+
+def test_a_download_that_stops_short_or_outlives_its_list_does_not_count(
+    server: MissionServer,
+) -> None:
+    upload(server, 3)
+    server.handle(request_list(), LINK, 0.0)
+    server.handle(request_int(0), LINK, 0.0)
+    server.handle(request_int(1), LINK, 0.0)
+    server.handle(request_int(2, sysid=254), LINK, 0.0)  # another GCS's request
+    server.handle(request_int(2), LINK + 1, 0.0)  # the same GCS on another link
+    assert server.counters["downloads"] == 0
+    upload(server, 3)  # the mission changed under the download
+    server.handle(request_int(2), LINK, 0.0)
+    server.handle(request_int(0), LINK, 0.0)  # without a list request first
+    server.handle(request_int(1), LINK, 0.0)
+    server.handle(request_list(mavlink2.MAV_MISSION_TYPE_FENCE), LINK, 0.0)  # an empty list
+    assert server.counters["downloads"] == 0
