@@ -265,6 +265,9 @@ async def stream_ws(websocket: WebSocket, flight_id: str, after_seq: int = 0) ->
     if auth.lower().startswith("bearer "):
         token = auth[7:]
     scopes = None if token is None else websocket.app.state.tokens.scopes(token)
+    # Accepted before it is closed: a close before the handshake is answered is an HTTP 403
+    # (ASGI), and the client would never see the close code.
+    await websocket.accept()
     if scopes is None:
         await websocket.close(code=4401, reason="a bearer token is required")
         return
@@ -272,7 +275,6 @@ async def stream_ws(websocket: WebSocket, flight_id: str, after_seq: int = 0) ->
     if flight_id not in engine.flights:
         await websocket.close(code=4404, reason=f"no flight {flight_id!r}")
         return
-    await websocket.accept()
     try:
         async for msg in stream(engine, flight_id, after_seq):
             await websocket.send_text(json.dumps(msg))

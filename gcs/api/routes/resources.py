@@ -122,7 +122,19 @@ async def schedule_view(schedule_id: str, request: Request) -> dict[str, Any]:
 
 
 @router.get(
-    "/schedules/{schedule_id}/missions/{vehicle}.{fmt}", dependencies=observe, tags=["schedules"]
+    "/schedules/{schedule_id}/missions/{vehicle}.{fmt}",
+    dependencies=observe,
+    tags=["schedules"],
+    response_class=Response,
+    responses={
+        200: {
+            "description": "the .plan (JSON) or the .waypoints (text) file",
+            "content": {
+                "application/json": {"schema": {"type": "object"}},
+                "text/plain": {"schema": {"type": "string"}},
+            },
+        }
+    },
 )
 async def mission_file(
     schedule_id: str, vehicle: str, fmt: Literal["plan", "waypoints"], request: Request
