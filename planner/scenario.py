@@ -405,7 +405,7 @@ def _not_finite(value: Any) -> str:
     return "not a number (NaN)" if math.isnan(x) else f"not a finite number ({x})"
 
 
-def _file_path(loc: tuple[int | str, ...], data: Any) -> list[int | str]:
+def field_path(loc: tuple[int | str, ...], data: Any) -> list[int | str]:
     """An error's location as the file has it: without the ``kind`` tags pydantic inserts
     for a tagged union (``threats[0].radar.radius_m`` is ``threats[0].radius_m``)."""
     out: list[int | str] = []
@@ -430,7 +430,7 @@ def _file_path(loc: tuple[int | str, ...], data: Any) -> list[int | str]:
 
 def _error_line(source: str, err: ValidationError, data: Any = None) -> str:
     first = err.errors()[0]
-    path = _file_path(tuple(first["loc"]), data)
+    path = field_path(tuple(first["loc"]), data)
     loc = ".".join(str(p) if not isinstance(p, int) else f"[{p}]" for p in path)
     loc = loc.replace(".[", "[")
     msg = first["msg"]

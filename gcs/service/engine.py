@@ -48,7 +48,7 @@ from planner.errors import InfeasibleError, PlannerError
 from planner.missionfile import to_qgc_plan, to_wpl
 from planner.plan import World, build_world, plan
 from planner.retime import build_schedule, check_feasible
-from planner.scenario import Scenario, Threat
+from planner.scenario import Scenario, Threat, field_path
 from planner.schedule import Schedule
 from planner.schedulefile import path_mission
 
@@ -124,7 +124,11 @@ def parse_scenario_text(body: str, media_type: str) -> Scenario:
         return Scenario.model_validate(data)
     except ValidationError as err:
         errors = [
-            {"loc": [str(x) for x in e["loc"]], "msg": e["msg"], "type": e["type"]}
+            {
+                "loc": [str(x) for x in field_path(e["loc"], data)],
+                "msg": e["msg"],
+                "type": e["type"],
+            }
             for e in err.errors(include_url=False, include_context=False, include_input=False)
         ]
         first = errors[0]
@@ -424,9 +428,9 @@ class Engine:
 
     def mission_file(self, schedule_id: str, vehicle: str, fmt: str) -> str:
         entry = self.planned(schedule_id)
-        vs = entry.schedule.vehicle(vehicle)
-        if vs is None:
+        if vehicle not in {v.vehicle_id for v in entry.schedule.vehicles}:
             raise NotFound(f"no vehicle {vehicle!r} in schedule {schedule_id}")
+        vs = entry.schedule.vehicle(vehicle)
         items = list(path_mission(entry.schedule, vs, entry.world.terrain).items)
         if fmt == "plan":
             return json.dumps(to_qgc_plan(items), indent=1) + "\n"

@@ -171,14 +171,7 @@ async def test_nan_in_a_body_names_the_field(
     "field",
     [
         "vehicles.1.speed_max_m_s",
-        pytest.param(
-            "threats.0.center.east_m",
-            marks=pytest.mark.xfail(
-                strict=True,
-                reason="planner.scenario models allow NaN where a field has no bounds: the "
-                "scenario is kept (201) and its schedule fails later",
-            ),
-        ),
+        "threats.0.center.east_m",
     ],
 )
 async def test_nan_in_a_json_scenario_names_the_field(
@@ -246,11 +239,6 @@ async def test_unknown_id_is_404_naming_it(
     assert _stored(app) == before
 
 
-@pytest.mark.xfail(
-    strict=True,
-    reason="Engine.mission_file expects Schedule.vehicle to return None for an unknown vehicle; "
-    "it raises KeyError (a 500)",
-)
 async def test_unknown_vehicle_of_a_schedule_is_404(client: httpx.AsyncClient) -> None:
     schedule = await _planned(client, await _keep_paper(client))
     r = await client.get(

@@ -216,14 +216,18 @@ async def stream(engine: Engine, flight_id: str, after_seq: int) -> AsyncIterato
 
 
 def _telemetry(snap: dict[str, Any]) -> dict[str, Any]:
+    """A batch: what changes between events (the console's panel needs no snapshot polling:
+    the strategy's loiter turns left and the link's mode change without an event)."""
     keys = (
         "id", "state", "east_m", "north_m", "alt_amsl_m", "heading_deg", "airspeed_m_s",
         "commanded_m_s", "eta_s", "error_s", "slot_s", "link_silent", "last_fix_age_s",
+        "strategy", "link",
     )  # fmt: skip
     return {
         "t_s": snap["t_s"],
         "state": snap["state"],
         "team_time_s": snap["team_time_s"],
+        "team_time_version": snap["team_time_version"],
         "vehicles": [{k: v.get(k) for k in keys} for v in snap["vehicles"]],
     }
 
@@ -270,6 +274,9 @@ async def stream_ws(websocket: WebSocket, flight_id: str, after_seq: int = 0) ->
     await websocket.accept()
     if scopes is None:
         await websocket.close(code=4401, reason="a bearer token is required")
+        return
+    if not scopes & {"observe", "admin"}:
+        await websocket.close(code=4403, reason="this token lacks the 'observe' scope")
         return
     engine: Engine = websocket.app.state.engine
     if flight_id not in engine.flights:
