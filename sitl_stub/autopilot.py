@@ -27,7 +27,7 @@ Behaviour modelled on ArduPlane 4.x (``commands_logic.cpp``, ``AP_Mission``, ``A
 - Mission: item 0 is home and never flown. DO commands between two NAV commands run when the
   mission advances past them (i.e. when the previous NAV item is reached); unsupported DO
   commands are no-ops (DO_JUMP is not followed); unsupported NAV commands are skipped.
-- NAV_WAYPOINT: L1 navigation along prev -> next; reached within
+- NAV_WAYPOINT: L1 navigation (:mod:`sitl_stub.l1`) along prev -> next; reached within
   ``turn_distance(wp_radius, next_turn_angle)`` (param2 > 0 overrides; param3 pass-by > 0 sets
   it to 0) or when past the finish line. Pass-by offsetting of the point is not modelled.
 - NAV_TAKEOFF (ArduPlane/takeoff.cpp, commands_logic.cpp verify_takeoff): ground roll on the
@@ -68,6 +68,7 @@ from pymavlink.dialects.v20 import ardupilotmega as mav
 from sitl_stub import model
 from sitl_stub.atmosphere import eas2tas
 from sitl_stub.items import MissionItem
+from sitl_stub.l1 import clamp, l1_loiter, l1_waypoint, wrap_pi
 from sitl_stub.model import GRAVITY_M_S2, AirframeParams, FlightState, Wind
 
 _DEG = math.pi / 180.0
@@ -183,114 +184,6 @@ _TAKEOFF_MODE = Mode.TAKEOFF
 
 
 Point = tuple[float, float, float]  # lat_deg, lon_deg, alt_m AMSL
-
-
-def _wrap_pi(a: float) -> float:
-    return (a + math.pi) % _TWO_PI - math.pi
-
-
-def _clamp(x: float, lo: float, hi: float) -> float:
-    return lo if x < lo else hi if x > hi else x
-
-
-def l1_waypoint(
-    an: float,
-    ae: float,
-    bn: float,
-    be: float,
-    vn: float,
-    ve: float,
-    heading_rad: float,
-    period_s: float,
-    damping: float,
-) -> tuple[float, float, float]:
-    """AP_L1_Control::update_waypoint with the vehicle at the origin of a local N/E frame.
-
-    A=(an, ae) is the previous waypoint, B=(bn, be) the next. Returns (lateral acceleration
-    demand m/s^2, positive = turn right; nav bearing rad; cross-track error m).
-    """
-    gs = math.hypot(vn, ve)
-    if gs < 0.1:
-        vn = 0.1 * math.cos(heading_rad)
-        ve = 0.1 * math.sin(heading_rad)
-        gs = 0.1
-    l1 = max(0.3183099 * damping * period_s * gs, 0.1)
-    abn = bn - an
-    abe = be - ae
-    ab_len = math.hypot(abn, abe)
-    if ab_len < 1.0e-3:
-        abn, abe = bn, be
-        ab_len = math.hypot(abn, abe)
-        if ab_len < 1.0e-3:
-            abn, abe, ab_len = math.cos(heading_rad), math.sin(heading_rad), 1.0
-    abn /= ab_len
-    abe /= ab_len
-    a_n = -an  # vehicle relative to A
-    a_e = -ae
-    wp_a_dist = math.hypot(a_n, a_e)
-    along = a_n * abn + a_e * abe
-    xtrack = a_n * abe - a_e * abn
-    if wp_a_dist > l1 and along / max(wp_a_dist, 1.0) < -0.7071:
-        un, ue = -a_n / wp_a_dist, -a_e / wp_a_dist  # toward A
-        nu = math.atan2(vn * ue - ve * un, vn * un + ve * ue)
-        nav_bearing = math.atan2(ue, un)
-    elif along > ab_len + gs * 3.0:
-        d = max(math.hypot(bn, be), 1e-6)
-        un, ue = bn / d, be / d  # toward B
-        nu = math.atan2(vn * ue - ve * un, vn * un + ve * ue)
-        nav_bearing = math.atan2(ue, un)
-    else:
-        nu2 = math.atan2(vn * abe - ve * abn, vn * abn + ve * abe)
-        nu1 = math.asin(_clamp(xtrack / l1, -0.7071, 0.7071))
-        nu = nu1 + nu2
-        nav_bearing = math.atan2(abe, abn) + nu1
-    nu = _clamp(nu, -1.5708, 1.5708)
-    lat_acc = 4.0 * damping * damping * gs * gs / l1 * math.sin(nu)
-    return lat_acc, nav_bearing, xtrack
-
-
-def l1_loiter(
-    cn: float,
-    ce: float,
-    radius_m: float,
-    direction: int,
-    vn: float,
-    ve: float,
-    heading_rad: float,
-    period_s: float,
-    damping: float,
-) -> tuple[float, float, bool]:
-    """AP_L1_Control::update_loiter; centre (cn, ce) relative to the vehicle.
-
-    direction +1 = clockwise. Returns (lateral acceleration demand, nav bearing, on_circle).
-    """
-    omega = _TWO_PI / period_s
-    gs = math.hypot(vn, ve)
-    l1 = max(0.3183099 * damping * period_s * gs, 0.1)
-    a_n = -cn
-    a_e = -ce
-    a_len = math.hypot(a_n, a_e)
-    if a_len > 0.1:
-        un, ue = a_n / a_len, a_e / a_len
-    elif gs < 0.1:
-        un, ue = math.cos(heading_rad), math.sin(heading_rad)
-    else:
-        un, ue = vn / gs, ve / gs
-    xvel_cap = un * ve - ue * vn
-    ltrack_cap = -(vn * un + ve * ue)
-    nu = _clamp(math.atan2(xvel_cap, ltrack_cap), -1.5708, 1.5708)
-    lat_cap = 4.0 * damping * damping * gs * gs / l1 * math.sin(nu)
-    xerr = a_len - radius_m
-    pd = xerr * omega * omega + (-ltrack_cap) * 2.0 * damping * omega
-    vel_tangent = xvel_cap * direction
-    if ltrack_cap < 0.0 and vel_tangent < 0.0:
-        pd = max(pd, 0.0)
-    ctr = vel_tangent * vel_tangent / max(0.5 * radius_m, radius_m + xerr)
-    circ = direction * (pd + ctr)
-    nav_bearing = math.atan2(-ue, -un)
-    if xerr > 0.0 and direction * lat_cap < direction * circ:
-        return lat_cap, nav_bearing, False
-    return circ, nav_bearing, True
 
 
 class Autopilot:
@@ -653,8 +546,8 @@ class Autopilot:
         if nav == _NAV_TAKEOFF:
             if self._takeoff_heading_rad is None:
                 self._takeoff_heading_rad = st.heading_rad
-            err = _wrap_pi(self._takeoff_heading_rad - st.course_rad)
-            bank = _clamp(1.5 * err, -p.max_bank_rad / 3.0, p.max_bank_rad / 3.0)
+            err = wrap_pi(self._takeoff_heading_rad - st.course_rad)
+            bank = clamp(1.5 * err, -p.max_bank_rad / 3.0, p.max_bank_rad / 3.0)
             self._nav_bearing = self._takeoff_heading_rad
             self._target_bearing = self._takeoff_heading_rad
             self._wp_dist = 0.0
@@ -682,8 +575,8 @@ class Autopilot:
             elif nav == _NAV_LAND and self._land_stage != _LAND_APPROACH:
                 # Flare / roll-out: hold the approach course.
                 leg = math.atan2(be - ae, bn - an) if math.hypot(bn - an, be - ae) > 1 else 0.0
-                err = _wrap_pi(leg - st.course_rad)
-                lat_acc = GRAVITY_M_S2 * math.tan(_clamp(1.5 * err, -0.2, 0.2))
+                err = wrap_pi(leg - st.course_rad)
+                lat_acc = GRAVITY_M_S2 * math.tan(clamp(1.5 * err, -0.2, 0.2))
                 self._nav_bearing = leg
             else:
                 tn, te = bn, be
@@ -717,12 +610,12 @@ class Autopilot:
                 climb_ff = -p.land_flare_sink_m_s
                 target_alt = st.alt_m
                 motor = self._land_stage == _LAND_FLARE
-        bank = _clamp(bank, -p.max_bank_rad, p.max_bank_rad)
+        bank = clamp(bank, -p.max_bank_rad, p.max_bank_rad)
         climb = climb_ff + (target_alt - st.alt_m) / p.alt_time_constant_s
         self._nav_roll = bank
         self._alt_error = target_alt - st.alt_m
         self._nav_pitch = math.atan2(
-            _clamp(climb, -p.sink_rate_max_m_s, p.climb_rate_max_m_s), max(st.airspeed_m_s, 1.0)
+            clamp(climb, -p.sink_rate_max_m_s, p.climb_rate_max_m_s), max(st.airspeed_m_s, 1.0)
         )
         self._target_airspeed_m_s = tas
         return tas, bank, climb, motor
@@ -743,7 +636,7 @@ class Autopilot:
             under = p.min_groundspeed_m_s - fwd
             if under > 0.0:
                 tas = max(tas, (st.airspeed_m_s + under) / self._tas_scale)
-        return _clamp(tas, p.airspeed_min_m_s, p.airspeed_max_m_s)
+        return clamp(tas, p.airspeed_min_m_s, p.airspeed_max_m_s)
 
     def _loiter_nav(self, st: FlightState, an: float, ae: float, cn: float, ce: float) -> float:
         """update_loiter + loiter_angle_update; returns the lateral acceleration demand."""
@@ -775,7 +668,7 @@ class Autopilot:
                 self._loiter_summing = True
                 self._loiter_sum_rad = 1e-6
         else:
-            self._loiter_sum_rad += _wrap_pi(bearing - self._loiter_old_bearing) * self._loiter_dir
+            self._loiter_sum_rad += wrap_pi(bearing - self._loiter_old_bearing) * self._loiter_dir
         self._loiter_old_bearing = bearing
         return lat_acc
 
@@ -938,7 +831,7 @@ class Autopilot:
         c = self._item_point(item)
         leg = _bearing(a, b)
         nxt_leg = _bearing(b, c)
-        self._next_turn_angle_deg = math.degrees(_wrap_pi(nxt_leg - leg))
+        self._next_turn_angle_deg = math.degrees(wrap_pi(nxt_leg - leg))
 
     def _advance_nav(self, start: int, events: list[Event], keep_prev: bool = False) -> None:
         """AP_Mission::advance_current_nav_cmd: run DO items up to the next NAV item, start it."""
@@ -1118,7 +1011,7 @@ class Autopilot:
         if item.command == _CMD_RTL:
             target = self._home
         bearing = _bearing(self._here(), target)
-        err = abs(_wrap_pi(bearing - st.course_rad))
+        err = abs(wrap_pi(bearing - st.course_rad))
         extra = 10.0 * math.floor(self._loiter_sum_rad / _TWO_PI)
         if err <= math.radians(10.0 + extra):
             if self._loiter_xtrack:

@@ -7,6 +7,11 @@ with packed MAVLink 2 bytes addressed to one link or to all (``None``).
 Stream intervals are in SIMULATED time (as ArduPilot SITL with a speed-up): a 1 Hz
 SYSTEM_TIME at 100x is 100 messages per wall second. Streams are per vehicle and go to every
 connected link (ArduPilot keeps SRx rates per serial port).
+
+What goes in each message is :mod:`sitl_stub.telemetry`; commands are
+:mod:`sitl_stub.commands`, parameters :mod:`sitl_stub.params` (the three are mixed into
+:class:`Vehicle`); this module routes messages in and out, runs the streams and the mission
+protocol's timers, and watches for goal crossings.
 """
 
 from __future__ import annotations
@@ -14,140 +19,34 @@ from __future__ import annotations
 import logging
 import math
 from collections.abc import Callable
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 from typing import Any
 
 from pymavlink.dialects.v20 import ardupilotmega as mavlink2
 
-from sitl_stub.autopilot import Autopilot, CurrentChanged, ItemReached, Mode, Text
+from sitl_stub.autopilot import Autopilot, CurrentChanged, ItemReached, Text
 from sitl_stub.clock import SimClock
+from sitl_stub.commands import CommandHandlers
 from sitl_stub.items import MissionItem
 from sitl_stub.link import FaultyLink
 from sitl_stub.mission_server import LinkId, MissionServer, MissionStored, addressed_to
-from sitl_stub.model import AirframeParams, FlightState, crossing_time
+from sitl_stub.model import FlightState, crossing_time
+from sitl_stub.params import ParameterHandlers
+from sitl_stub.telemetry import (
+    DEFAULT_INTERVALS_S,
+    MSG_ID_TO_NAME,
+    SPECS,
+    STREAM_GROUPS,
+    TelemetryMessages,
+)
 from sitl_stub.wind_estimate import WindEstimateError
-from sitl_stub.wire import MessageSpec, Packer, spec_for
+from sitl_stub.wire import Packer
 
 log = logging.getLogger(__name__)
 
 SendBytes = Callable[[LinkId | None, bytes], None]
 
 COMPONENT_ID = 1
-FORCE_MAGIC = 21196.0
-# ArduPlane 4.5.7, official release.
-FLIGHT_SW_VERSION = (4 << 24) | (5 << 16) | (7 << 8) | 255
-CAPABILITIES = (
-    mavlink2.MAV_PROTOCOL_CAPABILITY_MISSION_FLOAT
-    | mavlink2.MAV_PROTOCOL_CAPABILITY_PARAM_FLOAT
-    | mavlink2.MAV_PROTOCOL_CAPABILITY_MISSION_INT
-    | mavlink2.MAV_PROTOCOL_CAPABILITY_COMMAND_INT
-    | mavlink2.MAV_PROTOCOL_CAPABILITY_SET_POSITION_TARGET_GLOBAL_INT
-    | mavlink2.MAV_PROTOCOL_CAPABILITY_MAVLINK2
-    | mavlink2.MAV_PROTOCOL_CAPABILITY_MISSION_FENCE
-    | mavlink2.MAV_PROTOCOL_CAPABILITY_MISSION_RALLY
-)
-SENSORS = (
-    mavlink2.MAV_SYS_STATUS_SENSOR_3D_GYRO
-    | mavlink2.MAV_SYS_STATUS_SENSOR_3D_ACCEL
-    | mavlink2.MAV_SYS_STATUS_SENSOR_3D_MAG
-    | mavlink2.MAV_SYS_STATUS_SENSOR_ABSOLUTE_PRESSURE
-    | mavlink2.MAV_SYS_STATUS_SENSOR_DIFFERENTIAL_PRESSURE
-    | mavlink2.MAV_SYS_STATUS_SENSOR_GPS
-    | mavlink2.MAV_SYS_STATUS_SENSOR_ANGULAR_RATE_CONTROL
-    | mavlink2.MAV_SYS_STATUS_SENSOR_ATTITUDE_STABILIZATION
-    | mavlink2.MAV_SYS_STATUS_SENSOR_YAW_POSITION
-    | mavlink2.MAV_SYS_STATUS_SENSOR_XY_POSITION_CONTROL
-    | mavlink2.MAV_SYS_STATUS_SENSOR_MOTOR_OUTPUTS
-    | mavlink2.MAV_SYS_STATUS_AHRS
-    | mavlink2.MAV_SYS_STATUS_PREARM_CHECK
-)
-
-# Default stream intervals, simulated seconds (0 = off).
-DEFAULT_INTERVALS_S: dict[str, float] = {
-    "HEARTBEAT": 1.0,
-    "GLOBAL_POSITION_INT": 0.5,
-    "VFR_HUD": 0.5,
-    "ATTITUDE": 0.5,
-    "SYS_STATUS": 1.0,
-    "GPS_RAW_INT": 1.0,
-    "SYSTEM_TIME": 1.0,
-    "WIND": 1.0,
-    "NAV_CONTROLLER_OUTPUT": 1.0,
-    "MISSION_CURRENT": 1.0,
-    "HOME_POSITION": 0.0,
-    "AUTOPILOT_VERSION": 0.0,
-}
-
-# REQUEST_DATA_STREAM groups, as ArduPilot's SRx_ parameters group messages.
-STREAM_GROUPS: dict[int, tuple[str, ...]] = {
-    mavlink2.MAV_DATA_STREAM_EXTENDED_STATUS: (
-        "SYS_STATUS",
-        "GPS_RAW_INT",
-        "MISSION_CURRENT",
-        "NAV_CONTROLLER_OUTPUT",
-    ),
-    mavlink2.MAV_DATA_STREAM_POSITION: ("GLOBAL_POSITION_INT",),
-    mavlink2.MAV_DATA_STREAM_EXTRA1: ("ATTITUDE",),
-    mavlink2.MAV_DATA_STREAM_EXTRA2: ("VFR_HUD",),
-    mavlink2.MAV_DATA_STREAM_EXTRA3: ("SYSTEM_TIME", "WIND"),
-}
-STREAM_GROUPS[mavlink2.MAV_DATA_STREAM_ALL] = tuple(
-    name for names in STREAM_GROUPS.values() for name in names
-)
-
-
-@dataclass(frozen=True, slots=True)
-class ParamSpec:
-    """One parameter: ArduPlane name, AirframeParams field, MAVLink type, range."""
-
-    name: str
-    field: str | None
-    mav_type: int
-    minimum: float
-    maximum: float
-
-
-PARAMS: tuple[ParamSpec, ...] = (
-    ParamSpec("AIRSPEED_CRUISE", "airspeed_cruise_m_s", mavlink2.MAV_PARAM_TYPE_REAL32, 5, 100),
-    ParamSpec("AIRSPEED_MAX", "airspeed_max_m_s", mavlink2.MAV_PARAM_TYPE_REAL32, 5, 100),
-    ParamSpec("AIRSPEED_MIN", "airspeed_min_m_s", mavlink2.MAV_PARAM_TYPE_REAL32, 5, 100),
-    ParamSpec("SYSID_THISMAV", None, mavlink2.MAV_PARAM_TYPE_INT8, 1, 255),
-    ParamSpec("WP_LOITER_RAD", "loiter_radius_m", mavlink2.MAV_PARAM_TYPE_REAL32, -32767, 32767),
-    ParamSpec("WP_RADIUS", "wp_radius_m", mavlink2.MAV_PARAM_TYPE_REAL32, 1, 32767),
-)
-PARAM_INDEX = {p.name: i for i, p in enumerate(PARAMS)}
-
-AUTO_LIKE_MODES = frozenset({"AUTO", "RTL", "LOITER", "GUIDED", "CIRCLE", "TAKEOFF"})
-
-# Framing of the messages a vehicle sends as streams or on request (see sitl_stub.wire).
-SPECS: dict[str, MessageSpec] = {name: spec_for(name) for name in DEFAULT_INTERVALS_S}
-MSG_ID_TO_NAME: dict[int, str] = {spec.msg_id: name for name, spec in SPECS.items()}
-
-
-def _base_mode(mode: Mode) -> int:
-    """HEARTBEAT base_mode flags of a mode, disarmed."""
-    base = mavlink2.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED
-    if mode.name == "MANUAL":
-        base |= mavlink2.MAV_MODE_FLAG_MANUAL_INPUT_ENABLED
-    elif mode.name in AUTO_LIKE_MODES:
-        base |= mavlink2.MAV_MODE_FLAG_GUIDED_ENABLED | mavlink2.MAV_MODE_FLAG_STABILIZE_ENABLED
-        if mode.name == "AUTO":
-            base |= mavlink2.MAV_MODE_FLAG_AUTO_ENABLED
-    else:
-        base |= mavlink2.MAV_MODE_FLAG_STABILIZE_ENABLED
-    return int(base)
-
-
-_MODE_BASE_FLAGS = {int(mode): _base_mode(mode) for mode in Mode}
-_ARMED = mavlink2.MAV_MODE_FLAG_SAFETY_ARMED
-_MAV_STATE_ACTIVE = mavlink2.MAV_STATE_ACTIVE
-_MAV_STATE_STANDBY = mavlink2.MAV_STATE_STANDBY
-_MODE_AUTO = int(Mode.AUTO)
-_TWO_PI = 2.0 * math.pi
-
-
-def _ts(msg: Any) -> tuple[int, int]:
-    return msg.get_srcSystem(), msg.get_srcComponent()
 
 
 @dataclass(slots=True)
@@ -160,7 +59,7 @@ class Watch:
     callback: Callable[[float], None]
 
 
-class Vehicle:
+class Vehicle(TelemetryMessages, CommandHandlers, ParameterHandlers):
     """The MAVLink endpoint of one simulated ArduPlane."""
 
     def __init__(
@@ -216,40 +115,12 @@ class Vehicle:
         }
         self._last_wall_s = 0.0
         self._statustext_id = 0
-        # Field values of each message, in the order of its pymavlink constructor.
-        self._builders: dict[str, Callable[[], tuple[Any, ...]]] = {
-            "HEARTBEAT": self._heartbeat,
-            "GLOBAL_POSITION_INT": self._global_position_int,
-            "VFR_HUD": self._vfr_hud,
-            "ATTITUDE": self._attitude,
-            "SYS_STATUS": self._sys_status,
-            "GPS_RAW_INT": self._gps_raw_int,
-            "SYSTEM_TIME": self._system_time,
-            "WIND": self._wind,
-            "NAV_CONTROLLER_OUTPUT": self._nav_controller_output,
-            "MISSION_CURRENT": self._mission_current,
-            "HOME_POSITION": self._home_position,
-            "AUTOPILOT_VERSION": self._autopilot_version,
-        }
+        self._builders = self._message_builders()
         self._by_id = MSG_ID_TO_NAME
         self._stream_table = [
             (name, SPECS[name], self._builders[name]) for name in self.intervals_s
         ]
-        self._commands: dict[int, Callable[[Any, list[float], LinkId], int]] = {
-            mavlink2.MAV_CMD_COMPONENT_ARM_DISARM: self._cmd_arm,
-            mavlink2.MAV_CMD_DO_SET_MODE: self._cmd_set_mode,
-            mavlink2.MAV_CMD_MISSION_START: self._cmd_mission_start,
-            mavlink2.MAV_CMD_DO_CHANGE_SPEED: self._cmd_change_speed,
-            mavlink2.MAV_CMD_DO_SET_MISSION_CURRENT: self._cmd_set_mission_current,
-            mavlink2.MAV_CMD_REQUEST_MESSAGE: self._cmd_request_message,
-            mavlink2.MAV_CMD_SET_MESSAGE_INTERVAL: self._cmd_set_message_interval,
-            mavlink2.MAV_CMD_GET_MESSAGE_INTERVAL: self._cmd_get_message_interval,
-            mavlink2.MAV_CMD_REQUEST_AUTOPILOT_CAPABILITIES: self._cmd_autopilot_capabilities,
-            mavlink2.MAV_CMD_GET_HOME_POSITION: self._cmd_get_home,
-            mavlink2.MAV_CMD_NAV_RETURN_TO_LAUNCH: self._cmd_rtl,
-            mavlink2.MAV_CMD_NAV_LOITER_UNLIM: self._cmd_loiter,
-            mavlink2.MAV_CMD_DO_REPOSITION: self._cmd_reposition,
-        }
+        self._commands = self._command_handlers()
 
     # -- wiring ------------------------------------------------------------------------
 
@@ -436,134 +307,6 @@ class Vehicle:
             if isinstance(ev, MissionStored) and ev.mission_type == 0:
                 self.autopilot.replace_mission(ev.items)
 
-    # -- commands ------------------------------------------------------------------------
-
-    def _ack(self, msg: Any, command: int, result: int | bool, link: LinkId) -> None:
-        if isinstance(result, bool):
-            result = mavlink2.MAV_RESULT_ACCEPTED if result else mavlink2.MAV_RESULT_FAILED
-        src, comp = _ts(msg)
-        self.emit(mavlink2.MAVLink_command_ack_message(command, result, 0, 0, src, comp), link)
-
-    def _command(self, msg: Any, p: list[float], link: LinkId, *, is_int: bool) -> None:
-        handler = self._commands.get(int(msg.command))
-        if handler is None:
-            self.counters["unsupported_commands"] += 1
-            self._ack(msg, msg.command, mavlink2.MAV_RESULT_UNSUPPORTED, link)
-            return
-        if not all(math.isfinite(v) for v in p[:4]) and msg.command not in (
-            mavlink2.MAV_CMD_DO_REPOSITION,
-        ):
-            self._ack(msg, msg.command, mavlink2.MAV_RESULT_DENIED, link)
-            return
-        result = handler(msg, p, link)
-        self._ack(msg, msg.command, result, link)
-
-    def _cmd_arm(self, msg: Any, p: list[float], link: LinkId) -> int:
-        force = p[1] == FORCE_MAGIC
-        if p[0] == 1.0:
-            ok, reason = self.autopilot.arm(force=force)
-            verb = "Arm"
-        elif p[0] == 0.0:
-            ok, reason = self.autopilot.disarm(force=force)
-            verb = "Disarm"
-        else:
-            return int(mavlink2.MAV_RESULT_DENIED)
-        if not ok:
-            self.statustext(mavlink2.MAV_SEVERITY_CRITICAL, f"{verb}: {reason}", link)
-            return int(mavlink2.MAV_RESULT_FAILED)
-        return int(mavlink2.MAV_RESULT_ACCEPTED)
-
-    def _set_mode(self, custom_mode: int) -> bool:
-        try:
-            mode = Mode(int(custom_mode))
-        except ValueError:
-            return False
-        return self.autopilot.set_mode(mode)
-
-    def _cmd_set_mode(self, msg: Any, p: list[float], link: LinkId) -> int:
-        if not int(p[0]) & mavlink2.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED:
-            return int(mavlink2.MAV_RESULT_DENIED)
-        return self._result(self._set_mode(int(p[1])))
-
-    def _cmd_mission_start(self, msg: Any, p: list[float], link: LinkId) -> int:
-        return self._result(self.autopilot.start_mission(int(p[0]), int(p[1])))
-
-    def _cmd_change_speed(self, msg: Any, p: list[float], link: LinkId) -> int:
-        return self._result(self.autopilot.change_speed(int(p[0]), p[1], p[2]))
-
-    def _cmd_set_mission_current(self, msg: Any, p: list[float], link: LinkId) -> int:
-        ok = self.autopilot.set_current(int(p[0]))
-        if ok:
-            self.emit_named("MISSION_CURRENT")
-        return self._result(ok)
-
-    def _cmd_request_message(self, msg: Any, p: list[float], link: LinkId) -> int:
-        name = self._by_id.get(int(p[0]))
-        if name is None:
-            return int(mavlink2.MAV_RESULT_FAILED)
-        self.emit_named(name, link)
-        return int(mavlink2.MAV_RESULT_ACCEPTED)
-
-    def _cmd_set_message_interval(self, msg: Any, p: list[float], link: LinkId) -> int:
-        name = self._by_id.get(int(p[0]))
-        if name is None:
-            return int(mavlink2.MAV_RESULT_FAILED)
-        interval_us = p[1]
-        if interval_us == 0:
-            self.set_interval(name, DEFAULT_INTERVALS_S[name])
-        elif interval_us < 0:
-            self.set_interval(name, 0.0)
-        else:
-            self.set_interval(name, interval_us / 1e6)
-        return int(mavlink2.MAV_RESULT_ACCEPTED)
-
-    def _cmd_get_message_interval(self, msg: Any, p: list[float], link: LinkId) -> int:
-        name = self._by_id.get(int(p[0]))
-        if name is None:
-            return int(mavlink2.MAV_RESULT_FAILED)
-        interval = self.intervals_s[name]
-        us = int(interval * 1e6) if interval > 0 else -1
-        self.emit(mavlink2.MAVLink_message_interval_message(int(p[0]), us), link)
-        return int(mavlink2.MAV_RESULT_ACCEPTED)
-
-    def _cmd_autopilot_capabilities(self, msg: Any, p: list[float], link: LinkId) -> int:
-        self.emit_named("AUTOPILOT_VERSION", link)
-        return int(mavlink2.MAV_RESULT_ACCEPTED)
-
-    def _cmd_get_home(self, msg: Any, p: list[float], link: LinkId) -> int:
-        self.emit_named("HOME_POSITION", link)
-        return int(mavlink2.MAV_RESULT_ACCEPTED)
-
-    def _cmd_rtl(self, msg: Any, p: list[float], link: LinkId) -> int:
-        return self._result(self.autopilot.set_mode(Mode.RTL))
-
-    def _cmd_loiter(self, msg: Any, p: list[float], link: LinkId) -> int:
-        return self._result(self.autopilot.set_mode(Mode.LOITER))
-
-    def _cmd_reposition(self, msg: Any, p: list[float], link: LinkId) -> int:
-        lat, lon, alt = p[4], p[5], p[6]
-        if not (math.isfinite(lat) and math.isfinite(lon) and abs(lat) <= 90 and abs(lon) <= 180):
-            return int(mavlink2.MAV_RESULT_DENIED)
-        if not self.autopilot.armed:
-            return int(mavlink2.MAV_RESULT_FAILED)
-        change = int(p[1]) & mavlink2.MAV_DO_REPOSITION_FLAGS_CHANGE_MODE
-        if self.autopilot.mode != Mode.GUIDED and (
-            not change or not self.autopilot.set_mode(Mode.GUIDED)
-        ):
-            return int(mavlink2.MAV_RESULT_FAILED)
-        frame = int(getattr(msg, "frame", mavlink2.MAV_FRAME_GLOBAL_RELATIVE_ALT))
-        if not math.isfinite(alt):
-            alt_amsl = self.autopilot.state.alt_m
-        elif frame in (mavlink2.MAV_FRAME_GLOBAL, mavlink2.MAV_FRAME_GLOBAL_INT):
-            alt_amsl = alt
-        else:
-            alt_amsl = alt + self.autopilot.home[2]
-        return self._result(self.autopilot.set_guided_target(lat, lon, alt_amsl))
-
-    @staticmethod
-    def _result(ok: bool) -> int:
-        return int(mavlink2.MAV_RESULT_ACCEPTED if ok else mavlink2.MAV_RESULT_FAILED)
-
     # -- streams -------------------------------------------------------------------------
 
     def set_interval(self, name: str, interval_s: float) -> None:
@@ -582,214 +325,3 @@ class Vehicle:
         interval = 1.0 / rate_hz if msg.start_stop and rate_hz > 0 else 0.0
         for name in names:
             self.set_interval(name, interval)
-
-    # -- parameters ----------------------------------------------------------------------
-
-    def param_value(self, name: str) -> float:
-        spec = PARAMS[PARAM_INDEX[name]]
-        if spec.field is None:
-            return float(self.system_id)
-        return float(getattr(self.autopilot.params, spec.field))
-
-    def _param_msg(self, index: int) -> Any:
-        spec = PARAMS[index]
-        return mavlink2.MAVLink_param_value_message(
-            spec.name.encode(), self.param_value(spec.name), spec.mav_type, len(PARAMS), index
-        )
-
-    def _param(self, mtype: str, msg: Any, link: LinkId) -> None:
-        if not addressed_to(msg, self.system_id, self.component_id):
-            return
-        if mtype == "PARAM_REQUEST_LIST":
-            for i in range(len(PARAMS)):
-                self.emit(self._param_msg(i), link)
-        elif mtype == "PARAM_REQUEST_READ":
-            idx = int(msg.param_index)
-            if idx < 0:
-                idx = PARAM_INDEX.get(str(msg.param_id), -1)
-            if 0 <= idx < len(PARAMS):
-                self.emit(self._param_msg(idx), link)
-        elif mtype == "PARAM_SET":
-            name = str(msg.param_id)
-            found = PARAM_INDEX.get(name)
-            if found is None:
-                self.statustext(mavlink2.MAV_SEVERITY_WARNING, f"Unknown parameter {name}", link)
-                return
-            idx = found
-            spec = PARAMS[idx]
-            value = float(msg.param_value)
-            if spec.field is not None:
-                if not (math.isfinite(value) and spec.minimum <= value <= spec.maximum):
-                    self.statustext(
-                        mavlink2.MAV_SEVERITY_WARNING, f"{name} {value:g} out of range", link
-                    )
-                else:
-                    self._set_param_field(spec.field, value, name)
-            # Broadcast, as ArduPilot does, so every GCS sees the new value.
-            self.emit(self._param_msg(idx))
-
-    def _set_param_field(self, field: str, value: float, name: str) -> None:
-        params: AirframeParams = self.autopilot.params
-        try:
-            changes: dict[str, Any] = {field: value}
-            new = replace(params, **changes)
-            self.autopilot.set_params(new)
-        except (ValueError, TypeError) as err:
-            self.statustext(mavlink2.MAV_SEVERITY_WARNING, f"{name}: {err}")
-
-    # -- message builders: field values in pymavlink constructor order --------------------
-
-    def _heartbeat(self) -> tuple[Any, ...]:
-        ap = self.autopilot
-        mode = int(ap.mode)
-        base = _MODE_BASE_FLAGS[mode]
-        if ap.armed:
-            base |= _ARMED
-            status = _MAV_STATE_ACTIVE
-        else:
-            status = _MAV_STATE_STANDBY
-        return (
-            mavlink2.MAV_TYPE_FIXED_WING,
-            mavlink2.MAV_AUTOPILOT_ARDUPILOTMEGA,
-            base,
-            mode,
-            status,
-            3,
-        )
-
-    def _global_position_int(self) -> tuple[Any, ...]:
-        s = self.autopilot.state
-        home_alt = self.autopilot.home[2]
-        return (
-            self.clock.time_boot_ms,
-            round(s.lat_deg * 1e7),
-            round(s.lon_deg * 1e7),
-            round(s.alt_m * 1000),
-            round((s.alt_m - home_alt) * 1000),
-            _i16(s.vel_north_m_s * 100),
-            _i16(s.vel_east_m_s * 100),
-            _i16(-s.climb_rate_m_s * 100),
-            round(math.degrees(s.heading_rad) * 100) % 36000,
-        )
-
-    def _vfr_hud(self) -> tuple[Any, ...]:
-        s = self.autopilot.state
-        gs = math.hypot(s.vel_north_m_s, s.vel_east_m_s)
-        throttle = 0 if (s.on_ground and not self.autopilot.armed) else 50
-        # ArduPlane reports its airspeed sensor's equivalent airspeed (GCS_Mavlink.cpp,
-        # GCS_MAVLINK_Plane::vfr_hud_airspeed): what the autopilot believes, bias included.
-        return (
-            self.autopilot.measured_eas_m_s,
-            gs,
-            round(math.degrees(s.heading_rad)) % 360,
-            throttle,
-            s.alt_m,
-            s.climb_rate_m_s,
-        )
-
-    def _attitude(self) -> tuple[Any, ...]:
-        s = self.autopilot.state
-        yaw = math.remainder(s.heading_rad, _TWO_PI)
-        return (self.clock.time_boot_ms, s.roll_rad, s.pitch_rad, yaw, 0.0, 0.0, 0.0)
-
-    def _sys_status(self) -> tuple[Any, ...]:
-        return (SENSORS, SENSORS, SENSORS, 100, 12600, 1000, 100, 0, 0, 0, 0, 0, 0)
-
-    def _gps_raw_int(self) -> tuple[Any, ...]:
-        s = self.autopilot.state
-        gs = math.hypot(s.vel_north_m_s, s.vel_east_m_s)
-        cog = math.degrees(math.atan2(s.vel_east_m_s, s.vel_north_m_s)) % 360.0
-        return (
-            int(self.clock.sim_time_s * 1e6),
-            mavlink2.GPS_FIX_TYPE_3D_FIX,
-            round(s.lat_deg * 1e7),
-            round(s.lon_deg * 1e7),
-            round(s.alt_m * 1000),
-            121,
-            200,
-            min(65534, round(gs * 100)),
-            round(cog * 100) % 36000,
-            10,
-        )
-
-    @property
-    def utc_s(self) -> float | None:
-        """The UTC this vehicle reports (true simulated UTC + its offset), None without UTC."""
-        if self.utc_offset_s is None:
-            return None
-        return self.clock.utc_s + self.utc_offset_s
-
-    def _system_time(self) -> tuple[Any, ...]:
-        utc = self.utc_s
-        return (0 if utc is None else round(utc * 1e6), self.clock.time_boot_ms)
-
-    def _wind(self) -> tuple[Any, ...]:
-        s = self.autopilot.state
-        north, east = s.wind_north_m_s, s.wind_east_m_s
-        if self.wind_error is not None:
-            err_n, err_e = self.wind_error.north_east_m_s(s.time_s)
-            north += err_n
-            east += err_e
-        speed = math.hypot(north, east)
-        direction = math.degrees(math.atan2(-east, -north)) % 360.0
-        return (direction, speed, 0.0)
-
-    def _nav_controller_output(self) -> tuple[Any, ...]:
-        n = self.autopilot.nav
-        return (
-            n.nav_roll_deg,
-            n.nav_pitch_deg,
-            _i16(n.nav_bearing_deg),
-            _i16(n.target_bearing_deg),
-            max(0, min(65535, round(n.wp_dist_m))),
-            n.alt_error_m,
-            n.aspd_error_m_s,
-            n.xtrack_error_m,
-        )
-
-    def _mission_current(self) -> tuple[Any, ...]:
-        ap = self.autopilot
-        total = max(0, self.mission.count() - 1)
-        auto = ap.mode == _MODE_AUTO
-        if total == 0:
-            state = mavlink2.MISSION_STATE_NO_MISSION
-        elif auto and ap.armed:
-            state = mavlink2.MISSION_STATE_ACTIVE
-        else:
-            state = mavlink2.MISSION_STATE_NOT_STARTED
-        return (int(ap.current_seq), total, state, 1 if auto else 2)
-
-    def _home_position(self) -> tuple[Any, ...]:
-        lat, lon, alt = self.autopilot.home
-        return (
-            round(lat * 1e7),
-            round(lon * 1e7),
-            round(alt * 1000),
-            0.0,
-            0.0,
-            0.0,
-            [1.0, 0.0, 0.0, 0.0],
-            0.0,
-            0.0,
-            0.0,
-            int((self.utc_s or 0.0) * 1e6),
-        )
-
-    def _autopilot_version(self) -> tuple[Any, ...]:
-        return (
-            CAPABILITIES,
-            FLIGHT_SW_VERSION,
-            0,
-            0,
-            0,
-            [0] * 8,
-            [0] * 8,
-            [0] * 8,
-            0,
-            0,
-            self.system_id,
-        )
-
-
-def _i16(v: float) -> int:
-    return max(-32768, min(32767, round(v)))

@@ -15,7 +15,7 @@ from sitl_stub.api import Home, SimTeam
 from sitl_stub.autopilot import Mode
 from sitl_stub.items import MissionItem
 from sitl_stub.model import displace_deg
-from sitl_stub.vehicle import SPECS
+from sitl_stub.telemetry import SPECS
 from sitl_stub.wire import Packer, spec_for
 from tests.sitl_stub.conftest import Client
 
