@@ -82,15 +82,17 @@ async def upload(flight_id: str, request: Request) -> dict[str, Any]:
 
 
 @router.post("/flights/{flight_id}/launch", status_code=202, dependencies=operate)
-async def launch(flight_id: str, body: LaunchIn, request: Request) -> dict[str, Any]:
+async def launch(flight_id: str, request: Request, body: LaunchIn | None = None) -> dict[str, Any]:
     """Start the mission at a UTC (or ``delay_s`` from now): each vehicle is launched at its
     takeoff time and the arrivals held."""
+    body = body or LaunchIn()
     return engine_of(request).launch(flight_id, body.start_utc_s, body.delay_s)
 
 
 @router.post("/flights/{flight_id}/abort", dependencies=operate)
-async def abort(flight_id: str, body: AbortIn, request: Request) -> dict[str, Any]:
+async def abort(flight_id: str, request: Request, body: AbortIn | None = None) -> dict[str, Any]:
     """Abort one vehicle (or all): RTL or LOITER; per vehicle None or why not."""
+    body = body or AbortIn()
     return await engine_of(request).abort(flight_id, body.vehicle, body.mode)
 
 
