@@ -1,0 +1,270 @@
+"""Benchmark: the operator console with a large team, in headless Chromium.
+
+A team of N vehicles (:func:`arc_team`: the paper's map, launch sites on the west and south
+edges, goals on an arc around the paper target) is planned and flown through the service's
+REST API on bundled simulator vehicles (rehearsal options: speed-up, wind, loss); the console
+is opened on the flight (``/ui/?flight=ID``) and the page measures itself (``window.tcgcs.perf``):
+
+- frame time: the deltas between ``requestAnimationFrame`` callbacks (the map redraws in them);
+- event-to-paint lag: a telemetry batch's receipt (the WebSocket message) to the end of the
+  next frame, which has drawn it.
+
+While it measures, an operator pans the map (a drag) and zooms (the wheel) every 2 s, so the
+frames include full redraws besides the telemetry ones. The service runs as ``python -m gcs
+serve`` in a child process on loopback (``gcs.api.demo``).
+
+    .venv/bin/python bench/bench_console.py --vehicles 30 --speedup 200
+"""
+
+from __future__ import annotations
+
+import argparse
+import asyncio
+import contextlib
+import json
+import math
+import os
+import platform
+import statistics
+import sys
+import time
+import uuid
+from pathlib import Path
+from typing import Any
+
+import httpx
+import numpy as np
+from playwright.async_api import Page, async_playwright
+
+from gcs.api.demo import _service
+from planner.plan import build_terrain
+from planner.scenario import load_scenario, parse_scenario
+
+ROOT = Path(__file__).resolve().parents[1]
+PAPER = ROOT / "scenarios" / "paper_three_uav.yaml"
+CHROMIUM = "/usr/bin/chromium"
+TARGET = (200_000.0, 200_000.0)
+
+
+def arc_team(n: int, radius_m: float = 20_000.0) -> dict[str, Any]:
+    """The paper's map with ``n`` vehicles: launch sites spread evenly along the west and
+    south edges (lowland points only, as ``bench_planner.team_scenario`` picks them), goals
+    evenly on an arc ``radius_m`` around the paper target from north-west to south-east,
+    given in the order of the sites' bearings from the target so that no two routes cross.
+
+    Unlike the planner bench's team this one can be flown by the service, which refuses a
+    schedule with a pair under the separation minimum (500 m): routes are not drawn along
+    the same valleys (terrain weight 0, ``alt_max_m`` over the peaks), the only threat kept
+    is SAM1 (the radars and NFZ1 funnel neighbours into one corridor) and the takeoff windows
+    are wide ([0, 9000] s) so the short routes wait on the ground.
+    """
+    base = load_scenario(PAPER).model_dump(mode="json", exclude_none=True)
+    base["threats"] = [t for t in base["threats"] if t["id"] == "SAM1"]
+    base["buffers"] = []
+    base["weights"] = {"threat": 4.0, "terrain": 0.0}
+    terrain = build_terrain(parse_scenario(base))
+    edge = [(60_000.0, float(n_)) for n_ in np.arange(240_000.0, 60_000.0, -2_000.0)]
+    edge += [(float(e), 60_000.0) for e in np.arange(62_000.0, 240_001.0, 2_000.0)]
+    ground = terrain.elevation_m(np.array([p[0] for p in edge]), np.array([p[1] for p in edge]))
+    sites = [p for p, z in zip(edge, ground, strict=True) if float(z) <= 900.0]
+    picked = [sites[int(i)] for i in np.linspace(0, len(sites) - 1, n).round()]
+    tx, ty = TARGET
+    picked.sort(key=lambda p: math.atan2(p[1] - ty, p[0] - tx) % (2 * math.pi))
+    template = base["vehicles"][0]
+    vehicles = []
+    for k, (se, sn) in enumerate(picked):
+        a = math.radians(135.0 + 180.0 * k / max(1, n - 1))
+        v = dict(template)
+        v["id"] = f"U{k:03d}"
+        v["start"] = {"east_m": se, "north_m": sn, "alt_m": 1000}
+        v["goal"] = {
+            "east_m": tx + radius_m * math.cos(a),
+            "north_m": ty + radius_m * math.sin(a),
+            "alt_m": 1000,
+        }
+        v["takeoff_window_s"] = [0, 9000]
+        v["alt_max_m"] = 3000
+        vehicles.append(v)
+    base["vehicles"] = vehicles
+    return base
+
+
+def _ok(r: httpx.Response) -> Any:
+    if r.status_code >= 400:
+        raise SystemExit(f"{r.request.method} {r.request.url}: HTTP {r.status_code}: {r.text}")
+    return r.json() if r.content else None
+
+
+async def _schedule(client: httpx.AsyncClient, args: argparse.Namespace) -> tuple[str, int, float]:
+    """A schedule of the team: its id, the plan's seed and the planning wall s. Should a pair
+    come under the separation minimum the job fails: the next seed is tried (``args.tries``)."""
+    body = json.dumps(arc_team(args.vehicles))
+    for seed in range(args.seed, args.seed + args.tries):
+        headers = {"Content-Type": "application/json"}
+        sc = _ok(await client.post("/v1/scenarios", content=body, headers=headers))
+        t0 = time.perf_counter()
+        job = _ok(await client.post("/v1/schedules", json={"scenario_id": sc["id"], "seed": seed}))
+        while job["state"] in ("queued", "running"):
+            await asyncio.sleep(0.5)
+            job = _ok(await client.get(f"/v1/jobs/{job['id']}"))
+        if job["state"] == "succeeded":
+            return job["result"]["id"], seed, time.perf_counter() - t0
+        print(f"seed {seed}: {job['error']['detail']}", file=sys.stderr)
+    raise SystemExit(f"no schedule in {args.tries} tries")
+
+
+async def _flight(client: httpx.AsyncClient, args: argparse.Namespace) -> tuple[str, int, float]:
+    """Schedule, flight on simulator vehicles, upload: the flight's id, the team's seed and
+    the planning wall s."""
+    schedule_id, seed, plan_s = await _schedule(client, args)
+    rehearsal: dict[str, Any] = {"speedup": args.speedup, "loss": args.loss, "seed": seed}
+    if args.wind:
+        rehearsal |= {"wind_m_s": args.wind, "wind_from_deg": 270.0}
+    flight = _ok(
+        await client.post("/v1/flights", json={"schedule_id": schedule_id, "rehearsal": rehearsal})
+    )
+    fid = flight["flight_id"]
+    _ok(await client.post(f"/v1/flights/{fid}/upload"))
+    snap = flight
+    while snap["state"] in ("planned", "uploading"):
+        await asyncio.sleep(0.2)
+        snap = _ok(await client.get(f"/v1/flights/{fid}"))
+    if snap["state"] != "ready":
+        raise SystemExit(f"upload failed: {snap['uploads']}")
+    return fid, seed, plan_s
+
+
+async def _operate(page: Page, stop: asyncio.Event) -> int:
+    """Pan and zoom the map every 2 s until ``stop``; how many gestures."""
+    box = await page.locator("#map").bounding_box()
+    assert box is not None
+    cx, cy = box["x"] + box["width"] / 2, box["y"] + box["height"] / 2
+    n = 0
+    while not stop.is_set():
+        d = 60 if n % 2 == 0 else -60
+        await page.mouse.move(cx, cy)
+        await page.mouse.down()
+        await page.mouse.move(cx + d, cy + d / 2, steps=8)
+        await page.mouse.up()
+        await page.mouse.wheel(0, -200 if n % 4 < 2 else 200)
+        n += 1
+        with contextlib.suppress(TimeoutError):
+            await asyncio.wait_for(stop.wait(), 2.0)
+    return n
+
+
+async def _over(client: httpx.AsyncClient, fid: str) -> None:
+    """Leave no flight running behind the service's shutdown: abort it (all home) and wait
+    until it is over and its record kept."""
+    snap = _ok(await client.get(f"/v1/flights/{fid}"))
+    if snap["state"] not in ("completed", "failed", "aborted"):
+        await client.post(f"/v1/flights/{fid}/abort", json={"mode": "rtl"})
+    for _ in range(240):
+        snap = _ok(await client.get(f"/v1/flights/{fid}"))
+        if snap["record_ready"]:
+            return
+        await asyncio.sleep(0.25)
+
+
+def _pct(xs: list[float], q: float) -> float:
+    s = sorted(xs)
+    return s[min(len(s) - 1, max(0, round(q / 100 * (len(s) - 1))))]
+
+
+async def run(args: argparse.Namespace) -> dict[str, Any]:
+    token = uuid.uuid4().hex
+    async with _service(token) as url, async_playwright() as pw:
+        headers = {"Authorization": f"Bearer {token}"}
+        async with httpx.AsyncClient(base_url=url, headers=headers, timeout=120.0) as client:
+            fid, seed, plan_s = await _flight(client, args)
+            browser = await pw.chromium.launch(executable_path=CHROMIUM, args=["--no-sandbox"])
+            page = await browser.new_page(viewport={"width": 1600, "height": 1000})
+            await page.add_init_script(f"sessionStorage.setItem('tcgcs.token', {token!r})")
+            await page.goto(f"{url}/ui/?flight={fid}")
+            await page.wait_for_function("() => tcgcs.stream && tcgcs.stream.state === 'open'")
+            _ok(await client.post(f"/v1/flights/{fid}/launch", json={}))
+            await page.wait_for_function("() => tcgcs.telemetry && tcgcs.telemetry.t_s > 0")
+            await page.evaluate("tcgcs.perf.reset()")
+            stop = asyncio.Event()
+            gestures = asyncio.create_task(_operate(page, stop))
+            t0 = time.perf_counter()
+            while time.perf_counter() - t0 < args.wall:
+                if await page.evaluate("tcgcs.stream.state === 'ended'"):
+                    break
+                await asyncio.sleep(0.5)
+            stop.set()
+            n_gestures = await gestures
+            wall = time.perf_counter() - t0
+            got = await page.evaluate(
+                "({frames: tcgcs.perf.frames, lags: tcgcs.perf.lags, t: tcgcs.telemetry.t_s,"
+                " rate: tcgcs.clock.rate, events: tcgcs.events.length,"
+                " state: tcgcs.state.flightState, n: tcgcs.state.order.length})"
+            )
+            await browser.close()
+            await _over(client, fid)
+    frames, lags = got["frames"], got["lags"]
+    return {
+        "vehicles": got["n"],
+        "plan_seed": seed,
+        "speedup": args.speedup,
+        "achieved_rate": got["rate"],
+        "plan_s": plan_s,
+        "wall_s": wall,
+        "mission_s": got["t"],
+        "flight_state": got["state"],
+        "events": got["events"],
+        "gestures": n_gestures,
+        "frames": len(frames),
+        "frame_p50_ms": statistics.median(frames),
+        "frame_p99_ms": _pct(frames, 99),
+        "frame_max_ms": max(frames),
+        "long_frames": sum(1 for f in frames if f > 50.0),
+        "batches": len(lags),
+        "lag_p50_ms": statistics.median(lags),
+        "lag_p99_ms": _pct(lags, 99),
+        "lag_max_ms": max(lags),
+    }
+
+
+def _cpu() -> str:
+    try:
+        for line in Path("/proc/cpuinfo").read_text().splitlines():
+            if line.startswith("model name"):
+                return line.split(":", 1)[1].strip()
+    except OSError:
+        pass
+    return platform.processor() or platform.machine()
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__)
+    parser.add_argument("--vehicles", type=int, default=30)
+    parser.add_argument("--speedup", type=float, default=200.0)
+    parser.add_argument("--seed", type=int, default=0, help="the plan's seed")
+    parser.add_argument("--tries", type=int, default=3, help="seeds to try for a schedule")
+    parser.add_argument("--wind", type=float, default=5.0, help="m/s from the west (0: none)")
+    parser.add_argument("--loss", type=float, default=0.0)
+    parser.add_argument("--wall", type=float, default=120.0, help="measure at most this long")
+    args = parser.parse_args()
+    r = asyncio.run(run(args))
+    print(
+        f"machine: {platform.machine()}, nproc {os.cpu_count()}, {_cpu()}, "
+        f"{platform.python_implementation()} {platform.python_version()}"
+    )
+    print(json.dumps(r, indent=1))
+    print(
+        "| vehicles | speed-up (achieved) | measured wall s | frames | frame p50 ms | p99 ms "
+        "| max ms | frames > 50 ms | batches | lag p50 ms | p99 ms | max ms |"
+    )
+    print("|---:|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|")
+    print(
+        f"| {r['vehicles']} | {r['speedup']:.0f}x ({r['achieved_rate']:.0f}x) | "
+        f"{r['wall_s']:.1f} | {r['frames']} | {r['frame_p50_ms']:.1f} | "
+        f"{r['frame_p99_ms']:.1f} | {r['frame_max_ms']:.1f} | {r['long_frames']} | "
+        f"{r['batches']} | {r['lag_p50_ms']:.1f} | {r['lag_p99_ms']:.1f} | "
+        f"{r['lag_max_ms']:.1f} |"
+    )
+
+
+if __name__ == "__main__":
+    main()
