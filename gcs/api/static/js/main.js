@@ -39,11 +39,13 @@ const clock = new MissionClock();
 const perf = {
   frames: [], // requestAnimationFrame deltas, ms
   lags: [], // telemetry receipt to the end of the frame that drew it, ms
+  receipts: [], // when each telemetry batch was received (performance.now(), ms)
   pending: [], // receipt times not yet drawn
   lastFrame: null,
   reset() {
     this.frames.length = 0;
     this.lags.length = 0;
+    this.receipts.length = 0;
   },
 };
 let stream = null;
@@ -306,6 +308,8 @@ function onMessage(type, data, received) {
     mergeVehicles(data.vehicles);
     mapView.setVehicles(data.vehicles);
     perf.pending.push(received);
+    perf.receipts.push(received);
+    if (perf.receipts.length > PERF_KEEP) perf.receipts.shift();
     renderPanel();
   } else if (type === "event") {
     state.events.push(data);
