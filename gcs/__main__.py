@@ -63,11 +63,7 @@ def _signing(args: argparse.Namespace) -> SigningConfig | None:
         return SigningConfig(secret_key=key_from_passphrase(args.signing_passphrase))
     if args.signing_key:
         try:
-            key = bytes.fromhex(args.signing_key)
-        except ValueError:
-            raise UsageError("--signing-key: not a hex string") from None
-        try:
-            return SigningConfig(secret_key=key)
+            return SigningConfig.from_hex(args.signing_key)
         except ValueError as err:
             raise UsageError(f"--signing-key: {err}") from None
     return None

@@ -38,6 +38,21 @@ class SigningConfig:
     link_id: int = 0
     allow_unsigned: Collection[str] = field(default_factory=lambda: frozenset({"RADIO_STATUS"}))
 
+    @classmethod
+    def from_hex(cls, key_hex: str) -> SigningConfig:
+        """A config for a key given as 64 hex digits.
+
+        Raises
+        ------
+        ValueError
+            Not hex, or not 32 bytes (said in words).
+        """
+        try:
+            key = bytes.fromhex(key_hex)
+        except ValueError:
+            raise ValueError("not a hex string") from None
+        return cls(secret_key=key)
+
     def __post_init__(self) -> None:
         if len(self.secret_key) != KEY_BYTES:
             raise ValueError(

@@ -853,11 +853,7 @@ class Engine:
 def _signing(key_hex: str) -> SigningConfig:
     """A 32-byte signing key given as 64 hex digits."""
     try:
-        key = bytes.fromhex(key_hex)
-    except ValueError:
-        raise InvalidInput("signing_key: not a hex string") from None
-    try:
-        return SigningConfig(secret_key=key)
+        return SigningConfig.from_hex(key_hex)
     except ValueError as err:
         raise InvalidInput(f"signing_key: {err}") from None
 
