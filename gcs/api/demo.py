@@ -12,10 +12,6 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import json
-import os
-import signal
-import socket
-import sys
 import tempfile
 import uuid
 from collections.abc import AsyncIterator
@@ -25,6 +21,7 @@ from typing import Any
 
 import httpx
 
+from gcs.api.process import running_service
 from gcs.errors import GcsError
 
 __all__ = ["DemoOptions", "run_demo", "sse_messages"]
@@ -46,50 +43,12 @@ class DemoOptions:
     quiet: bool = False
 
 
-def _free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return int(s.getsockname()[1])
-
-
 @contextlib.asynccontextmanager
 async def _service(token: str) -> AsyncIterator[str]:
-    """``python -m gcs serve`` in a child process on a free port, ready; stopped after."""
-    port = _free_port()
+    """The service in a child process on an embedded SQLite in a temporary directory."""
     with tempfile.TemporaryDirectory(prefix="tcgcs-demo-") as tmp:
-        env = {
-            **os.environ,
-            "TCGCS_DATA_DIR": tmp,
-            "TCGCS_TOKENS": json.dumps({token: ["admin"]}),
-        }
-        env.pop("TCGCS_DATABASE_URL", None)
-        proc = await asyncio.create_subprocess_exec(
-            sys.executable, "-m", "gcs", "serve", "--port", str(port), env=env,
-            stdout=asyncio.subprocess.DEVNULL, stderr=asyncio.subprocess.PIPE,
-        )  # fmt: skip
-        url = f"http://127.0.0.1:{port}"
-        try:
-            async with httpx.AsyncClient(base_url=url) as client:
-                for _ in range(300):
-                    if proc.returncode is not None:
-                        err = b"" if proc.stderr is None else await proc.stderr.read()
-                        raise GcsError(f"the service did not start: {err.decode()[-2000:]}")
-                    with contextlib.suppress(httpx.TransportError):
-                        if (await client.get("/v1/health")).status_code == 200:
-                            break
-                    await asyncio.sleep(0.1)
-                else:
-                    raise GcsError("the service did not answer /v1/health within 30 s")
-            yield url
-        finally:
-            if proc.returncode is None:
-                proc.send_signal(signal.SIGINT)
-                try:
-                    async with asyncio.timeout(20):
-                        await proc.wait()
-                except TimeoutError:
-                    proc.kill()
-                    await proc.wait()
+        async with running_service(Path(tmp), {token: ["admin"]}, stop_within_s=20.0) as svc:
+            yield svc.url
 
 
 def _check(r: httpx.Response, what: str) -> Any:
