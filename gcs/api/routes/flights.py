@@ -200,13 +200,13 @@ async def stream(engine: Engine, flight_id: str, after_seq: int) -> AsyncIterato
             if sub.dropped:
                 yield {"type": "behind", "data": {"after_seq": last}}
                 return
-            if got is not None:
-                if got.seq > last:
-                    last = got.seq
-                    yield {"type": "event", "data": event_json(got)}
-                continue
-            if sub.closed:
+            if got is not None and got.seq > last:
+                last = got.seq
+                yield {"type": "event", "data": event_json(got)}
+            if got is None and sub.closed:
                 return
+            if loop.time() < next_telemetry:
+                continue  # a batch is due only when its time has come, events or not
             next_telemetry = loop.time() + TELEMETRY_WALL_S
             snap = engine.snapshot(flight_id, max_age_s=TELEMETRY_WALL_S / 2)
             yield {"type": "telemetry", "data": _telemetry(snap)}
