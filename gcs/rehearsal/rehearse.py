@@ -42,7 +42,7 @@ from gcs.mavlink.vehicle import Vehicle
 from gcs.rehearsal.truth import TruthSample, closest_approach, min_separation, read_truth
 from gcs.service.fleet import Fleet
 from gcs.service.stubs import StubProcess
-from gcs.store.repository import CheckpointWriter, EventWriter, Store
+from gcs.store.repository import FlightKeeper, Store
 from planner.deconflict import separation
 from planner.plan import build_terrain
 from planner.scenario import Scenario
@@ -371,9 +371,7 @@ class _Kept:
 
     store: Store | None = None
     flight_id: str | None = None
-    writer: asyncio.Task[None] | None = None
-    events: Subscription | None = None
-    checkpoints: CheckpointWriter | None = None
+    keeper: FlightKeeper | None = None
 
     @classmethod
     def start(
@@ -400,13 +398,11 @@ class _Kept:
                     coord.schedule, sep, coord.world.terrain, scenario_file=str(opts.scenario_path)
                 )
                 store.update_flight(flight_id, resume={"schedule": doc})
-        events = coord.bus.subscribe(maxsize=1_000_000, after_seq=0)
-        writer = asyncio.create_task(EventWriter(store, flight_id).run(events))
-        checkpoints = CheckpointWriter(store, flight_id)
-        coord.on_checkpoint = checkpoints.offer
+        keeper = FlightKeeper(store, flight_id, coord.bus)
+        coord.on_checkpoint = keeper.checkpoints.offer
         if not opts.quiet:
             print(f"rehearse: flight {flight_id} kept in {store.engine.url!r}", flush=True)
-        return cls(store, flight_id, writer, events, checkpoints)
+        return cls(store, flight_id, keeper)
 
     def state(self, state: str, **fields: Any) -> None:
         if self.store is not None and self.flight_id is not None:
@@ -414,14 +410,9 @@ class _Kept:
 
     async def finish(self, coord: FlightRunner) -> None:
         """The last events and checkpoint written (the final state is the last event's)."""
-        if self.store is None or self.events is None or self.writer is None:
-            return
         coord.on_checkpoint = None
-        if self.checkpoints is not None:
-            await self.checkpoints.close()
-        self.events.close()
-        await self.writer
-        self.store.close()
+        if self.keeper is not None:
+            await self.keeper.close()
 
 
 def _open_store(opts: RehearsalOptions) -> Store | None:

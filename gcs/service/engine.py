@@ -30,7 +30,7 @@ import numpy as np
 import yaml
 from pydantic import ValidationError
 
-from gcs.coordination.bus import EventBus, Subscription
+from gcs.coordination.bus import EventBus
 from gcs.coordination.config import FlightConfig
 from gcs.coordination.events import FlightEvent
 from gcs.coordination.missionclock import MissionClock
@@ -43,7 +43,7 @@ from gcs.rehearsal.report import write_report
 from gcs.service.fleet import Fleet, FleetVehicle, VehicleBusy
 from gcs.service.mapview import flight_map, terrain_png
 from gcs.service.stubs import StubProcess
-from gcs.store.repository import CheckpointWriter, EventWriter, Store, StoreNotFound
+from gcs.store.repository import FlightKeeper, Store, StoreNotFound
 from planner.errors import InfeasibleError, PlannerError
 from planner.missionfile import to_qgc_plan, to_wpl
 from planner.plan import World, build_world, plan
@@ -216,9 +216,7 @@ class FlightHandle:
     truth_path: Path | None = None
     uploads: dict[str, dict[str, Any]] = field(default_factory=dict)
     task: asyncio.Task[None] | None = None
-    writer: asyncio.Task[None] | None = None
-    kept: Subscription | None = None
-    checkpoints: CheckpointWriter | None = None
+    keeper: FlightKeeper | None = None
     record: dict[str, Any] | None = None
     report_dir: Path | None = None
     wall0: float = field(default_factory=time.perf_counter)
@@ -523,12 +521,8 @@ class Engine:
 
     def _keep(self, handle: FlightHandle) -> None:
         """The flight's events and checkpoints go to the store as they happen."""
-        handle.kept = handle.runner.bus.subscribe(maxsize=1_000_000, after_seq=0)
-        handle.writer = asyncio.get_running_loop().create_task(
-            EventWriter(self.store, handle.id).run(handle.kept)
-        )
-        handle.checkpoints = CheckpointWriter(self.store, handle.id)
-        handle.runner.on_checkpoint = handle.checkpoints.offer
+        handle.keeper = FlightKeeper(self.store, handle.id, handle.runner.bus)
+        handle.runner.on_checkpoint = handle.keeper.checkpoints.offer
 
     # -- restart --------------------------------------------------------------------------------
 
@@ -726,15 +720,10 @@ class Engine:
 
     async def _stop_writers(self, handle: FlightHandle) -> None:
         handle.runner.on_checkpoint = None
-        if handle.checkpoints is not None:
-            await handle.checkpoints.close()
-            handle.checkpoints = None
-        if handle.kept is not None:
-            handle.kept.close()  # the writer drains what is queued, then ends
-        if handle.writer is not None:
+        if handle.keeper is not None:
+            keeper, handle.keeper = handle.keeper, None
             with contextlib.suppress(BaseException):
-                await handle.writer
-            handle.writer = None
+                await keeper.close()
 
     # -- steering -------------------------------------------------------------------------------
 

@@ -25,7 +25,7 @@ from sqlalchemy import Engine, create_engine, select
 from sqlalchemy.exc import IntegrityError, OperationalError
 from sqlalchemy.orm import Session
 
-from gcs.coordination.bus import Subscription
+from gcs.coordination.bus import EventBus, Subscription
 from gcs.coordination.events import EventKind, FlightEvent
 from gcs.coordination.member import VehicleState
 from gcs.errors import GcsError
@@ -37,6 +37,7 @@ __all__ = [
     "VEHICLE_PHASES",
     "CheckpointWriter",
     "EventWriter",
+    "FlightKeeper",
     "FlightRecordRow",
     "Store",
     "StoreConflict",
@@ -455,6 +456,25 @@ class CheckpointWriter:
         self._wake.set()
         await self._task
         await self._flush()
+
+
+class FlightKeeper:
+    """A flight kept in the store as it happens: every event of its bus (an
+    :class:`EventWriter` on a subscription from the first event) and its newest checkpoint
+    (a :class:`CheckpointWriter`: hand :meth:`CheckpointWriter.offer` to the runner)."""
+
+    def __init__(self, store: Store, flight_id: str, bus: EventBus) -> None:
+        self.events = bus.subscribe(maxsize=1_000_000, after_seq=0)
+        self.checkpoints = CheckpointWriter(store, flight_id)
+        self._writer = asyncio.get_running_loop().create_task(
+            EventWriter(store, flight_id).run(self.events)
+        )
+
+    async def close(self) -> None:
+        """The pending checkpoint and every queued event written, then stop."""
+        await self.checkpoints.close()
+        self.events.close()  # the writer drains what is queued, then ends
+        await self._writer
 
 
 class EventWriter:
