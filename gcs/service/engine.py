@@ -251,11 +251,11 @@ class Engine:
             )
             if simulated and handle.runner.state not in ENDED:
                 handle.runner.fail("the service stopped, and its simulator vehicles with it")
-            for task in (handle.task,):
-                if task is not None and not task.done():
-                    task.cancel()
-                    with contextlib.suppress(BaseException):
-                        await task
+            task = handle.task
+            if task is not None and not task.done():
+                task.cancel()
+                with contextlib.suppress(BaseException):
+                    await task
             await self._stop_writers(handle)
             await self._stop_simulator(handle)
         for task in list(self._tasks):
