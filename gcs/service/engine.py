@@ -214,7 +214,7 @@ class FlightHandle:
     rehearsal: Rehearsal | None = None
     stub: StubProcess | None = None
     truth_path: Path | None = None
-    uploads: dict[str, dict[str, Any]] = field(default_factory=dict)
+    upload_task: asyncio.Task[None] | None = None
     task: asyncio.Task[None] | None = None
     keeper: FlightKeeper | None = None
     record: dict[str, Any] | None = None
@@ -630,11 +630,10 @@ class Engine:
         """
         handle = self.flight(flight_id)
         state = handle.runner.state
-        if state is not FlightState.PLANNED or handle.task is not None:
+        if state is not FlightState.PLANNED or handle.upload_task is not None:
             raise Conflict(f"flight {flight_id} is {state.value}: nothing to upload")
-        handle.uploads = {vid: {"state": "pending"} for vid in handle.vehicles}
-        handle.task = self._spawn(self._upload(handle))
-        return {"flight_id": flight_id, "state": "uploading", "vehicles": handle.uploads}
+        handle.upload_task = self._spawn(self._upload(handle))
+        return {"flight_id": flight_id, "state": "uploading", "vehicles": _uploads(handle)}
 
     async def _upload(self, handle: FlightHandle) -> None:
         runner = handle.runner
@@ -643,10 +642,6 @@ class Engine:
             await runner.upload_all()
         except GcsError as err:
             log.info("flight %s: upload failed: %s", handle.id, err)
-        finally:
-            handle.task = None
-            for vid, why in runner.upload_results.items():
-                handle.uploads[vid] = {"state": "ok" if why is None else "failed", "error": why}
 
     def launch(
         self, flight_id: str, start_utc_s: float | None, delay_s: float | None
@@ -807,7 +802,7 @@ class Engine:
         snap = handle.runner.snapshot()
         snap["flight_id"] = flight_id
         snap["schedule_id"] = handle.schedule.id
-        snap["uploads"] = handle.uploads
+        snap["uploads"] = _uploads(handle)
         snap["record_ready"] = handle.record is not None
         return snap
 
@@ -837,6 +832,22 @@ class Engine:
     def events(self, flight_id: str, after_seq: int, limit: int) -> list[FlightEvent]:
         self.flight(flight_id)
         return self.store.events(flight_id, after_seq=after_seq, limit=limit)
+
+
+def _uploads(handle: FlightHandle) -> dict[str, dict[str, Any]]:
+    """Per vehicle, once an upload was asked for: pending, ok, or failed and why (read from
+    the runner's results, so it never lags the flight's state)."""
+    if handle.upload_task is None:
+        return {}
+    results = handle.runner.upload_results
+    out: dict[str, dict[str, Any]] = {}
+    for vid in handle.vehicles:
+        if vid not in results:
+            out[vid] = {"state": "pending"}
+        else:
+            why = results[vid]
+            out[vid] = {"state": "ok" if why is None else "failed", "error": why}
+    return out
 
 
 def _signing(key_hex: str) -> SigningConfig:
