@@ -454,7 +454,8 @@ class Violation:
 
     ``constraint`` is the name of the limit argument (``"min_leg_m"``, ``"max_turn_rad"``,
     ``"max_range_m"``); ``index`` is the leg index, the vertex index, or for the range the
-    index of the first vertex beyond ``max_range_m``.
+    index of the first vertex beyond ``max_range_m``. ``s_m`` is where along the path a
+    violation at one point lies (m), when it has one (terrain clearance).
     """
 
     constraint: str
@@ -462,6 +463,7 @@ class Violation:
     value: float
     limit: float
     message: str
+    s_m: float | None = None
 
 
 def check_polyline(

@@ -44,6 +44,12 @@ from planner.threats import ThreatZone, active, build_threats, forbidden_at, pol
 FloatArray = NDArray[np.float64]
 Method = Literal["aco", "astar"]
 PROFILE_STEP_M = 50.0
+CLIMB_OUT_CLEARANCE_FRACTION = 0.5
+"""Climbing from home, the aircraft keeps at least this fraction of the height it has climbed
+between it and the terrain (until that is ``clearance_m``): level ground under the climb
+leaves all of it, rising ground ahead eats into it. A route whose climb-out rises toward
+terrain faster than that is refused (a departure's obstacle-clearance idea: the climb must
+outclimb the ground ahead by a margin that grows with the distance flown)."""
 
 
 @dataclass(frozen=True)
@@ -456,6 +462,7 @@ def altitude_profile(
                 float(clearance[k]),
                 v.clearance_m,
                 f"{clearance[k]:.0f} m above terrain at {s[k]:.0f} m along the path",
+                float(s[k]),
             )
         )
     top = float(wp_alt.max())
@@ -516,6 +523,52 @@ class Plan:
     nominal_arrival_s: tuple[float, ...]
 
 
+def climb_out_violation(
+    path: FlightPath, terrain: Terrain, v: Vehicle, profile: AltitudeProfile
+) -> Violation | None:
+    """The climb from home, checked against the terrain it flies over (None: clear).
+
+    A vehicle that starts on the ground takes off at home (terrain elevation there) and climbs
+    along its path at ``climb_gradient`` until it meets the altitude profile; the profile's own
+    clearance is checked where it is flown. During the climb the height above terrain must be
+    at least ``min(clearance_m, CLIMB_OUT_CLEARANCE_FRACTION * height climbed)``. Returns the
+    worst point as a ``clearance`` violation (``index``: the sample, every ``PROFILE_STEP_M``).
+    """
+    s, pts = sample_by_distance(path, PROFILE_STEP_M)
+    ground = terrain.elevation_m(pts[:, 0], pts[:, 1])
+    home = float(ground[0])
+    planned = np.interp(s, profile.s_m, profile.alt_m)
+    climb = home + v.climb_gradient * s
+    climbing = climb < planned
+    if not climbing[1:].any():
+        return None
+    flown = np.minimum(climb, planned)
+    need = np.minimum(v.clearance_m, CLIMB_OUT_CLEARANCE_FRACTION * (flown - home))
+    margin = np.where(climbing, flown - ground - need, np.inf)
+    k = int(np.argmin(margin))
+    if margin[k] >= -1.0:
+        return None
+    return Violation(
+        "clearance",
+        k,
+        float(flown[k] - ground[k]),
+        float(need[k]),
+        f"climbing from home ({home:.0f} m) at gradient {v.climb_gradient:g}, "
+        f"{flown[k] - ground[k]:.0f} m above terrain ({ground[k]:.0f} m) at {s[k]:.0f} m "
+        f"along the path, needs {need[k]:.0f} m",
+        float(s[k]),
+    )
+
+
+def _where(world: World, path: FlightPath, violation: Violation) -> str:
+    """Where a violation at a point of the path is, as latitude and longitude (deg)."""
+    if violation.s_m is None:
+        return ""
+    pose = path.pose_at(violation.s_m)
+    lat, lon = world.scenario.frame().to_geodetic(pose.east_m, pose.north_m)
+    return f" (lat {float(lat):.5f}, lon {float(lon):.5f})"
+
+
 def finish_route(
     world: World,
     problem: Problem,
@@ -529,11 +582,15 @@ def finish_route(
 ) -> PlannedRoute:
     """Simplify, smooth, profile and check one grid route.
 
+    A vehicle that starts on the ground (``start_alt_m`` None and not ``airborne``) has its
+    climb from home checked too (:func:`climb_out_violation`).
+
     Raises
     ------
     InfeasibleError
         The smoothed route enters a forbidden zone, turns tighter than the minimum radius,
-        loses terrain clearance, or exceeds the vehicle's range or ceiling.
+        loses terrain clearance (along the profile or climbing from home: the message names
+        the vehicle and the position), or exceeds the vehicle's range or ceiling.
     """
     task = problem.tasks[index]
     v = world.scenario.vehicle(task.vehicle_id)
@@ -543,6 +600,7 @@ def finish_route(
     grid_length = float(np.hypot(*np.diff(pts, axis=0).T).sum())
     margin = max(v.min_turn_radius_m, 0.5 * world.grid.resolution_m)
     start_alt = v.start.alt_m if start_alt_m is None else start_alt_m
+    from_home = start_alt_m is None and not v.airborne
     route: PlannedRoute | None = None
     failure = ""
     for candidate in (
@@ -579,6 +637,9 @@ def finish_route(
             )
         )
         constraints.extend(profile.violations)
+        climb_out = climb_out_violation(path, world.terrain, v, profile) if from_home else None
+        if climb_out is not None:
+            constraints.append(climb_out)
         if path.length_m > v.max_range_m:
             constraints.append(
                 Violation(
@@ -607,7 +668,8 @@ def finish_route(
             failure = f"vehicle {v.id}: smoothed path turns tighter than min_turn_radius_m"
             continue
         if hard:
-            failure = f"vehicle {v.id}: {hard[0].constraint}: {hard[0].message}"
+            where = _where(world, path, hard[0])
+            failure = f"vehicle {v.id}: {hard[0].constraint}: {hard[0].message}{where}"
             continue
         route = PlannedRoute(
             v.id,

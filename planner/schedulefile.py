@@ -146,7 +146,10 @@ def path_mission(
     items = compile_mission(
         home=home,
         waypoints=waypoints,
-        takeoff_alt_m=max(v.start.alt_m - ground, 1.0),
+        # The climb-out ends where the altitude profile starts (not lower: a start altitude
+        # below the terrain there would leave the first leg below it, and the profile, which
+        # starts no lower than the start altitude, is what the clearance was checked on).
+        takeoff_alt_m=max(vs.alt_at(0.0) - ground, 1.0),
         speeds=speeds,
         loiters=loiters,
         airspeed_limits_m_s=(v.speed_min_m_s, v.speed_max_m_s),
