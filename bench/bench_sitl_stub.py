@@ -5,9 +5,12 @@ fraction of the requested rate (goal >= 95% for 10 vehicles at 100x), the messag
 second the clients decoded, and the simulator's CPU time as a share of one core (its
 headroom). The clients run in a separate process so their decoding does not share the
 simulator's core. The vehicles sit on the ground, disarmed; ``--fly`` arms them and flies a
-long AUTO mission instead (takeoff, then a 4 km square circuit), which costs more physics.
+long AUTO mission instead (takeoff, then a 4 km square circuit), which costs more physics;
+``--terrain`` flies them over a seeded 40-hill synthetic terrain (the ground under each vehicle
+looked up every physics step, as with ``python -m sitl_stub --scenario``) instead of flat
+ground, and streams TERRAIN_REPORT at 1 Hz.
 
-    python bench/bench_sitl_stub.py --vehicles 10 --speedup 100 --seconds 21 [--fly]
+    python bench/bench_sitl_stub.py --vehicles 10 --speedup 100 --seconds 21 [--fly] [--terrain]
 """
 
 from __future__ import annotations
@@ -17,11 +20,15 @@ import asyncio
 import multiprocessing as mp
 import time
 
+import numpy as np
 from pymavlink.dialects.v20 import ardupilotmega as mavlink2
 
+from planner.geo import LocalFrame
+from planner.terrain import SyntheticTerrain
 from sitl_stub.api import Home, SimTeam
 from sitl_stub.items import MissionItem
 from sitl_stub.model import displace_deg
+from sitl_stub.terrain import GridTerrain
 
 
 def clients(ports: list[int], seconds: float, result: mp.Queue) -> None:  # type: ignore[type-arg]
@@ -68,9 +75,24 @@ def circuit(home: Home) -> list[MissionItem]:
     return items
 
 
-async def run(n: int, speedup: float, seconds: float, fly: bool) -> str:
+def hills(home: Home) -> GridTerrain:
+    """40 hills up to 50 m over a 20 km square around the homes (the circuit clears them)."""
+    frame = LocalFrame(home.lat_deg, home.lon_deg)
+    terrain = SyntheticTerrain.generate(
+        seed=1, min_east_m=-10e3, max_east_m=10e3, min_north_m=-10e3, max_north_m=10e3,
+        base_m=home.alt_m, peak_m=50.0, hills=40,
+    )  # fmt: skip
+
+    def elevation(lat_deg: np.ndarray, lon_deg: np.ndarray) -> np.ndarray:
+        return terrain.elevation_m(*frame.to_local(lat_deg, lon_deg))
+
+    return GridTerrain(elevation)
+
+
+async def run(n: int, speedup: float, seconds: float, fly: bool, terrain: bool) -> str:
     homes = [Home(-35.36 + 0.001 * i, 149.16, 584.0) for i in range(n)]
-    async with SimTeam.start(homes=homes, tcp_base=0, speedup=speedup) as team:
+    ground = hills(homes[0]) if terrain else None
+    async with SimTeam.start(homes=homes, tcp_base=0, speedup=speedup, terrain=ground) as team:
         if fly:
             for v, home in zip(team.vehicles, homes, strict=True):
                 items = tuple(circuit(home))
@@ -92,8 +114,9 @@ async def run(n: int, speedup: float, seconds: float, fly: bool) -> str:
         if fly:
             assert all(not v.true_state.on_ground for v in team.vehicles), "not flying"
     achieved = sim / wall
+    where = ("flying" if fly else "on ground") + (" over terrain" if terrain else "")
     return (
-        f"| {n} | {speedup:g} | {'flying' if fly else 'on ground'} | {wall:.1f} "
+        f"| {n} | {speedup:g} | {where} | {wall:.1f} "
         f"| {achieved:.1f} | {achieved / speedup:.1%} | {msgs / seconds:.0f} "
         f"| {cpu / wall:.0%} |"
     )
@@ -105,8 +128,9 @@ def main() -> None:
     ap.add_argument("--speedup", type=float, default=100.0)
     ap.add_argument("--seconds", type=float, default=21.0)
     ap.add_argument("--fly", action="store_true", help="arm and fly an AUTO mission")
+    ap.add_argument("--terrain", action="store_true", help="over synthetic hills, not flat")
     args = ap.parse_args()
-    row = asyncio.run(run(args.vehicles, args.speedup, args.seconds, args.fly))
+    row = asyncio.run(run(args.vehicles, args.speedup, args.seconds, args.fly, args.terrain))
     print(
         "| vehicles | speed-up | vehicles are | wall s | achieved speed-up | of requested "
         "| msgs/s to clients | simulator CPU (one core) |"

@@ -22,6 +22,7 @@ from typing import TYPE_CHECKING
 
 from sitl_stub.api import DEFAULT_TCP_BASE, Home, SimTeam
 from sitl_stub.model import AirframeParams
+from sitl_stub.terrain import GridTerrain, Hill
 from sitl_stub.truth import DEFAULT_TRUTH_PERIOD_S
 
 if TYPE_CHECKING:
@@ -65,18 +66,27 @@ def parse_args(argv: Sequence[str] | None = None) -> argparse.Namespace:
     ap.add_argument("--vehicles", type=int, default=1, help="number of vehicles (default 1)")
     ap.add_argument("--tcp-base", type=int, default=DEFAULT_TCP_BASE, help="port of vehicle 0")
     ap.add_argument("--speedup", type=float, default=1.0, help="simulated/wall time ratio")
-    where = ap.add_mutually_exclusive_group(required=True)
-    where.add_argument(
+    ap.add_argument(
         "--home",
         action="append",
         metavar="LAT,LON,ALT_M[,HDG_DEG]",
         help="start on the ground (ALT_M AMSL); once: shared by all vehicles (spaced 30 m "
         "across the heading); repeated once per vehicle: vehicle i at the i-th --home",
     )
-    where.add_argument(
+    ap.add_argument(
         "--scenario",
         metavar="FILE",
-        help="scenario file: each vehicle on the ground (terrain elevation) at its start",
+        help="scenario file: the vehicles fly over its terrain (the ground under each one, "
+        "every physics step; flown into it, one crashes) and, without --home, start on the "
+        "ground at its vehicles' starts",
+    )
+    ap.add_argument(
+        "--hill",
+        action="append",
+        metavar="LAT,LON,RADIUS_M,HEIGHT_M",
+        help="with --scenario: a hill the scenario's terrain does not have, HEIGHT_M above it "
+        "at LAT,LON, a cosine bump of RADIUS_M (a terrain database error to rehearse against; "
+        "repeatable)",
     )
     ap.add_argument(
         "--airspeed",
@@ -185,7 +195,15 @@ def parse_args(argv: Sequence[str] | None = None) -> argparse.Namespace:
     return ap.parse_args(_join_negative_values(list(sys.argv[1:] if argv is None else argv)))
 
 
-_VALUE_OPTIONS = ("--home", "--wind", "--airspeed", "--blackout", "--speed-bias", "--utc-offset")
+_VALUE_OPTIONS = (
+    "--home",
+    "--hill",
+    "--wind",
+    "--airspeed",
+    "--blackout",
+    "--speed-bias",
+    "--utc-offset",
+)
 
 
 def _join_negative_values(argv: list[str]) -> list[str]:
@@ -204,7 +222,9 @@ def _join_negative_values(argv: list[str]) -> list[str]:
 def homes_from_args(args: argparse.Namespace) -> list[Home]:
     if args.vehicles < 1:
         raise UsageError(f"--vehicles must be at least 1, got {args.vehicles}")
-    if args.scenario:
+    if not args.home:
+        if not args.scenario:
+            raise UsageError("give --home (once, or once per vehicle) or --scenario")
         return homes_from_scenario(args.scenario, args.vehicles)
     texts: list[str] = args.home
     _check_count(texts, "--home", args.vehicles)
@@ -340,6 +360,50 @@ def initial_bearing_deg(lat1: float, lon1: float, lat2: float, lon2: float) -> f
     return math.degrees(math.atan2(y, x)) % 360.0
 
 
+def terrain_from_args(args: argparse.Namespace, homes: Sequence[Home]) -> GridTerrain | None:
+    """The ground the vehicles fly over: ``--scenario``'s terrain with any ``--hill`` on it
+    (None without a scenario: flat at each home's altitude). Where the terrain has no data
+    (an SRTM tile missing) the ground is flat at the lowest home's altitude."""
+    hills = [_hill(text) for text in args.hill or ()]
+    if not args.scenario:
+        if hills:
+            raise UsageError("--hill needs --scenario (the terrain it stands on)")
+        return None
+    import numpy as np
+
+    from planner.plan import build_terrain
+    from sitl_stub.terrain import with_hills
+
+    scenario = _scenario(args.scenario)
+    frame = scenario.frame()
+    terrain = build_terrain(scenario)
+
+    def elevation(lat_deg: np.ndarray, lon_deg: np.ndarray) -> np.ndarray:
+        east, north = frame.to_local(lat_deg, lon_deg)
+        return terrain.elevation_m(np.asarray(east), np.asarray(north))
+
+    grid = GridTerrain(with_hills(elevation, hills), fallback_m=min(h.alt_m for h in homes))
+    for i, home in enumerate(homes):
+        below = home.alt_m - grid.elevation_m(home.lat_deg, home.lon_deg)
+        if abs(below) > 5.0:
+            log.warning(
+                "vehicle %d: home altitude %.1f m is %+.1f m from the terrain there: its "
+                "terrain is moved by that to put home on the ground",
+                i,
+                home.alt_m,
+                below,
+            )
+    return grid
+
+
+def _hill(text: str) -> Hill:
+    lat, lon, radius, height = _floats(text, "--hill", 4, 4)
+    try:
+        return Hill(lat, lon, radius, height)
+    except ValueError as err:
+        raise UsageError(f"--hill {text!r}: {err}") from None
+
+
 def homes_from_scenario(path: str, n: int) -> list[Home]:
     """Vehicle i on the ground at scenario vehicle i's start, nose toward its goal.
 
@@ -401,6 +465,7 @@ async def serve(
     homes: list[Home],
     params: list[AirframeParams] | None = None,
     blackouts: Sequence[BlackoutSpec] = (),
+    terrain: GridTerrain | None = None,
 ) -> None:
     from sitl_stub.model import Wind
 
@@ -433,6 +498,7 @@ async def serve(
             truth_out=args.truth,
             truth_period_s=args.truth_period,
             counters_out=args.counters,
+            terrain=terrain,
         ) as team:
             if args.loss or args.latency_ms:
                 for v in team.vehicles:
@@ -481,12 +547,13 @@ def main(argv: Sequence[str] | None = None) -> int:
         if not (math.isfinite(args.truth_period) and args.truth_period > 0):
             raise UsageError(f"--truth-period must be a positive number, got {args.truth_period}")
         homes = homes_from_args(args)
+        terrain = terrain_from_args(args, homes)
         params = params_from_args(args)
         blackouts = blackouts_from_args(args)
         speed_bias_from_args(args)  # usage errors before anything starts
         utc_offsets_from_args(args)
         with contextlib.suppress(KeyboardInterrupt):
-            asyncio.run(serve(args, homes, params, blackouts))
+            asyncio.run(serve(args, homes, params, blackouts, terrain))
     except (UsageError, ValueError, OSError) as err:
         print(f"sitl_stub: error: {err}", file=sys.stderr)
         return 2

@@ -12,7 +12,9 @@ Example::
 lines (:mod:`sitl_stub.truth`); ``counters_out="counters.json"`` keeps a file of what the
 vehicles were made to do (arms, AUTO entries, mission transfers: :mod:`sitl_stub.counters`);
 ``team.schedule_blackout(i, start_sim_s, duration_s)`` cuts a vehicle's link at a simulated
-time.
+time. ``SimTeam.start(..., terrain=GridTerrain(elevation))`` flies the vehicles over terrain
+(:mod:`sitl_stub.terrain`) instead of flat ground at each home's altitude; one flown into it
+crashes (``team.vehicles[i].autopilot.crash_time_s``).
 """
 
 from __future__ import annotations
@@ -26,7 +28,7 @@ from pathlib import Path
 
 import numpy as np
 
-from sitl_stub.autopilot import Autopilot
+from sitl_stub.autopilot import Autopilot, Ground
 from sitl_stub.clock import DEFAULT_EPOCH_UTC_S, ClockStats, SimClock
 from sitl_stub.counters import DEFAULT_COUNTERS_PERIOD_S, CountersWriter
 from sitl_stub.link import FaultyLink
@@ -102,6 +104,7 @@ class SimTeam:
         truth_period_s: float = DEFAULT_TRUTH_PERIOD_S,
         counters_out: str | Path | None = None,
         counters_period_s: float = DEFAULT_COUNTERS_PERIOD_S,
+        terrain: Ground | None = None,
     ) -> AsyncIterator[SimTeam]:
         """Start the team; vehicle ``i`` has system id ``i + 1`` on ``tcp_base + 10*i``.
 
@@ -115,6 +118,8 @@ class SimTeam:
         ``counters_out`` the vehicles' counters are kept in that file, rewritten whole every
         ``counters_period_s`` wall seconds and when the team stops
         (:class:`~sitl_stub.counters.CountersWriter`, available as :attr:`counters_file`).
+        With ``terrain`` every vehicle flies over it (the ground under it each physics step;
+        its TERRAIN_REPORT streams at 1 Hz); without, the ground is flat at its home altitude.
         """
         team = cls.create(
             homes=homes,
@@ -134,6 +139,7 @@ class SimTeam:
             wind_estimate_error=wind_estimate_error,
             one_client_per_port=one_client_per_port,
             tcp_base=tcp_base,
+            terrain=terrain,
         )
         if truth_out is not None:
             team.truth = TruthRecorder.open(
@@ -193,6 +199,7 @@ class SimTeam:
         wind_estimate_error: bool = True,
         one_client_per_port: bool = False,
         tcp_base: int = DEFAULT_TCP_BASE,
+        terrain: Ground | None = None,
     ) -> SimTeam:
         """Build the team without opening sockets (``start`` is the usual entry)."""
         if not homes:
@@ -227,6 +234,7 @@ class SimTeam:
                 wind=wind or Wind(),
                 rng=np.random.default_rng(seeds[2 * i]),
                 time_s=0.0,
+                terrain=terrain,
             )
             link = FaultyLink(np.random.default_rng(seeds[2 * i + 1]), lambda: clock.sim_time_s)
             vehicles.append(

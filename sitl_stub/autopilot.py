@@ -45,7 +45,18 @@ Behaviour modelled on ArduPlane 4.x (``commands_logic.cpp``, ``AP_Mission``, ``A
 - Altitude in AUTO slews linearly between waypoints (above 20 m or when descending; a
   feed-forward climb rate follows the slope); RTL/GUIDED climb at once and glide down.
 - Frames: GLOBAL(_INT) is AMSL; every other frame (RELATIVE_ALT, TERRAIN_ALT ...) is taken as
-  relative to home (the stub's terrain is flat at home altitude). Lat/lon 0,0 means "here".
+  relative to home (TERRAIN_ALT is not flown above the terrain). Lat/lon 0,0 means "here".
+- Ground: flat at home altitude, or with ``terrain`` (:class:`Ground`, e.g.
+  :class:`sitl_stub.terrain.GridTerrain`) the terrain's elevation under the aircraft, looked up
+  every physics step, moved by what it misses the home altitude by at home (home is on the
+  ground); on the ground the wheels follow it.
+- Crash: an armed aircraft in the air that reaches the ground other than by landing (NAV_LAND),
+  or goes below it (flown into rising terrain), is wrecked where it hit: on the ground, still,
+  never moving again, armed refused. ``CRASH_DETECT_DELAY_S`` later it says
+  "Crash detected" (MAV_SEVERITY_EMERGENCY) and disarms, as ArduPlane's crash detection with
+  CRASH_DETECT=1 (disarm) does (ArduPlane/is_flying.cpp, ``crash_detection_update``; there only
+  in AUTO, here in every mode), and its HEARTBEAT says MAV_STATE_EMERGENCY from then on
+  (ArduPlane/GCS_Mavlink.cpp ``vehicle_system_status``: ``crash_state.is_crashed``).
 - Modes: AUTO, RTL (home at ALT_HOLD_RTL, then loiter), LOITER (circle here), GUIDED (circle
   the guided point, or here), CIRCLE (bank = roll limit / 3), TAKEOFF (climb to
   ``takeoff_mode_alt_m``, then loiter there); MANUAL, STABILIZE, FBWA, FBWB, CRUISE fly wings
@@ -61,6 +72,7 @@ import enum
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass, replace
+from typing import Protocol
 
 import numpy as np
 from pymavlink.dialects.v20 import ardupilotmega as mav
@@ -86,6 +98,7 @@ _CMD_JUMP = int(mav.MAV_CMD_DO_JUMP)
 _CMD_NAV_LAST = int(mav.MAV_CMD_NAV_LAST)
 _AMSL_FRAMES = frozenset({int(mav.MAV_FRAME_GLOBAL), int(mav.MAV_FRAME_GLOBAL_INT)})
 
+SEVERITY_EMERGENCY = int(mav.MAV_SEVERITY_EMERGENCY)
 SEVERITY_WARNING = int(mav.MAV_SEVERITY_WARNING)
 SEVERITY_NOTICE = int(mav.MAV_SEVERITY_NOTICE)
 SEVERITY_INFO = int(mav.MAV_SEVERITY_INFO)
@@ -185,6 +198,19 @@ _TAKEOFF_MODE = Mode.TAKEOFF
 
 Point = tuple[float, float, float]  # lat_deg, lon_deg, alt_m AMSL
 
+CRASH_DETECT_DELAY_S = 3.5
+"""From impact to "Crash detected": ArduPlane's is_flying() probability, low-passed at 5 Hz
+(0.85 per update), falls below 0.1 about 3 s after the aircraft stops, then
+CRASH_DETECTION_DELAY_MS (500 ms) of debounce (ArduPlane/is_flying.cpp)."""
+CRASH_TEXT = "Crash detected"
+"""ArduPlane's STATUSTEXT (MAV_SEVERITY_EMERGENCY) when CRASH_DETECT disarms it."""
+
+
+class Ground(Protocol):
+    """Terrain elevation AMSL (m) at a point (:class:`sitl_stub.terrain.GridTerrain`)."""
+
+    def elevation_m(self, lat_deg: float, lon_deg: float) -> float: ...
+
 
 class Autopilot:
     """One simulated ArduPlane: call ``step(dt_s)`` on the simulated clock."""
@@ -200,10 +226,20 @@ class Autopilot:
         wind: Wind = Wind(0.0, 0.0, 0.0),  # noqa: B008 - frozen value
         rng: np.random.Generator,
         time_s: float = 0.0,
+        terrain: Ground | None = None,
     ) -> None:
         self._params = params
         self._wind = wind
         self._home: Point = (home_lat_deg, home_lon_deg, home_alt_m)
+        self._terrain = terrain
+        # Home is on the ground: the terrain is moved by what it misses home's altitude by
+        # (grid interpolation, a rounded --home; more than metres is a wrong home).
+        self._ground_offset_m = 0.0
+        if terrain is not None:
+            self._ground_offset_m = home_alt_m - terrain.elevation_m(home_lat_deg, home_lon_deg)
+        self._ground_m = home_alt_m
+        self._crash_s: float | None = None  # when it hit the ground (simulated s)
+        self._crash_detected = False
         self._prng = model.NormalStream(rng)
         self._state = FlightState(
             time_s=time_s,
@@ -278,6 +314,26 @@ class Autopilot:
     @property
     def mode(self) -> Mode:
         return self._mode
+
+    @property
+    def terrain(self) -> Ground | None:
+        """The terrain it flies over (None: flat at home altitude)."""
+        return self._terrain
+
+    @property
+    def ground_alt_m(self) -> float:
+        """The ground elevation AMSL under the aircraft at its last step."""
+        return self._ground_m
+
+    @property
+    def crash_time_s(self) -> float | None:
+        """When it hit the ground outside a landing (simulated s), None if it has not."""
+        return self._crash_s
+
+    @property
+    def crash_detected(self) -> bool:
+        """It has said "Crash detected" (HEARTBEAT MAV_STATE_EMERGENCY from then on)."""
+        return self._crash_detected
 
     @property
     def armed(self) -> bool:
@@ -357,7 +413,9 @@ class Autopilot:
 
     # ------------------------------------------------------------------ commands
     def arm(self, force: bool = False) -> tuple[bool, str]:
-        """Arm (re-arming an armed vehicle succeeds, as on ArduPilot)."""
+        """Arm (re-arming an armed vehicle succeeds, as on ArduPilot); a wreck is refused."""
+        if self._crash_s is not None:
+            return False, "Arm refused: the aircraft crashed"
         if not self._armed:
             self.counters["arms"] += 1
         self._armed = True
@@ -464,8 +522,15 @@ class Autopilot:
 
     def _substep(self, dt_s: float, events: list[Event]) -> None:
         st = self._state
+        if self._crash_s is not None:
+            self._wreck(st, dt_s, events)
+            return
         p = self._params
-        ground = self._home[2]
+        if self._terrain is not None:
+            self._ground_m = (
+                self._terrain.elevation_m(st.lat_deg, st.lon_deg) + self._ground_offset_m
+            )
+        ground = self._ground_m
         self._update_tas_scale()
         scale = self._tas_scale
         if not self._armed:
@@ -506,7 +571,7 @@ class Autopilot:
             self._start_loiter_here()
         eas, bank, climb, motor = self._guidance(st, mode)
         climb_max = p.takeoff_climb_rate_m_s if self._nav == _NAV_TAKEOFF else 0.0
-        self._state = model.step_scalar(
+        self._state = new = model.step_scalar(
             st,
             eas * scale,
             bank,
@@ -520,11 +585,40 @@ class Autopilot:
             scale,
             climb_max,
         )
+        if not st.on_ground and (new.alt_m < ground or (new.on_ground and self._nav != _NAV_LAND)):
+            self._crash(ground)
+            return
         if self._nav == _NAV_LAND:
             self._after_land_step(st, events)
         elif mode == _GUIDED and not self._guided_reached and self._loiter_start_s is not None:
             self._guided_reached = True
             events.append(ItemReached(0))
+
+    def _crash(self, ground_m: float) -> None:
+        """Flown into the ground: wrecked where it hit, on the ground and still."""
+        st = self._state
+        self._crash_s = st.time_s
+        self._nav_roll = 0.0
+        self._state = replace(
+            st,
+            alt_m=ground_m,
+            airspeed_m_s=0.0,
+            roll_rad=0.0,
+            pitch_rad=0.0,
+            climb_rate_m_s=0.0,
+            vel_north_m_s=0.0,
+            vel_east_m_s=0.0,
+            on_ground=True,
+        )
+
+    def _wreck(self, st: FlightState, dt_s: float, events: list[Event]) -> None:
+        """A wreck only ages; its crash is detected (said, and disarmed) after the delay."""
+        self._state = replace(st, time_s=st.time_s + dt_s)
+        assert self._crash_s is not None
+        if not self._crash_detected and st.time_s + dt_s >= self._crash_s + CRASH_DETECT_DELAY_S:
+            self._crash_detected = True
+            self._armed = False
+            events.append(Text(SEVERITY_EMERGENCY, CRASH_TEXT))
 
     # ------------------------------------------------------------------ guidance
     def _guidance(self, st: FlightState, mode: Mode) -> tuple[float, float, float, bool]:

@@ -132,7 +132,8 @@ class Controls:
     by ``max_bank_rad``; ``climb_rate_cmd_m_s`` is limited by the climb/sink limits; with
     ``motor_on`` False the aircraft glides (in the air) or brakes to a stop (on the ground).
     On the ground with ``motor_on`` the aircraft rolls along its heading and lifts off at the
-    rotate speed if ``climb_rate_cmd_m_s > 0``. ``ground_alt_m`` is the terrain height (AMSL).
+    rotate speed if ``climb_rate_cmd_m_s > 0``. ``ground_alt_m`` is the terrain height (AMSL)
+    under the aircraft: on the ground its altitude follows it.
     """
 
     target_airspeed_m_s: float
@@ -343,7 +344,9 @@ def step_scalar(
     de = 0.5 * (state.vel_east_m_s + ve) * dt_s
     alt = state.alt_m
     new_alt = alt + 0.5 * (state.climb_rate_m_s + climb) * dt_s
-    if not on_ground and not lifted_off and new_alt <= ground_alt_m and climb <= 0.0:
+    if on_ground:
+        new_alt = ground_alt_m  # the wheels follow the ground
+    elif not lifted_off and new_alt <= ground_alt_m and climb <= 0.0:
         # Touchdown: wheels on the ground, keep rolling along the heading.
         on_ground = True
         new_alt = ground_alt_m

@@ -62,7 +62,11 @@ DEFAULT_INTERVALS_S: dict[str, float] = {
     "MISSION_CURRENT": 1.0,
     "HOME_POSITION": 0.0,
     "AUTOPILOT_VERSION": 0.0,
+    "TERRAIN_REPORT": 0.0,  # 1 Hz on a vehicle flying over terrain (Vehicle sets it)
 }
+TERRAIN_REPORT_INTERVAL_S = 1.0
+TERRAIN_SPACING_M = 100
+"""TERRAIN_REPORT.spacing: ArduPilot's TERRAIN_SPACING default (its grid, in metres)."""
 
 # REQUEST_DATA_STREAM groups, as ArduPilot's SRx_ parameters group messages.
 STREAM_GROUPS: dict[int, tuple[str, ...]] = {
@@ -75,7 +79,8 @@ STREAM_GROUPS: dict[int, tuple[str, ...]] = {
     mavlink2.MAV_DATA_STREAM_POSITION: ("GLOBAL_POSITION_INT",),
     mavlink2.MAV_DATA_STREAM_EXTRA1: ("ATTITUDE",),
     mavlink2.MAV_DATA_STREAM_EXTRA2: ("VFR_HUD",),
-    mavlink2.MAV_DATA_STREAM_EXTRA3: ("SYSTEM_TIME", "WIND"),
+    # ArduPlane's EXTRA3 has MSG_TERRAIN (TERRAIN_REQUEST and TERRAIN_REPORT) when terrain is on.
+    mavlink2.MAV_DATA_STREAM_EXTRA3: ("SYSTEM_TIME", "WIND", "TERRAIN_REPORT"),
 }
 STREAM_GROUPS[mavlink2.MAV_DATA_STREAM_ALL] = tuple(
     name for names in STREAM_GROUPS.values() for name in names
@@ -103,6 +108,7 @@ _MODE_BASE_FLAGS = {int(mode): _base_mode(mode) for mode in Mode}
 _ARMED = mavlink2.MAV_MODE_FLAG_SAFETY_ARMED
 _MAV_STATE_ACTIVE = mavlink2.MAV_STATE_ACTIVE
 _MAV_STATE_STANDBY = mavlink2.MAV_STATE_STANDBY
+_MAV_STATE_EMERGENCY = mavlink2.MAV_STATE_EMERGENCY
 _MODE_AUTO = int(Mode.AUTO)
 _TWO_PI = 2.0 * math.pi
 
@@ -137,6 +143,7 @@ class TelemetryMessages:
             "MISSION_CURRENT": self._mission_current,
             "HOME_POSITION": self._home_position,
             "AUTOPILOT_VERSION": self._autopilot_version,
+            "TERRAIN_REPORT": self._terrain_report,
         }
 
     def _heartbeat(self) -> tuple[Any, ...]:
@@ -148,6 +155,9 @@ class TelemetryMessages:
             status = _MAV_STATE_ACTIVE
         else:
             status = _MAV_STATE_STANDBY
+        if ap.crash_detected:
+            # ArduPlane/GCS_Mavlink.cpp vehicle_system_status: crash_state.is_crashed.
+            status = _MAV_STATE_EMERGENCY
         return (
             mavlink2.MAV_TYPE_FIXED_WING,
             mavlink2.MAV_AUTOPILOT_ARDUPILOTMEGA,
@@ -258,6 +268,22 @@ class TelemetryMessages:
         else:
             state = mavlink2.MISSION_STATE_NOT_STARTED
         return (int(ap.current_seq), total, state, 1 if auto else 2)
+
+    def _terrain_report(self) -> tuple[Any, ...]:
+        """As libraries/AP_Terrain/TerrainGCS.cpp send_terrain_report: terrain_height is the
+        terrain AMSL under the vehicle, current_height the vehicle's height above it (its
+        altitude above home plus the terrain at home minus the terrain here); spacing 0 means
+        no terrain data (a vehicle over flat ground); pending and loaded (ArduPilot's counts of
+        4x4 grid blocks) are 0: the stub's terrain is not kept in those blocks."""
+        ap = self.autopilot
+        s = ap.state
+        lat, lon = round(s.lat_deg * 1e7), round(s.lon_deg * 1e7)
+        if ap.terrain is None:
+            return (lat, lon, 0, 0.0, 0.0, 0, 0)
+        here = ap.ground_alt_m
+        # (altitude above home) + (terrain at home) - (terrain here); home is on the terrain.
+        current = s.alt_m - here
+        return (lat, lon, TERRAIN_SPACING_M, here, current, 0, 0)
 
     def _home_position(self) -> tuple[Any, ...]:
         lat, lon, alt = self.autopilot.home

@@ -8,12 +8,14 @@ then, every ``period_s`` simulated seconds, one line per vehicle ::
 
     {"utc_s": ..., "i": 0, "sysid": 1, "lat_deg": ..., "lon_deg": ..., "alt_m": ...,
      "airspeed_m_s": ..., "eas_m_s": ..., "groundspeed_m_s": ..., "armed": false,
-     "on_ground": true}
+     "on_ground": true, "terrain_m": ..., "crashed": false}
 
 ``utc_s`` is the TRUE simulated UTC of the step (all vehicles of one row share it; a vehicle
 started with a UTC offset, or without UTC, reports other times in SYSTEM_TIME), ``alt_m`` is
 AMSL, ``airspeed_m_s`` the TRUE airspeed and ``eas_m_s`` the true equivalent airspeed (what
-ArduPlane's airspeeds are; with a speed bias the vehicle's VFR_HUD differs from it). Lines
+ArduPlane's airspeeds are; with a speed bias the vehicle's VFR_HUD differs from it),
+``terrain_m`` the ground AMSL under the vehicle and ``crashed`` whether it has been flown into
+it (from the impact on, before the vehicle says so). Lines
 are buffered and written whole: the file is flushed every ``flush_lines`` lines, at least
 every ``flush_wall_s`` wall seconds while recording, and on :meth:`TruthRecorder.close`, so a
 reader tailing it only ever sees a partial last line while a flush is in progress.
@@ -136,7 +138,9 @@ class TruthRecorder:
             tas, gs = round(s.airspeed_m_s, 3), round(s.groundspeed_m_s, 3)
             eas = round(v.autopilot.eas_m_s, 3)
             armed, ground = v.autopilot.armed, s.on_ground
-            if math.isfinite(utc + lat + lon + alt + tas + eas + gs):
+            terrain = round(v.autopilot.ground_alt_m, 2)
+            crashed = v.autopilot.crash_time_s is not None
+            if math.isfinite(utc + lat + lon + alt + tas + eas + gs + terrain):
                 # Hand-formatted (3x faster than json.dumps); float repr is valid JSON.
                 buf.append(
                     f'{{"utc_s": {utc!r}, "i": {i}, "sysid": {v.system_id}, '
@@ -144,7 +148,8 @@ class TruthRecorder:
                     f'"airspeed_m_s": {tas!r}, "eas_m_s": {eas!r}, '
                     f'"groundspeed_m_s": {gs!r}, '
                     f'"armed": {"true" if armed else "false"}, '
-                    f'"on_ground": {"true" if ground else "false"}}}\n'
+                    f'"on_ground": {"true" if ground else "false"}, '
+                    f'"terrain_m": {terrain!r}, "crashed": {"true" if crashed else "false"}}}\n'
                 )
             else:  # never expected; json.dumps writes NaN/Infinity, which Python reads
                 row = {
@@ -159,6 +164,8 @@ class TruthRecorder:
                     "groundspeed_m_s": gs,
                     "armed": armed,
                     "on_ground": ground,
+                    "terrain_m": terrain,
+                    "crashed": crashed,
                 }
                 buf.append(json.dumps(row) + "\n")
         self.lines_recorded += len(self.vehicles)

@@ -37,6 +37,7 @@ from sitl_stub.telemetry import (
     MSG_ID_TO_NAME,
     SPECS,
     STREAM_GROUPS,
+    TERRAIN_REPORT_INTERVAL_S,
     TelemetryMessages,
 )
 from sitl_stub.wind_estimate import WindEstimateError
@@ -101,6 +102,8 @@ class Vehicle(TelemetryMessages, CommandHandlers, ParameterHandlers):
         self._sync_home()
         # Change with set_interval (it keeps the schedule below in step).
         self.intervals_s = dict(DEFAULT_INTERVALS_S)
+        if autopilot.terrain is not None:
+            self.intervals_s["TERRAIN_REPORT"] = TERRAIN_REPORT_INTERVAL_S
         self._next_due_s = {name: 0.0 for name in self.intervals_s}
         # Earliest next-due time over all streams: most steps send nothing and stop there.
         self._streams_due_s = 0.0
@@ -324,4 +327,6 @@ class Vehicle(TelemetryMessages, CommandHandlers, ParameterHandlers):
         rate_hz = int(msg.req_message_rate)
         interval = 1.0 / rate_hz if msg.start_stop and rate_hz > 0 else 0.0
         for name in names:
+            if name == "TERRAIN_REPORT" and self.autopilot.terrain is None:
+                continue  # as ArduPlane with TERRAIN_ENABLE 0: no terrain, no report
             self.set_interval(name, interval)

@@ -30,6 +30,8 @@ from sitl_stub.__main__ import (
 from sitl_stub.api import Home
 from tests.sitl_stub.conftest import Client, free_port_base
 
+PAPER = Path(__file__).resolve().parents[2] / "scenarios" / "paper_three_uav.yaml"
+
 
 @dataclass
 class StubRun:
@@ -223,6 +225,10 @@ def test_speed_bias_parses_per_vehicle() -> None:
         (["--home", "0,0,0", "--start-utc", "-5"], "--start-utc"),
         (["--home", "0,0,0", "--truth", "/no/such/dir/t.jsonl"], "--truth"),
         (["--home", "0,0,0", "--counters", "/no/such/dir/c.json"], "--counters"),
+        ([], "give --home (once, or once per vehicle) or --scenario"),
+        (["--home", "0,0,0", "--hill", "0,0,500,100"], "--hill needs --scenario"),
+        (["--scenario", str(PAPER), "--hill", "30,40,0,5"], "--hill '30,40,0,5': hill radius"),
+        (["--scenario", str(PAPER), "--hill", "30,40,100"], "--hill needs 4"),
     ],
 )
 def test_cli_rejects_bad_values_naming_the_option(
