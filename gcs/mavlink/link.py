@@ -34,7 +34,8 @@ from typing import Any
 from gcs.errors import LinkClosed, LinkTimeout
 from gcs.mavlink.dialect import MESSAGE_BY_NAME, mavlink2
 from gcs.mavlink.endpoints import Endpoint, parse_connection
-from gcs.mavlink.signing import CheckingCodec, SigningConfig, apply_signing
+from gcs.mavlink.framing import FramingCodec
+from gcs.mavlink.signing import SigningConfig, apply_signing
 from gcs.mavlink.transports import Transport, open_transport
 
 log = logging.getLogger(__name__)
@@ -353,7 +354,7 @@ class Link:
     # -- receiving -----------------------------------------------------------------------
 
     def _new_parser(self) -> Any:
-        parser = CheckingCodec(None, srcSystem=self.system_id, srcComponent=self.component_id)
+        parser = FramingCodec(None, srcSystem=self.system_id, srcComponent=self.component_id)
         parser.robust_parsing = True
         if self.signing is not None:
             apply_signing(parser, self.signing, outgoing=False)
