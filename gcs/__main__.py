@@ -9,7 +9,8 @@
         [--seed N] [--connect CONN ...] [--json OUT] [--report DIR] [--arrival-s T]
         [--blackout VEHICLE,START_S,DURATION_S] [--threats-from FILE]
         [--speed-bias VEHICLE,FRACTION] [--utc-offset VEHICLE,SECONDS] [--db URL]
-        [--abort VEHICLE|all,AT_S[,rtl|loiter]]
+        [--abort VEHICLE|all,AT_S[,rtl|loiter]] [--hill LAT,LON,RADIUS_M,HEIGHT_M]
+        [--on-vehicle-lost continue|retime|abort] [--stall-bound S] [--hard-deadline S]
 
 Common options: ``--vehicle SYSID`` (default: the first vehicle heard), ``--wait S`` (how long
 to wait for it), ``--timeout S`` and ``--retries N`` per protocol exchange (default: a timeout
@@ -344,7 +345,8 @@ def parser() -> argparse.ArgumentParser:
     rh.add_argument("--connect", nargs="+", default=[], help="fly these vehicles instead")
     rh.add_argument(
         "--truth",
-        help="with --connect: the simulator's truth log (sitl_stub --truth), for true arrivals",
+        help="with --connect: the simulator's truth log (sitl_stub --truth), for true arrivals; "
+        "without: where the rehearsal's stub writes its truth log (kept)",
     )
     rh.add_argument("--json", dest="json_out", help="write the flight record here")
     rh.add_argument("--report", help="write the report (figures, tables) into this directory")
@@ -366,6 +368,35 @@ def parser() -> argparse.ArgumentParser:
         action="append",
         default=[],
         help="VEHICLE,SECONDS: that stub vehicle's UTC runs this far ahead of the true UTC",
+    )
+    rh.add_argument(
+        "--hill",
+        action="append",
+        default=[],
+        help="LAT,LON,RADIUS_M,HEIGHT_M: a hill in the stub's terrain that the scenario's lacks "
+        "(a terrain database error: a vehicle may fly into it)",
+    )
+    rh.add_argument(
+        "--on-vehicle-lost",
+        choices=["continue", "retime", "abort"],
+        default="continue",
+        help="when a vehicle crashes or stalls: the others keep their slots (continue, the "
+        "default), the team time moves to the earliest the others can make (retime), or the "
+        "team is aborted (abort)",
+    )
+    rh.add_argument(
+        "--stall-bound",
+        type=float,
+        default=10.0,
+        metavar="S",
+        help="a vehicle making no progress along its route this long (mission s) is lost",
+    )
+    rh.add_argument(
+        "--hard-deadline",
+        type=float,
+        default=3600.0,
+        metavar="S",
+        help="the flight ends, failed, this long after the planned arrival (mission s)",
     )
     rh.add_argument("--threats-from", help="file to watch for pop-up threats (JSON lines)")
     rh.add_argument(
@@ -422,7 +453,7 @@ def _rehearsal_options(args: argparse.Namespace) -> object:
     from pathlib import Path
 
     from gcs.coordination.config import FlightConfig
-    from gcs.rehearsal.rehearse import Blackout, RehearsalOptions
+    from gcs.rehearsal.rehearse import Blackout, Hill, RehearsalOptions
     from planner.scenario import load_scenario
 
     path = Path(args.scenario)
@@ -456,15 +487,28 @@ def _rehearsal_options(args: argparse.Namespace) -> object:
             raise UsageError(f"--blackout {text}: start must be >= 0 and duration > 0")
         blackouts.append(Blackout(vid, start, dur))
     aborts = [_abort(text, ids) for text in args.abort]
+    hills = []
+    for text in args.hill:
+        try:
+            lat, lon, radius, height = (float(x) for x in text.split(","))
+        except ValueError:
+            raise UsageError(f"--hill: expected LAT,LON,RADIUS_M,HEIGHT_M, got {text!r}") from None
+        if not (abs(lat) < 90.0 and abs(lon) <= 180.0 and radius > 0.0 and height > 0.0):
+            raise UsageError(f"--hill {text}: a latitude, a longitude, RADIUS_M > 0, HEIGHT_M > 0")
+        hills.append(Hill(lat, lon, radius, height))
+    for option, value in (
+        ("--stall-bound", args.stall_bound),
+        ("--hard-deadline", args.hard_deadline),
+    ):
+        if not (math.isfinite(value) and value > 0.0):
+            raise UsageError(f"{option} must be a positive number of seconds, got {value:g}")
     speed_bias = _per_vehicle(args.speed_bias, "--speed-bias", "FRACTION", ids, (-0.5, 0.5))
     utc_offsets = _per_vehicle(args.utc_offset, "--utc-offset", "SECONDS", ids, (-1e6, 1e6))
-    if args.connect and (blackouts or args.wind or args.loss or speed_bias or utc_offsets):
+    if args.connect and (blackouts or args.wind or args.loss or speed_bias or utc_offsets or hills):
         raise UsageError(
-            "--blackout, --wind, --loss, --speed-bias and --utc-offset apply to the stub, "
-            "not to --connect"
+            "--blackout, --wind, --loss, --speed-bias, --utc-offset and --hill apply to the "
+            "stub, not to --connect"
         )
-    if args.truth and not args.connect:
-        raise UsageError("--truth reads a connected simulator's log; it needs --connect")
     if args.truth and not Path(args.truth).resolve().parent.is_dir():
         raise UsageError(f"--truth {args.truth}: directory does not exist")
     return RehearsalOptions(
@@ -483,9 +527,15 @@ def _rehearsal_options(args: argparse.Namespace) -> object:
         aborts=aborts,
         speed_bias=speed_bias,
         utc_offsets_s=utc_offsets,
+        hills=hills,
         threats_from=Path(args.threats_from) if args.threats_from else None,
         quiet=args.quiet,
-        config=FlightConfig(seed=args.seed),
+        config=FlightConfig(
+            seed=args.seed,
+            on_vehicle_lost=args.on_vehicle_lost,
+            stall_bound_s=args.stall_bound,
+            hard_deadline_s=args.hard_deadline,
+        ),
         db_url=args.db,
         resume=args.resume,
     )
@@ -540,6 +590,8 @@ async def rehearse_cmd(args: argparse.Namespace) -> str:
     if opts.report_dir is not None:
         written = write_report(record, opts.report_dir)  # the record carries its world
         print(f"gcs: report in {opts.report_dir} ({', '.join(p.name for p in written)})")
+    if record["state"] == "failed":
+        raise GcsError(f"rehearsal failed: {record['state_reason']}")
     if not passed(record, args.tolerance):
         raise GcsError(
             f"rehearsal missed: arrivals outside +/-{args.tolerance:g} s or separation below "

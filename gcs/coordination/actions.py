@@ -58,6 +58,25 @@ class Fix:
 
 
 @dataclass(frozen=True)
+class Heartbeat:
+    """What a vehicle's HEARTBEAT says of it."""
+
+    vehicle_id: str
+    armed: bool
+    emergency: bool
+    """system_status MAV_STATE_EMERGENCY (ArduPlane: it has detected a crash)."""
+
+
+@dataclass(frozen=True)
+class Alarm:
+    """A STATUSTEXT at MAV_SEVERITY_CRITICAL or worse (0 emergency .. 2 critical)."""
+
+    vehicle_id: str
+    severity: int
+    text: str
+
+
+@dataclass(frozen=True)
 class LinkSilent:
     vehicle_id: str
 
@@ -242,6 +261,8 @@ class Compute:
 Input = (
     Tick
     | Fix
+    | Heartbeat
+    | Alarm
     | LinkSilent
     | LinkBack
     | Launched

@@ -3,10 +3,15 @@
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Literal
 
 from planner.plan import Method
 
-__all__ = ["FlightConfig"]
+__all__ = ["FlightConfig", "LostPolicy"]
+
+LostPolicy = Literal["continue", "retime", "abort"]
+"""What the rest of a team does when one of its vehicles is lost (see
+:attr:`FlightConfig.on_vehicle_lost`)."""
 
 
 @dataclass(frozen=True)
@@ -54,3 +59,16 @@ class FlightConfig:
     command_retries: int = 8
     overrun_s: float = 900.0
     """Give up this long after the latest target if a vehicle has not arrived."""
+    hard_deadline_s: float = 3600.0
+    """The flight ends, failed, this long after the latest arrival as planned, whatever the
+    team time has become since: the overrun follows the team time, which a late vehicle or the
+    operator moves; this never moves, so a flight always ends."""
+    stall_bound_s: float = 10.0
+    """A vehicle on its route (climbed out, joined it once, not in a loiter) whose progress
+    along it stalls or goes backwards for longer than this is lost: it crashed, or it no longer
+    flies its mission. Measured on its fixes' mission times, so a link blackout is no stall."""
+    on_vehicle_lost: LostPolicy = "continue"
+    """The operator's choice when a vehicle is lost (it reported a crash, disarmed on its
+    route, or stalled): ``continue``, the others keep their slots; ``retime``, the team time
+    moves to the earliest the others can still make together (the lost one no longer holds
+    it back); ``abort``, every vehicle is aborted (RTL)."""

@@ -48,7 +48,16 @@ class EventKind(enum.StrEnum):
     CLOCK = "clock"
     """A vehicle keeps a UTC of its own, or none."""
     ABORT = "abort"
-    """A vehicle (or the team) was aborted, or the loop stopped before every vehicle arrived."""
+    """A vehicle (or the team) was aborted, or the loop stopped before every vehicle arrived
+    (the overrun, or the flight's hard deadline)."""
+    ALARM = "alarm"
+    """A vehicle said something critical (STATUSTEXT at MAV_SEVERITY_CRITICAL or worse;
+    ``payload``: ``severity``, ``text``)."""
+    VEHICLE_LOST = "vehicle_lost"
+    """A vehicle is lost to the team (``payload``: ``cause`` ``crash`` or ``stall``, ``t_s``
+    mission time, ``why``): it reported a crash (STATUSTEXT "Crash ...", HEARTBEAT
+    MAV_STATE_EMERGENCY, disarmed on its route), or its progress along its route stalled for
+    longer than ``stall_bound_s``. The reason says what the team does (``on_vehicle_lost``)."""
     STATE = "state"
     """A vehicle's state changed (``payload``: ``state``, ``was``;
     :class:`~gcs.coordination.member.VehicleState` values)."""

@@ -24,6 +24,7 @@ from planner.schedulefile import PathMission
 
 __all__ = [
     "FIRST_ROUTE_SEQ",
+    "Lost",
     "Member",
     "Phase",
     "VehicleState",
@@ -31,9 +32,10 @@ __all__ = [
     "route_track",
 ]
 
-Phase = Literal["ground", "takeoff", "route", "arrived", "aborted"]
+Phase = Literal["ground", "takeoff", "route", "arrived", "aborted", "lost"]
 """Where a vehicle is in its mission (the flight record's per-vehicle ``state``)."""
-DONE: frozenset[str] = frozenset({"arrived", "aborted"})
+DONE: frozenset[str] = frozenset({"arrived", "aborted", "lost"})
+LostCause = Literal["crash", "stall"]
 FIRST_ROUTE_SEQ = 2
 """Item 0 is home, item 1 the takeoff; the route starts at item 2."""
 
@@ -51,6 +53,19 @@ class VehicleState(enum.StrEnum):
     """In the air with no position report for longer than the silence threshold."""
     ARRIVED = "arrived"
     ABORTED = "aborted"
+    CRASHED = "crashed"
+    """It reported a crash (STATUSTEXT "Crash ...", MAV_STATE_EMERGENCY, disarmed on its route)."""
+    LOST = "lost"
+    """Its progress along its route stalled for longer than ``stall_bound_s``."""
+
+
+@dataclass(frozen=True)
+class Lost:
+    """Why and when a vehicle was lost to the team (mission s)."""
+
+    cause: LostCause
+    t_s: float
+    why: str
 
 
 @dataclass
@@ -103,6 +118,13 @@ class Member:
     """What the aircraft really flies for a commanded airspeed, learnt from its fixes."""
     state: VehicleState = VehicleState.WAITING_TAKEOFF
     """The last state said (see :meth:`current_state`)."""
+    joined: bool = False
+    """It has been within ``off_route_m`` of its route since its climb-out (its progress is
+    watched from then on)."""
+    progress: tuple[RouteTrack, float, float] | None = None
+    """``(track, s_m, t_s)``: the farthest it has come along that track and when it got there
+    (mission s); a new track (a re-plan, new loiters) starts it again."""
+    lost: Lost | None = None
 
     def tas_per_eas(self, s_m: float) -> float:
         """True airspeed flown per unit commanded from ``s_m`` on: the route's atmosphere
@@ -144,6 +166,8 @@ class Member:
             return VehicleState.ARRIVED
         if self.phase == "aborted":
             return VehicleState.ABORTED
+        if self.lost is not None:
+            return VehicleState.CRASHED if self.lost.cause == "crash" else VehicleState.LOST
         if self.phase == "ground":
             return VehicleState.WAITING_TAKEOFF
         if self.link_silent:

@@ -38,6 +38,7 @@ from gcs.coordination.missionclock import MissionClock
 from gcs.coordination.team import TeamController
 from gcs.errors import GcsError
 from gcs.mavlink import mission_client
+from gcs.mavlink.dialect import mavlink2
 from gcs.mavlink.vehicle import Vehicle
 from planner.errors import InfeasibleError
 from planner.plan import World, build_world, plan
@@ -65,6 +66,7 @@ TELEMETRY_HZ: dict[str, float] = {
     "GPS_RAW_INT": 0.2,
     "ATTITUDE": 0.0,  # not used: off
     "NAV_CONTROLLER_OUTPUT": 0.0,
+    "TERRAIN_REPORT": 0.0,
 }
 """What the runner asks each vehicle to send (Hz of the VEHICLE's time: a simulator at
 200x sends 200 times as many per wall second), by MAV_CMD_SET_MESSAGE_INTERVAL; 0 turns a
@@ -92,6 +94,7 @@ _AT_ONCE = frozenset(
         EventKind.ABORT,
         EventKind.START,
         EventKind.FLIGHT,
+        EventKind.VEHICLE_LOST,
     }
 )
 
@@ -146,6 +149,8 @@ class FlightRunner:
         self.team: TeamController | None = None
         self.vehicles: dict[str, Vehicle] = {}
         self.state = FlightState.PLANNED
+        self.state_reason = ""
+        """Why the flight is in its state, when it was said (a failure's reason)."""
         self.plan_wall_s = 1.0
         self.on_checkpoint: Callable[[bytes], None] | None = None
         """Called with a pickled controller after every change worth keeping (see
@@ -254,6 +259,7 @@ class FlightRunner:
         if state is self.state:
             return
         self.state = state
+        self.state_reason = reason
         text = f"flight {state.value}" + (f": {reason}" if reason else "")
         self._say(EventKind.FLIGHT, text, payload={"state": state.value})
 
@@ -570,13 +576,22 @@ class FlightRunner:
         finally:
             self._group = None
         members = list(team.members.values())
-        if all(m.phase == "aborted" for m in members):
+        failures = [
+            f"{m.vehicle_id} lost at {m.lost.t_s:.1f} s ({m.lost.cause}: {m.lost.why})"
+            for m in members
+            if m.lost is not None
+        ]
+        late = [m.vehicle_id for m in members if not m.done]
+        if team.stopped is not None:
+            failures.append(team.stopped)
+        elif late:
+            failures.append(f"not arrived: {', '.join(late)}")
+        if failures:
+            self._set_state(FlightState.FAILED, "; ".join(failures))
+        elif all(m.phase == "aborted" for m in members):
             self._set_state(FlightState.ABORTED)
-        elif all(m.phase in ("arrived", "aborted") for m in members):
-            self._set_state(FlightState.COMPLETED)
         else:
-            late = [m.vehicle_id for m in members if not m.done]
-            self._set_state(FlightState.FAILED, f"not arrived: {', '.join(late)}")
+            self._set_state(FlightState.COMPLETED)
         if self._checkpoint_dirty:
             self._checkpoint(True)
         return self.state
@@ -634,18 +649,23 @@ class FlightRunner:
         return max(cfg.link_silence_s, cfg.link_silence_wall_s * self.clock.rate)
 
     async def _fly(self, vid: str) -> None:
-        """Feed one vehicle's fixes to the controller; say when they stop and come back."""
+        """Feed one vehicle's fixes, heartbeats and critical texts to the controller; say when
+        its fixes stop and come back."""
         vehicle = self.vehicles[vid]
         m = self._team().members[vid]
-        sub = vehicle.link.subscribe({"GLOBAL_POSITION_INT"}, vehicle.system_id, maxsize=64)
+        sub = vehicle.link.subscribe(
+            {"GLOBAL_POSITION_INT", "HEARTBEAT", "STATUSTEXT"}, vehicle.system_id, maxsize=64
+        )
         try:
             silent = False
             while not m.done and not self._over():
                 # Look for silence often enough to see the shortest one reported.
                 poll_s = self._silence_s() / max(self.clock.rate, 1.0) / 2.0
                 msg = await sub.get(timeout_s=min(0.05, max(0.005, poll_s)))
-                if msg is None:
+                if msg is None or msg.get_type() != "GLOBAL_POSITION_INT":
                     silent = silent or self._went_silent(m)
+                    if msg is not None:
+                        self._on_status(vid, msg)
                     continue
                 if silent:
                     silent = False
@@ -682,6 +702,21 @@ class FlightRunner:
             self._feed(act.LinkSilent(m.vehicle_id))
             return True
         return False
+
+    def _on_status(self, vid: str, msg: Any) -> None:
+        """A HEARTBEAT (armed, MAV_STATE_EMERGENCY) or a STATUSTEXT at MAV_SEVERITY_CRITICAL
+        or worse, for the controller's supervision."""
+        if msg.get_type() == "HEARTBEAT":
+            self._feed(
+                act.Heartbeat(
+                    vid,
+                    bool(msg.base_mode & mavlink2.MAV_MODE_FLAG_SAFETY_ARMED),
+                    msg.system_status == mavlink2.MAV_STATE_EMERGENCY,
+                )
+            )
+        elif msg.severity <= mavlink2.MAV_SEVERITY_CRITICAL:
+            text = msg.text.decode(errors="replace") if isinstance(msg.text, bytes) else msg.text
+            self._feed(act.Alarm(vid, int(msg.severity), text.rstrip("\x00")))
 
     def _on_fix(self, vid: str, vehicle: Vehicle) -> None:
         st = vehicle.state

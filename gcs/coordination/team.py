@@ -13,6 +13,12 @@ level change); loiter turns when a vehicle would be early even at its minimum sp
 the fewest turns that fit, by replacing its mission after a waypoint ahead); a later team
 arrival when one would be late even at its maximum speed; pop-up threats re-planned for the
 vehicles whose routes they touch, from waypoints ahead, and the team re-timed.
+
+Supervision: a vehicle that reports a crash (a STATUSTEXT "Crash ...", HEARTBEAT
+MAV_STATE_EMERGENCY in the air, disarmed on its route) or whose progress along its route
+stalls for ``stall_bound_s`` is lost (:data:`EventKind.VEHICLE_LOST`), and the rest continue,
+re-time without it or abort, as ``on_vehicle_lost`` says. The flight ends at its hard deadline
+(the planned latest arrival plus ``hard_deadline_s``) whatever the team time became.
 """
 
 from __future__ import annotations
@@ -26,7 +32,7 @@ from gcs.coordination import actions as act
 from gcs.coordination.arrival import ArrivalController, Decision, SpeedLimits
 from gcs.coordination.config import FlightConfig
 from gcs.coordination.events import EventKind
-from gcs.coordination.member import FIRST_ROUTE_SEQ, Member, path_en, route_track
+from gcs.coordination.member import FIRST_ROUTE_SEQ, Lost, LostCause, Member, path_en, route_track
 from gcs.coordination.replanning import MissionChanges
 from gcs.coordination.routetrack import Wind
 from gcs.coordination.tracks import TruthSample, closest_approach
@@ -39,7 +45,17 @@ from planner.schedule import Schedule
 from planner.timing import SpeedLimits as PlannerLimits
 from planner.timing import takeoff_time_s
 
-__all__ = ["TeamController", "TeamTimeRefused"]
+__all__ = ["PROGRESS_M", "TeamController", "TeamTimeRefused", "is_crash_text"]
+
+PROGRESS_M = 1.0
+"""Along-route distance (m) a fix must gain on the farthest one yet to count as progress."""
+
+
+def is_crash_text(text: str) -> bool:
+    """A STATUSTEXT saying the vehicle crashed: ArduPlane's crash detection sends "Crash
+    detected" (or "Crash detected. No action taken"; ArduPlane/is_flying.cpp), ArduCopter's
+    "Crash: Disarming" (ArduCopter/crash_check.cpp). A hard landing is not one."""
+    return text.lstrip().lower().startswith("crash")
 
 
 class TeamTimeRefused(GcsError):
@@ -109,6 +125,8 @@ class TeamController(MissionChanges):
         vehicle's mission with these too)."""
         self.version = 1
         """Moves with every change of the team time (an operator's stale move is refused)."""
+        self.hard_deadline_s = 0.0
+        """Mission time the flight ends at, failed, if it has not before (never moves)."""
         for vs in schedule.vehicles:
             v = scenario.vehicle(vs.vehicle_id)
             limits = SpeedLimits(v.speed_min_m_s, v.speed_max_m_s, schedule.step_m_s)
@@ -129,6 +147,9 @@ class TeamController(MissionChanges):
             )
             m.planned_paths.append({"label": "initial", "t_s": 0.0, "en_m": path_en(vs)})
             self.members[v.id] = m
+        self.hard_deadline_s = (
+            max(m.target_s for m in self.members.values()) + self.config.hard_deadline_s
+        )
 
     # -- set-up --------------------------------------------------------------------------------
 
@@ -171,6 +192,10 @@ class TeamController(MissionChanges):
                 self._tick(now_s, out)
             case act.Fix():
                 self._fix(event, out)
+            case act.Heartbeat():
+                self._heartbeat(event, now_s, out)
+            case act.Alarm():
+                self._alarm(event, now_s, out)
             case act.LinkSilent(vehicle_id=vid):
                 self.members[vid].link_silent = True
             case act.LinkBack(vehicle_id=vid):
@@ -187,15 +212,16 @@ class TeamController(MissionChanges):
                 self._computed(event, now_s, out)
             case act.PlanningLead(lead_s=lead):
                 self.lead_s = max(self.config.min_lead_s, lead)
-        self._states(out, now_s)
+        # A fix changes only its own vehicle's state; anything else may change any.
+        self._states(out, now_s, event.vehicle_id if isinstance(event, act.Fix) else None)
         for a in out:
             if isinstance(a, act.Upload):
                 self.pending[a.vehicle_id] = a
         return out
 
-    def _states(self, out: list[act.Action], now_s: float) -> None:
-        """Say each vehicle's state when it changes."""
-        for m in self.members.values():
+    def _states(self, out: list[act.Action], now_s: float, only: str | None = None) -> None:
+        """Say each vehicle's state (or vehicle ``only``'s) when it changes."""
+        for m in self.members.values() if only is None else (self.members[only],):
             state = m.current_state(self.config.off_route_m)
             if state is not m.state:
                 old, m.state = m.state, state
@@ -209,14 +235,24 @@ class TeamController(MissionChanges):
                     )
                 )
 
-    def _deadline_s(self) -> float:
-        return max(m.target_s for m in self.members.values()) + self.config.overrun_s
+    def _deadline(self) -> tuple[float, str]:
+        """When the loop gives up (mission s), and why: the overrun past the latest target, or
+        the hard deadline, whichever is first."""
+        overrun = max(m.target_s for m in self.members.values()) + self.config.overrun_s
+        if overrun <= self.hard_deadline_s:
+            return overrun, f"mission overran its last target by {self.config.overrun_s:g} s"
+        return self.hard_deadline_s, (
+            f"hard deadline {self.hard_deadline_s:.1f} s passed (the planned arrival plus "
+            f"{self.config.hard_deadline_s:g} s)"
+        )
 
     def _tick(self, now: float, out: list[act.Action]) -> None:
         if self.finished:
             return
-        if now > self._deadline_s():
-            self.stopped = "mission overran its last target"
+        deadline, why = self._deadline()
+        if now > deadline:
+            late = ", ".join(m.vehicle_id for m in self.members.values() if not m.done)
+            self.stopped = f"{why}: {late} not arrived"
             out.append(act.Report(EventKind.ABORT, f"{self.stopped}; stopping the loop", t_s=now))
             out.append(act.Stop(self.stopped))
             return
@@ -304,6 +340,10 @@ class TeamController(MissionChanges):
         self._learn_bias(m, t, fix)
         if m.cross_track_m <= self.config.off_route_m:
             m.joining = False
+            m.joined = True
+        self._watch_progress(m, t, s, out)
+        if m.phase != "route":
+            return
         if m.in_loiter() or m.busy_mission:
             return
         if not seq_changed and t < m.next_decision_s:
@@ -311,6 +351,115 @@ class TeamController(MissionChanges):
         if m.track.length_m - s < self.config.final_m:
             return
         self._decide(m, t, s, fix, out)
+
+    # -- supervision ----------------------------------------------------------------------------
+
+    def _watch_progress(self, m: Member, t: float, s: float, out: list[act.Action]) -> None:
+        """Lose a vehicle whose progress along its route stalls (or goes backwards) for longer
+        than ``stall_bound_s``: watched once it has joined its route, not in a loiter."""
+        ref = m.progress
+        if (
+            ref is None
+            or ref[0] is not m.track
+            or s > ref[1] + PROGRESS_M
+            or not m.joined
+            or m.in_loiter()
+        ):
+            m.progress = (m.track, s, t)
+            return
+        stalled = t - ref[2]
+        if stalled > self.config.stall_bound_s:
+            self._lose(
+                m,
+                "stall",
+                f"no progress along its route for {stalled:.1f} s (at {s:.0f} m of "
+                f"{m.track.length_m:.0f} m, farthest {ref[1]:.0f} m at {ref[2]:.1f} s)",
+                t,
+                out,
+            )
+
+    def _heartbeat(self, hb: act.Heartbeat, now: float, out: list[act.Action]) -> None:
+        """In the air, MAV_STATE_EMERGENCY is a crash (ArduPlane says it once it has detected
+        one); on its route, disarmed is one too (its climb-out ended armed and in AUTO, so
+        an old heartbeat from before the launch cannot be taken for it)."""
+        m = self.members.get(hb.vehicle_id)
+        if m is None or m.phase not in ("takeoff", "route"):
+            return
+        if hb.emergency:
+            self._lose(m, "crash", "HEARTBEAT system_status MAV_STATE_EMERGENCY", now, out)
+        elif not hb.armed and m.phase == "route":
+            self._lose(m, "crash", "disarmed on its route", now, out)
+
+    def _alarm(self, alarm: act.Alarm, now: float, out: list[act.Action]) -> None:
+        """Say what a vehicle says at MAV_SEVERITY_CRITICAL or worse; a crash loses it."""
+        m = self.members.get(alarm.vehicle_id)
+        if m is None:
+            return
+        out.append(
+            act.Report(
+                EventKind.ALARM,
+                f"says {alarm.text!r} (MAV_SEVERITY {alarm.severity})",
+                m.vehicle_id,
+                t_s=now,
+                payload={"severity": alarm.severity, "text": alarm.text},
+            )
+        )
+        if m.phase in ("takeoff", "route") and is_crash_text(alarm.text):
+            self._lose(m, "crash", f"it says {alarm.text!r}", now, out)
+
+    def _lose(
+        self, m: Member, cause: LostCause, why: str, now: float, out: list[act.Action]
+    ) -> None:
+        """The vehicle leaves the team (it is neither commanded nor timed any more) and the
+        rest do what ``on_vehicle_lost`` says."""
+        m.phase = "lost"
+        m.lost = Lost(cause, now, why)
+        policy = self.config.on_vehicle_lost
+        then = {
+            "continue": "the others keep their slots",
+            "retime": "the team is re-timed without it",
+            "abort": "the team is aborted",
+        }[policy]
+        out.append(
+            act.Report(
+                EventKind.VEHICLE_LOST,
+                f"lost at {now:.1f} s ({cause}: {why}); {then}",
+                m.vehicle_id,
+                t_s=now,
+                payload={"cause": cause, "t_s": round(now, 3), "why": why, "policy": policy},
+            )
+        )
+        if policy == "retime":
+            self._retime_without(m, now, out)
+        elif policy == "abort":
+            out.extend(self.abort(None, "rtl", now)[1])
+
+    def _retime_without(self, lost: Member, now: float, out: list[act.Action]) -> None:
+        """The team time moves to the earliest the vehicles still flying to their slots can
+        make together (plus the late margin), if that is earlier than it is."""
+        ref = self.team_ref_s
+        if ref is None or all(m.done for m in self.members.values()):
+            return
+        earliest, vid, why = self.earliest_team_time_s(now)
+        new_ref = earliest + self.config.late_margin_s
+        if new_ref >= ref - self.config.tolerance_s:
+            out.append(
+                act.Report(
+                    EventKind.ARRIVAL,
+                    f"team arrival stays {ref:.1f} s without {lost.vehicle_id}: {vid} cannot "
+                    f"arrive before {earliest:.1f} s ({why})",
+                    t_s=now,
+                )
+            )
+            return
+        self._set_team_time(
+            new_ref,
+            now,
+            f"team arrival moved {ref:.1f} -> {new_ref:.1f} s without {lost.vehicle_id} "
+            f"(lost): the earliest {vid} can make ({why}) plus {self.config.late_margin_s:g} s",
+            None,
+            out,
+        )
 
     def _passed_items(self, m: Member, old: int | None, new: int) -> None:
         """DO_CHANGE_SPEED items the vehicle ran set the airspeed it flies."""
@@ -521,6 +670,11 @@ class TeamController(MissionChanges):
             raise GcsError(f"team time version {version} is stale (now {self.version})")
         if not math.isfinite(arrival_s):
             raise GcsError(f"team arrival must be a number of seconds, got {arrival_s!r}")
+        if arrival_s > self.hard_deadline_s:
+            raise GcsError(
+                f"team arrival {arrival_s:.1f} s is past the flight's hard deadline "
+                f"{self.hard_deadline_s:.1f} s"
+            )
         earliest, vid, why = self.earliest_team_time_s(now_s)
         if arrival_s < earliest - 1e-6:
             raise TeamTimeRefused(arrival_s, earliest, vid, why)
@@ -667,6 +821,9 @@ class TeamController(MissionChanges):
                     if m.last_fix_s is None
                     else round(max(0.0, now_s - m.last_fix_s), 2),
                     "arrival_s": m.arrival_s,
+                    "lost": None
+                    if m.lost is None
+                    else {"cause": m.lost.cause, "t_s": round(m.lost.t_s, 3), "why": m.lost.why},
                 }
             )
         return {
@@ -674,6 +831,7 @@ class TeamController(MissionChanges):
             "start_utc_s": self.start_utc_s,
             "team_time_s": self.team_ref_s,
             "team_time_version": self.version,
+            "hard_deadline_s": round(self.hard_deadline_s, 3),
             "arrival_reason": self.schedule.arrival_reason,
             "vehicles": vehicles,
             "threats_in_force": sorted(z.id for z in self.in_force(now_s)),

@@ -2,13 +2,15 @@
 already running, with ``--connect``) and report how well the team held its arrival time.
 
 Without ``--connect`` the rehearsal starts ``python -m sitl_stub`` in a child process, one
-vehicle per scenario vehicle on the ground at its start (nose along its planned path), with the
-scenario's airspeed limits, the wind, loss and seed asked for and a truth log of the simulated
-states. The coordinator reaches those vehicles over TCP exactly as it would reach any others;
-the truth log is read only afterwards, for the true goal crossings and separations.
+vehicle per scenario vehicle on the ground at its start (nose along its planned path), flying
+over the scenario's terrain (and any ``--hill`` only the simulator has), with the scenario's
+airspeed limits, the wind, loss and seed asked for and a truth log of the simulated states.
+The coordinator reaches those vehicles over TCP exactly as it would reach any others; the truth
+log is read only afterwards, for the true goal crossings and separations.
 
 With ``--connect`` the arrivals come from the vehicles' own telemetry, unless ``--truth`` names
-the truth log of the simulator being flown (``python -m sitl_stub --truth FILE``).
+the truth log of the simulator being flown (``python -m sitl_stub --truth FILE``); without, the
+stub's truth log is kept at ``--truth`` when it is given.
 """
 
 from __future__ import annotations
@@ -60,6 +62,17 @@ class Blackout:
 
 
 @dataclass(frozen=True)
+class Hill:
+    """Ground only the simulator has (``sitl_stub --hill``): ``height_m`` above the scenario's
+    terrain at its top, a cosine bump of ``radius_m``."""
+
+    lat_deg: float
+    lon_deg: float
+    radius_m: float
+    height_m: float
+
+
+@dataclass(frozen=True)
 class Abort:
     vehicle_id: str | None
     """None: every vehicle."""
@@ -78,7 +91,8 @@ class RehearsalOptions:
     seed: int = 0
     connect: Sequence[str] = ()
     truth: Path | None = None
-    """With ``connect``: the connected simulator's truth log, for the true arrivals."""
+    """With ``connect``: the connected simulator's truth log, for the true arrivals; without,
+    where the rehearsal's own stub writes its truth log (kept; by default a temporary file)."""
     json_out: Path | None = None
     report_dir: Path | None = None
     required_arrival_s: float | None = None
@@ -89,6 +103,8 @@ class RehearsalOptions:
     """Vehicle id -> fraction: the stub vehicle flies (1 + f) x the true airspeed it should."""
     utc_offsets_s: Mapping[str, float] = field(default_factory=dict)
     """Vehicle id -> seconds: the stub vehicle's UTC is the true UTC plus this."""
+    hills: Sequence[Hill] = ()
+    """Hills in the stub's terrain that the scenario's lacks (a terrain database error)."""
     threats_from: Path | None = None
     quiet: bool = False
     config: FlightConfig = field(default_factory=FlightConfig)
@@ -142,7 +158,12 @@ def stub_args(
         # 1.5 s suits radio links; on loopback at 200x one such wait is 300 s of mission.
         "--mission-timeout",
         "0.05",
+        # The terrain to fly over (the homes are given: on the ground, nose along the path).
+        "--scenario",
+        str(opts.scenario_path),
     ]
+    for hill in opts.hills:
+        cmd += ["--hill", f"{hill.lat_deg!r},{hill.lon_deg!r},{hill.radius_m!r},{hill.height_m!r}"]
     for home in stub_homes(coord):
         cmd += ["--home", home]
     for v in scenario.vehicles:
@@ -298,7 +319,7 @@ async def _rehearse(
             sysids: list[int | None] = [None] * len(conns)
             truth_path = opts.truth
         else:
-            truth_path = Path(tmp.name) / "truth.jsonl"
+            truth_path = opts.truth or Path(tmp.name) / "truth.jsonl"
             stub_start = time.time()
             stub = await StubProcess.start(
                 len(opts.scenario.vehicles),
@@ -512,7 +533,7 @@ def flight_record(
     truth: dict[int, list[TruthSample]] = {}
     if truth_path is not None and truth_path.exists():
         truth = read_truth(truth_path)
-    vehicles = []
+    vehicles: list[dict[str, Any]] = []
     until: dict[int, float] = {}
     tracks: dict[int, list[TruthSample]] = {}
     for m in coord.members.values():
@@ -565,6 +586,14 @@ def flight_record(
                 if telemetry_arrival is None
                 else round(telemetry_arrival, 3),
                 "takeoff_utc_s": None if launched is None else round(launched, 3),
+                "lost": None
+                if m.lost is None
+                else {
+                    "cause": m.lost.cause,
+                    "utc_s": round(start + m.lost.t_s, 3),
+                    "t_s": round(m.lost.t_s, 3),
+                    "why": m.lost.why,
+                },
                 "planned_paths": [
                     {"label": p["label"], "utc_s": round(start + p["t_s"], 3), "en_m": p["en_m"]}
                     for p in m.planned_paths
@@ -598,6 +627,8 @@ def flight_record(
     return {
         "format": FLIGHT_FORMAT,
         "scenario_file": str(opts.scenario_path),
+        "state": coord.state.value,
+        "state_reason": coord.state_reason,
         "start_utc_s": round(start, 3),
         "required_arrival_utc_s": None if ref is None else round(start + ref, 3),
         "required_arrival_s": None if ref is None else round(ref, 3),
@@ -647,7 +678,8 @@ def _period(samples: Sequence[TruthSample]) -> float:
 
 
 def passed(record: Mapping[str, Any], tolerance_s: float) -> bool:
-    """Every vehicle not aborted arrived within tolerance and the separation held."""
+    """Every vehicle not aborted arrived within tolerance and the separation held (a lost
+    vehicle never arrived)."""
     ok = all(
         v["error_s"] is not None and abs(v["error_s"]) <= tolerance_s
         for v in record["vehicles"]
@@ -657,4 +689,4 @@ def passed(record: Mapping[str, Any], tolerance_s: float) -> bool:
     return ok and (sep is None or sep >= record["separation_m"])
 
 
-__all__ = ["Abort", "Blackout", "RehearsalOptions", "flight_record", "passed", "rehearse"]
+__all__ = ["Abort", "Blackout", "Hill", "RehearsalOptions", "flight_record", "passed", "rehearse"]

@@ -142,7 +142,12 @@ async def test_infeasible_request_is_refused_before_launch_naming_time_and_vehic
         (["--loss", "1.5"], "--loss"),
         (["--speedup", "0"], "--speedup"),
         (["--connect", "tcp:127.0.0.1:5760", "--wind", "5,270"], "apply to the stub"),
-        (["--truth", "truth.jsonl"], "--truth reads a connected simulator's log"),
+        (["--truth", "/no/such/dir/truth.jsonl"], "directory does not exist"),
+        (["--hill", "46.5,8.0,1500"], "--hill: expected LAT,LON,RADIUS_M,HEIGHT_M"),
+        (["--hill", "46.5,8.0,0,600"], "RADIUS_M > 0"),
+        (["--connect", "tcp:127.0.0.1:5760", "--hill", "46.5,8,1500,600"], "apply to the stub"),
+        (["--stall-bound", "0"], "--stall-bound must be a positive number"),
+        (["--hard-deadline", "nan"], "--hard-deadline must be a positive number"),
         (
             ["--connect", "tcp:127.0.0.1:5760", "--truth", "/no/such/dir/truth.jsonl"],
             "directory does not exist",

@@ -5,7 +5,9 @@
 - one vehicle's link dark for 10 s, through the CLI (the blackout goes to the stub's stdin);
 - ``--connect`` to a simulator started on its own, one vehicle behind MAVProxy: nothing in the
   loop knows it is the stub, and the arrivals come from telemetry (checked against the
-  simulator's truth log).
+  simulator's truth log);
+- a generated two-vehicle scenario where one vehicle flies into a hill only the simulator has:
+  its crash is reported, the other keeps its slot, the rehearsal fails with the reason.
 """
 
 from __future__ import annotations
@@ -19,13 +21,15 @@ import signal
 from pathlib import Path
 from typing import Any
 
+import numpy as np
 import pytest
+import yaml
 
 from gcs.__main__ import main
 from gcs.coordination.bus import EventBus
 from gcs.rehearsal.rehearse import Abort, RehearsalOptions, passed, rehearse
 from gcs.service.fleet import Fleet, VehicleBusy
-from planner.scenario import load_scenario
+from planner.scenario import load_scenario, parse_scenario
 from tests.gcs.conftest import assert_flight_kept, free_udp_port, start_stub
 from tests.sitl_stub.conftest import free_port_base, mavproxy_router
 
@@ -346,3 +350,94 @@ async def test_two_flights_at_once_on_one_fleet_each_to_its_own_time(tmp_path: P
         assert record["arrival_source"] == "simulator"
         errors = _errors(record)
         assert all(e is not None and abs(e) <= 1.0 for e in errors.values()), errors
+
+
+def _two_abreast(path: Path) -> tuple[float, float]:
+    """Two vehicles flying east 14 km, 6 km apart, 300 m above flat ground at 300 m (a scenario
+    file at ``path``); returns the latitude and longitude of A's route half way along."""
+    doc = {
+        "name": "two abreast",
+        "area": {
+            "origin": {"lat_deg": 46.5, "lon_deg": 8.0},
+            "min_east_m": -3000, "min_north_m": -3000, "width_m": 20000, "height_m": 12000,
+        },
+        "terrain": {"kind": "flat", "elevation_m": 300},
+        "separation_m": 300,
+        "arrival": {"kind": "simultaneous"},
+        "vehicles": [
+            {
+                "id": vid,
+                "start": {"east_m": 0, "north_m": north, "alt_m": 600},
+                "goal": {"east_m": 14000, "north_m": north, "alt_m": 600},
+                "speed_min_m_s": 18, "speed_max_m_s": 28, "min_turn_radius_m": 200,
+                "max_range_m": 100000, "alt_max_m": 3000, "takeoff_window_s": [0, 600],
+            }
+            for vid, north in (("A", 0), ("B", 6000))
+        ],
+    }  # fmt: skip
+    path.write_text(yaml.safe_dump(doc), encoding="utf-8")
+    lat, lon = parse_scenario(doc).frame().to_geodetic(7000.0, 0.0)
+    return float(lat), float(lon)
+
+
+def _closest_utc_s(rows: list[dict[str, Any]], goal_en: tuple[float, float], frame: Any) -> float:
+    """When a vehicle's true track (the truth rows, straight between them) passes nearest
+    the goal."""
+    en = [tuple(float(x) for x in frame.to_local(r["lat_deg"], r["lon_deg"])) for r in rows]
+    best = (math.inf, math.nan)
+    for (a, ra), (b, rb) in itertools.pairwise(zip(en, rows, strict=True)):
+        d = np.subtract(b, a)
+        w = np.subtract(goal_en, a)
+        u = min(max(float(np.dot(w, d) / max(float(np.dot(d, d)), 1e-9)), 0.0), 1.0)
+        miss = float(np.hypot(*(w - u * d)))
+        if miss < best[0]:
+            best = (miss, ra["utc_s"] + u * (rb["utc_s"] - ra["utc_s"]))
+    assert best[0] < 100.0, best
+    return best[1]
+
+
+def test_a_vehicle_flown_into_a_hill_only_the_simulator_has_is_reported_and_the_other_arrives(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """The planner saw flat ground; the stub has a 600 m hill on A's route (--hill). A flies
+    into it: the stub says "Crash detected" (as ArduPlane), the coordinator reports A lost
+    within 10 s of mission time of the crash in the stub's truth log, B keeps its slot (the
+    operator's default choice, continue) and arrives within 1 s of it by the truth log, and
+    the rehearsal exits 1 naming A and the cause."""
+    scenario = tmp_path / "two_abreast.yaml"
+    lat, lon = _two_abreast(scenario)
+    out, truth = tmp_path / "flight.json", tmp_path / "truth.jsonl"
+    argv = ["rehearse", str(scenario), "--speedup", "200", "--hill", f"{lat!r},{lon!r},1500,600",
+            "--truth", str(truth), "--json", str(out), "--quiet"]  # fmt: skip
+    code = main(argv)
+    err = capsys.readouterr().err
+    assert code == 1, err
+    assert re.search(
+        r"rehearsal failed: A lost at [\d.]+ s \(crash: it says 'Crash detected'\)", err
+    )
+    record = json.loads(out.read_text())
+    assert record["state"] == "failed"
+    # The truth log, read here: A's first row crashed, on the hill.
+    rows = [json.loads(line) for line in truth.read_text().splitlines()[1:]]
+    a_rows = [r for r in rows if r["sysid"] == 1]
+    crashed = next(r for r in a_rows if r["crashed"])
+    assert crashed["on_ground"] and crashed["groundspeed_m_s"] == 0.0
+    assert crashed["terrain_m"] > 300.0 + 300.0 and crashed["alt_m"] == pytest.approx(
+        crashed["terrain_m"], abs=0.5
+    )
+    before = a_rows[a_rows.index(crashed) - 1]
+    assert not before["on_ground"] and before["alt_m"] > 550.0  # flying its route until then
+    (lost,) = [e for e in record["events"] if e["kind"] == "vehicle_lost"]
+    assert lost["vehicle"] == "A"
+    # Reported (mission time of the report) within 10 s of the impact, which lies between
+    # the last row flying and the first crashed one: measured from the row flying.
+    delay_s = record["start_utc_s"] + lost["t_s"] - before["utc_s"]
+    assert 0.0 < delay_s <= 10.0, delay_s
+    a, b = (next(v for v in record["vehicles"] if v["id"] == vid) for vid in ("A", "B"))
+    assert a["state"] == "lost" and a["lost"]["cause"] == "crash"
+    assert a["arrival_utc_s"] is None
+    # B's slot, kept, against its true passage of its goal.
+    frame = load_scenario(scenario).frame()
+    b_rows = [r for r in rows if r["sysid"] == 2 and not r["on_ground"]]
+    passed_s = _closest_utc_s(b_rows, (14000.0, 6000.0), frame)
+    assert abs(passed_s - b["target_arrival_utc_s"]) <= 1.0, (passed_s, b)

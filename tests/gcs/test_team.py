@@ -5,6 +5,7 @@ controller's figures)."""
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import pickle
 from collections.abc import Sequence
@@ -18,6 +19,7 @@ from gcs.coordination.config import FlightConfig
 from gcs.coordination.events import EventKind
 from gcs.coordination.member import FIRST_ROUTE_SEQ, Member, VehicleState
 from gcs.coordination.team import TeamController, TeamTimeRefused
+from gcs.errors import GcsError
 from planner.mission import MAV_CMD_NAV_LOITER_TURNS, MAV_CMD_NAV_WAYPOINT
 from planner.plan import World
 from planner.popup import popup_zones
@@ -471,3 +473,170 @@ def test_a_pickled_controller_decides_as_the_one_it_was_taken_from(
     assert {v["id"] for v in snap["vehicles"]} == set(team.members)
     uav2 = next(v for v in snap["vehicles"] if v["id"] == vid)
     assert uav2["state"] == "on_route" and uav2["slot_s"] == pytest.approx(m.target_s)
+
+
+# -- supervision ---------------------------------------------------------------------------------
+
+
+def _team(paper: tuple[Scenario, World, Schedule], **config: object) -> TeamController:
+    scenario, world, schedule = paper
+    t = TeamController(
+        scenario, schedule, world, FlightConfig(**config), rng=np.random.default_rng(3)
+    )  # type: ignore[arg-type]
+    t.start(START_UTC)
+    return t
+
+
+@pytest.mark.parametrize("after", ["stays", "goes_back"])
+def test_a_vehicle_whose_progress_stalls_past_the_bound_is_lost_and_the_others_keep_their_slots(
+    team: TeamController, after: str
+) -> None:
+    vid = "UAV2"
+    m, t0 = flying(team, vid, 600.0)
+    slots = {x.vehicle_id: x.target_s for x in team.members.values()}
+    ref = team.team_ref_s
+    bound = FlightConfig().stall_bound_s
+    s0 = 20_000.0
+    # On its route at 25 m/s, 2 fixes a second; a 30 s gap in them (a link blackout) with the
+    # progress made meanwhile is no stall.
+    for k in range(20):
+        team.handle(fix_at(team, vid, s0 + 12.5 * k, t0 + 0.5 * k), t0 + 0.5 * k)
+    s1, t1 = s0 + 12.5 * 19 + 750.0, t0 + 9.5 + 30.0
+    assert not reports(team.handle(fix_at(team, vid, s1, t1), t1), EventKind.VEHICLE_LOST)
+    # Then it stops (or turns back): no report until the bound has passed, one after it.
+    lost: list[act.Report] = []
+    k = 1
+    while not lost:
+        s = s1 if after == "stays" else s1 - 12.5 * k
+        t = t1 + 0.5 * k
+        lost = reports(team.handle(fix_at(team, vid, s, t), t), EventKind.VEHICLE_LOST)
+        assert lost or t - t1 <= bound
+        k += 1
+    assert t - t1 == pytest.approx(bound + 0.5, abs=0.01)
+    (r,) = lost
+    assert r.vehicle == vid and r.t_s == t
+    assert r.payload["cause"] == "stall" and r.payload["policy"] == "continue"
+    assert f"no progress along its route for {t - t1:.1f} s" in r.reason
+    assert "the others keep their slots" in r.reason
+    assert m.phase == "lost" and m.state is VehicleState.LOST and m.done
+    assert team.team_ref_s == ref
+    assert {x.vehicle_id: x.target_s for x in team.members.values()} == slots
+    # It is not commanded or timed any more.
+    assert team.handle(fix_at(team, vid, s1 + 5000.0, t + 60.0), t + 60.0) == []
+
+
+def fix_at(team: TeamController, vid: str, s_m: float, t_s: float) -> act.Fix:
+    return fix(team, vid, s_m, t_s, 25.0)
+
+
+def test_a_loiter_is_no_stall(team: TeamController) -> None:
+    vid = "UAV2"
+    m, t0 = flying(team, vid, 600.0)
+    team.handle(fix_at(team, vid, 20_000.0, t0), t0)
+    # Its mission's item 2 made loiter turns and flown: circling there, its s stays put.
+    loiter_seq = 2
+    items = list(m.mission.items)
+    items[loiter_seq] = dataclasses.replace(items[loiter_seq], command=MAV_CMD_NAV_LOITER_TURNS)
+    m.mission = dataclasses.replace(m.mission, items=tuple(items))
+    for k in range(1, 200):
+        f = fix_at(team, vid, 20_000.0, t0 + 0.5 * k)
+        out = team.handle(act.Fix(**{**f.__dict__, "mission_seq": loiter_seq}), t0 + 0.5 * k)
+        assert not reports(out, EventKind.VEHICLE_LOST)
+    assert m.state is VehicleState.LOITERING
+
+
+def test_a_crash_text_loses_the_vehicle_and_retime_moves_the_team_to_the_earliest_of_the_rest(
+    paper: tuple[Scenario, World, Schedule],
+) -> None:
+    team = _team(paper, on_vehicle_lost="retime")
+    vid = "UAV2"  # it sets the team time at its top speed: the others could arrive earlier
+    m = team.members[vid]
+    airborne(team, vid, m.takeoff_s)
+    t = m.takeoff_s + 30.0
+    ground = [x for x in team.members.values() if x.phase == "ground"]
+    assert {x.vehicle_id for x in ground} == {"UAV1", "UAV3"}
+    ref = team.team_ref_s
+    assert ref is not None
+    # A PreArm-like critical text is said, not taken for a crash.
+    out = team.handle(act.Alarm(vid, 2, "PreArm: Compass not healthy"), t - 1.0)
+    assert reports(out, EventKind.ALARM) and not reports(out, EventKind.VEHICLE_LOST)
+    out = team.handle(act.Alarm(vid, 0, "Crash detected"), t)
+    (alarm,) = reports(out, EventKind.ALARM)
+    assert alarm.payload == {"severity": 0, "text": "Crash detected"}
+    (lost,) = reports(out, EventKind.VEHICLE_LOST)
+    assert lost.payload["cause"] == "crash" and "'Crash detected'" in lost.reason
+    assert m.state is VehicleState.CRASHED
+    # The earliest common arrival of the two still on the ground, taking off now at top speed
+    # (the test's own arithmetic), plus the late margin.
+    v = {x.vehicle_id: team.scenario.vehicle(x.vehicle_id) for x in ground}
+    earliest = max(
+        max(t, v[x.vehicle_id].takeoff_window_s[0])
+        + x.schedule.path.length_m / (v[x.vehicle_id].speed_max_m_s * x.schedule.tas_per_eas())
+        - x.offset_s
+        for x in ground
+    )
+    expected = earliest + FlightConfig().late_margin_s
+    assert expected < ref - 10.0
+    (moved,) = reports(out, EventKind.ARRIVAL)
+    assert f"without {vid} (lost)" in moved.reason
+    assert team.team_ref_s == pytest.approx(expected, abs=0.01)
+    for x in ground:  # each can make its new slot from its takeoff time at top speed
+        assert x.target_s == pytest.approx(expected + x.offset_s)
+        top = v[x.vehicle_id].speed_max_m_s * x.schedule.tas_per_eas()
+        assert x.takeoff_s + x.schedule.path.length_m / top <= x.target_s + 0.01
+
+
+def test_emergency_or_disarmed_on_the_route_is_a_crash_and_abort_aborts_the_team(
+    paper: tuple[Scenario, World, Schedule],
+) -> None:
+    team = _team(paper, on_vehicle_lost="abort")
+    vid = "UAV2"
+    m = team.members[vid]
+    airborne(team, vid, m.takeoff_s)
+    t = m.takeoff_s + 5.0
+    # Climbing out, an old disarmed heartbeat is no crash; armed and healthy is nothing.
+    assert team.handle(act.Heartbeat(vid, armed=False, emergency=False), t) == []
+    t += 600.0
+    team.handle(fix_at(team, vid, 20_000.0, t), t)
+    assert m.phase == "route"
+    assert not reports(team.handle(act.Heartbeat(vid, True, False), t), EventKind.VEHICLE_LOST)
+    out = team.handle(act.Heartbeat(vid, armed=False, emergency=False), t + 1.0)
+    (lost,) = reports(out, EventKind.VEHICLE_LOST)
+    assert "disarmed on its route" in lost.reason and "the team is aborted" in lost.reason
+    assert m.state is VehicleState.CRASHED
+    others = [x for x in team.members.values() if x.vehicle_id != vid]
+    assert all(x.phase == "aborted" for x in others) and team.finished
+    in_air = {x.vehicle_id for x in others if x.launched_s is not None}
+    assert {a.vehicle_id for a in of(out, act.SetMode)} == in_air
+
+
+def test_emergency_heartbeat_while_climbing_out_is_a_crash(team: TeamController) -> None:
+    vid = "UAV2"
+    m = team.members[vid]
+    airborne(team, vid, m.takeoff_s)
+    out = team.handle(act.Heartbeat(vid, armed=True, emergency=True), m.takeoff_s + 20.0)
+    (lost,) = reports(out, EventKind.VEHICLE_LOST)
+    assert "MAV_STATE_EMERGENCY" in lost.reason and m.state is VehicleState.CRASHED
+
+
+def test_the_flight_ends_at_its_hard_deadline_whatever_the_team_time_became(
+    team: TeamController,
+) -> None:
+    planned_last = max(m.target_s for m in team.members.values())
+    cfg = FlightConfig()
+    assert team.hard_deadline_s == pytest.approx(planned_last + cfg.hard_deadline_s)
+    for m in team.members.values():
+        m.takeoff_s = math.inf  # nobody launches here
+    with pytest.raises(GcsError, match="past the flight's hard deadline"):
+        team.move_team_time(team.hard_deadline_s + 1.0, 0.0)
+    ref = team.team_ref_s
+    assert ref is not None
+    late = team.hard_deadline_s - 100.0 - (planned_last - ref)
+    team.move_team_time(late, 0.0)
+    overrun_at = max(m.target_s for m in team.members.values()) + cfg.overrun_s
+    assert overrun_at > team.hard_deadline_s  # the overrun moved with the team; this did not
+    assert of(team.handle(act.Tick(), team.hard_deadline_s - 1.0), act.Stop) == []
+    out = team.handle(act.Tick(), team.hard_deadline_s + 1.0)
+    (stop,) = of(out, act.Stop)
+    assert stop.reason.startswith(f"hard deadline {team.hard_deadline_s:.1f} s passed")
+    assert stop.reason.endswith("UAV1, UAV2, UAV3 not arrived") and team.finished
