@@ -124,6 +124,15 @@ def parse_args(argv: Sequence[str] | None = None) -> argparse.Namespace:
         help="wall seconds before a lost mission item is re-requested (default 1.5)",
     )
     ap.add_argument(
+        "--idle-exit",
+        type=float,
+        default=None,
+        metavar="S",
+        help="exit once no vehicle has had a client for S wall seconds (after the first "
+        "client): a simulator whose ground station is gone does not run on forever, while "
+        "one that restarts within S reaches its vehicles again",
+    )
+    ap.add_argument(
         "--control-stdin",
         action="store_true",
         help="read control lines from stdin: 'blackout INDEX START_SIM_S DURATION_S'",
@@ -460,6 +469,26 @@ async def _control(team: SimTeam, stop: asyncio.Event) -> None:
             )
 
 
+async def _idle_exit(team: SimTeam, idle_s: float, stop: asyncio.Event) -> None:
+    """Set ``stop`` once no vehicle has had a client for ``idle_s`` wall seconds, counted from
+    the last client gone (a team that never had one waits for its first)."""
+    served = False
+    idle_since: float | None = None
+    while True:
+        await asyncio.sleep(min(1.0, idle_s / 4))
+        if any(port.connections for port in team.server.ports):
+            served, idle_since = True, None
+            continue
+        if not served:
+            continue
+        now = time.monotonic()
+        idle_since = now if idle_since is None else idle_since
+        if now - idle_since >= idle_s:
+            print(f"sitl_stub: no client for {idle_s:g} s; stopping", flush=True)
+            stop.set()
+            return
+
+
 async def serve(
     args: argparse.Namespace,
     homes: list[Home],
@@ -508,12 +537,14 @@ async def serve(
             for i, port in enumerate(team.ports):
                 log.info("vehicle %d: sysid %d on tcp:%s:%d", i, i + 1, args.host, port)
             print(f"sitl_stub: {len(homes)} vehicle(s) ready, ports {team.ports}", flush=True)
-            control = None
+            tasks = []
             if args.control_stdin:
-                control = asyncio.get_running_loop().create_task(_control(team, stop))
+                tasks.append(loop.create_task(_control(team, stop)))
+            if args.idle_exit is not None:
+                tasks.append(loop.create_task(_idle_exit(team, args.idle_exit, stop)))
             await stop.wait()
-            if control is not None:
-                control.cancel()
+            for task in tasks:
+                task.cancel()
             stats = team.stats()
             print(
                 f"sitl_stub: stopping; simulated {stats.sim_elapsed_s:.1f} s in "

@@ -552,19 +552,21 @@ def flight_record(
                 samples, float(glat), float(glon), coord.config.arrival_radius_m, after_utc_s=after
             )
             arrival = None if ca is None else ca[0]
-            track = []
-            for smp in samples[:: max(1, int(round(2.0 / _period(samples))))]:
-                e, n = frame.to_local(smp.lat_deg, smp.lon_deg)
-                track.append(
-                    [
-                        round(smp.utc_s, 3),
-                        round(float(e), 1),
-                        round(float(n), 1),
-                        round(smp.alt_m, 1),
-                        round(smp.airspeed_m_s, 2),
-                        round(smp.groundspeed_m_s, 2),
-                    ]
-                )
+            every = samples[:: max(1, int(round(2.0 / _period(samples))))]
+            east, north = frame.to_local(
+                np.array([smp.lat_deg for smp in every]), np.array([smp.lon_deg for smp in every])
+            )
+            track = [
+                [
+                    round(smp.utc_s, 3),
+                    round(float(e), 1),
+                    round(float(n), 1),
+                    round(smp.alt_m, 1),
+                    round(smp.airspeed_m_s, 2),
+                    round(smp.groundspeed_m_s, 2),
+                ]
+                for smp, e, n in zip(every, np.atleast_1d(east), np.atleast_1d(north), strict=True)
+            ]
             tracks[sysid] = samples
         else:
             tracks[sysid] = [_sample(frame, row) for row in m.track_log]

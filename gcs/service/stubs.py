@@ -18,7 +18,11 @@ from dataclasses import dataclass
 
 from gcs.errors import GcsError
 
-__all__ = ["StubProcess", "free_tcp_base"]
+__all__ = ["IDLE_EXIT_S", "StubProcess", "free_tcp_base"]
+
+IDLE_EXIT_S = 120.0
+"""A bundled simulator with no client for this long (wall s) stops: its ground station died
+and did not come back (a service restarted within it reaches the vehicles again)."""
 
 
 def free_tcp_base(n: int) -> int:
@@ -63,6 +67,8 @@ class StubProcess:
         base = free_tcp_base(count)
         cmd = [sys.executable, "-m", "sitl_stub", "--vehicles", str(count), "--tcp-base", str(base)]
         cmd += list(args)
+        # A simulator whose ground station died and did not come back stops by itself.
+        cmd += ["--idle-exit", str(IDLE_EXIT_S)]
         if control:
             cmd.append("--control-stdin")
         proc = await asyncio.create_subprocess_exec(

@@ -87,6 +87,39 @@ async def test_cli_serves_two_vehicles_and_stops_cleanly_on_sigint() -> None:
                 await c.close()
 
 
+async def test_idle_exit_stops_a_simulator_whose_clients_are_gone() -> None:
+    """--idle-exit S: running while nobody has connected yet and while a client is there;
+    stopped (exit 0) S wall seconds after the last client left."""
+    base = free_port_base(1)
+    proc = await asyncio.create_subprocess_exec(
+        sys.executable, "-m", "sitl_stub", "--vehicles", "1", "--tcp-base", str(base),
+        "--home", "-35.36,149.16,584,90", "--idle-exit", "1.5",
+        stdout=asyncio.subprocess.PIPE, stderr=asyncio.subprocess.PIPE,
+    )  # fmt: skip
+    try:
+        assert proc.stdout is not None
+        async with asyncio.timeout(30):
+            assert b"ready" in await proc.stdout.readline()
+        await asyncio.sleep(3.0)  # no client yet: it waits for the first
+        assert proc.returncode is None
+        c = await Client.connect(base)
+        await c.recv("HEARTBEAT")
+        await asyncio.sleep(3.0)  # a client is there: it runs on
+        assert proc.returncode is None
+        await c.close()
+        left = asyncio.get_running_loop().time()
+        async with asyncio.timeout(20):
+            out, err = await proc.communicate()
+        took = asyncio.get_running_loop().time() - left
+        assert proc.returncode == 0, err.decode()
+        assert b"no client for 1.5 s; stopping" in out
+        assert 1.5 <= took < 6.0
+    finally:
+        if proc.returncode is None:
+            proc.kill()
+            await proc.wait()
+
+
 async def test_cli_rejects_bad_home_with_clear_message() -> None:
     proc = await asyncio.create_subprocess_exec(
         sys.executable, "-m", "sitl_stub", "--home", "95,10,0",
