@@ -625,10 +625,9 @@ async def serve_cmd(args: argparse.Namespace) -> str:
             raise UsageError(f"--port must be in 1..65535, got {args.port}")
         overrides["port"] = args.port
     settings = Settings(**overrides)  # type: ignore[arg-type]
+    app = create_app(settings)  # a bad tile file is an error before anything is served
     print(f"gcs: serving on http://{settings.host}:{settings.port}/v1 (docs at /v1/docs)")
-    config = uvicorn.Config(
-        create_app(settings), host=settings.host, port=settings.port, log_level="warning"
-    )
+    config = uvicorn.Config(app, host=settings.host, port=settings.port, log_level="warning")
     await uvicorn.Server(config).serve()
     return "service stopped"
 

@@ -24,9 +24,10 @@ from starlette.exceptions import HTTPException as StarletteHTTPException
 from gcs.api.auth import TokenTable, admin_token_file
 from gcs.api.idempotency import IdempotencyMiddleware
 from gcs.api.metrics import metrics_text
-from gcs.api.routes import flights, resources
+from gcs.api.routes import flights, resources, tiles
 from gcs.api.routes.common import ERRORS
 from gcs.api.settings import Settings
+from gcs.api.tiles import TileSource
 from gcs.service.engine import Engine, Infeasible, InvalidInput, ServiceError
 from gcs.store.repository import Store, StoreConflict, StoreError, StoreNotFound
 
@@ -39,7 +40,10 @@ STATIC = Path(__file__).with_name("static")
 
 
 def create_app(settings: Settings | None = None) -> FastAPI:
+    """The app of ``settings``; a configured tile file is checked here, so a bad one stops
+    the service before it serves (:class:`~gcs.api.tiles.TileSourceError`)."""
     settings = settings or Settings()
+    tile_source = TileSource.open(settings.tiles_mbtiles) if settings.tiles_mbtiles else None
 
     @asynccontextmanager
     async def lifespan(app: FastAPI) -> AsyncIterator[None]:
@@ -72,10 +76,12 @@ def create_app(settings: Settings | None = None) -> FastAPI:
         lifespan=lifespan,
     )
     app.add_middleware(IdempotencyMiddleware)
+    app.state.tiles = tile_source
     _errors(app)
     v1 = APIRouter(prefix="/v1")
     v1.include_router(resources.router)
     v1.include_router(flights.router)
+    v1.include_router(tiles.router)
 
     @v1.get("/health", tags=["ops"])
     async def health() -> dict[str, str]:

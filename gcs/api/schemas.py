@@ -19,6 +19,7 @@ __all__ = [
     "TeamTimeIn",
     "TeamTimeOut",
     "ThreatIn",
+    "TileSourceOut",
     "VehicleIn",
 ]
 
@@ -97,3 +98,19 @@ class TeamTimeIn(_Body):
 class TeamTimeOut(BaseModel):
     team_time_s: float | None
     version: int
+
+
+class TileSourceOut(BaseModel):
+    """The map tile source, as TileJSON 3.0.0 (the tile URLs relative to the service)."""
+
+    tilejson: Literal["3.0.0"] = "3.0.0"
+    name: str
+    format: Literal["png", "jpg", "webp"]
+    tiles: list[str] = Field(examples=[["/v1/tiles/{z}/{x}/{y}.png"]])
+    scheme: Literal["xyz"] = "xyz"
+    """Rows counted from the north, as web maps name tiles (the file's TMS rows flipped)."""
+    minzoom: int
+    maxzoom: int
+    bounds: list[float] = Field(min_length=4, max_length=4)
+    """West, south, east, north (deg)."""
+    attribution: str | None = None

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from pydantic import Field, field_validator
+from pydantic import Field, FilePath, field_validator
 from pydantic_settings import BaseSettings, SettingsConfigDict
 
 __all__ = ["SCOPES", "Settings"]
@@ -16,7 +16,7 @@ admin: all of them."""
 
 class Settings(BaseSettings):
     """``TCGCS_DATABASE_URL``, ``TCGCS_HOST``, ``TCGCS_PORT``, ``TCGCS_TOKENS``,
-    ``TCGCS_DATA_DIR``."""
+    ``TCGCS_DATA_DIR``, ``TCGCS_TILES_MBTILES``."""
 
     model_config = SettingsConfigDict(env_prefix="TCGCS_", env_file=".env", extra="ignore")
 
@@ -29,6 +29,9 @@ class Settings(BaseSettings):
     tokens: dict[str, list[str]] = Field(default_factory=dict, repr=False)
     """Bearer token -> its scopes (JSON in the environment). With none, the service makes one
     admin token and writes it to ``DATA_DIR/admin.token`` (mode 0600): it is never logged."""
+    tiles_mbtiles: FilePath | None = None
+    """A raster MBTiles file (png, jpg or webp tiles) served at ``/v1/tiles`` for the console's
+    map; without one the map shows the scenario's hillshade only."""
 
     @field_validator("tokens")
     @classmethod

@@ -8,6 +8,7 @@ import { num, vehicleColour } from "./format.js";
 import { MapView } from "./map.js";
 import { Countdown, Timeline, VehicleTable } from "./panel.js";
 import { FlightStream } from "./stream.js";
+import { TileLayer } from "./tiles.js";
 
 const $ = (id) => document.getElementById(id);
 const RUNNING = new Set(["running"]);
@@ -127,6 +128,7 @@ async function signIn(token) {
   $("console").hidden = false;
   $("logout").hidden = false;
   mapView.resize();
+  await loadTileSource();
   await refreshFlights();
   const wanted = new URLSearchParams(location.search).get("flight");
   if (wanted) await openFlight(wanted);
@@ -281,6 +283,41 @@ async function loadMap() {
 const refreshMap = debounce(() => {
   loadMap().catch((err) => say("flight-error", describeError(err)));
 }, 150);
+
+// -- the base layer: the hillshade, or the service's tiles ----------------------------------------
+
+/** The service's tile source (404: none is configured, the hillshade only). */
+async function loadTileSource() {
+  let source = null;
+  try {
+    source = await api.get("/v1/tiles", { what: "tile source" });
+  } catch (err) {
+    if (!(err instanceof ApiError) || err.status !== 404) say("flight-error", describeError(err));
+  }
+  const button = document.querySelector('#map-base [data-base="tiles"]');
+  button.disabled = !source;
+  if (!source) {
+    mapView.setTiles(null);
+    setBase("hillshade");
+    return;
+  }
+  button.title = `${source.name}: zooms ${source.minzoom} to ${source.maxzoom}`;
+  const url = (z, x, y) => source.tiles[0].replace("{z}", z).replace("{x}", x).replace("{y}", y);
+  const fetchTile = (z, x, y) => api.get(url(z, x, y), { what: `tile ${z}/${x}/${y}` });
+  mapView.setTiles(new TileLayer(source, fetchTile, () => (mapView.dirty = true)));
+  setBase("tiles");
+}
+
+function setBase(base) {
+  mapView.setBase(base);
+  for (const b of document.querySelectorAll("#map-base [data-base]")) {
+    b.classList.toggle("active", b.dataset.base === mapView.base);
+  }
+}
+
+for (const b of document.querySelectorAll("#map-base [data-base]")) {
+  b.addEventListener("click", () => setBase(b.dataset.base));
+}
 
 // -- the stream -------------------------------------------------------------------------------
 
@@ -541,6 +578,7 @@ function toolChanged(tool) {
     b.classList.toggle("active", b.dataset.tool === tool);
   }
   say("map-hint", HINTS[tool]);
+  $("map-hint").title = HINTS[tool];
 }
 
 for (const b of document.querySelectorAll("#map-tools [data-tool]")) {

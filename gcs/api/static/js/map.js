@@ -1,6 +1,7 @@
 // The map: a canvas in the scenario's local metres (east, north), north up. Drag pans, the
-// wheel zooms about the cursor. Layers: the terrain image over the area, threats, loiter
-// buffers, each vehicle's planned route, loiter circles, goal, flown trail and live position.
+// wheel zooms about the cursor. Layers: the base (the terrain image over the area, or the
+// service's map tiles when it has a tile source), threats, loiter buffers, each vehicle's
+// planned route, loiter circles, goal, flown trail and live position.
 // Drawing tools: a no-fly polygon (click the corners, double-click to close) and a radar disc
 // (press at the centre, drag out the radius); the shape is handed to `onShape` for sending.
 
@@ -18,6 +19,8 @@ export class MapView {
     this.onTool = onTool || (() => {});
     this.doc = null;
     this.terrain = null;
+    this.tiles = null; // a TileLayer when the service has a tile source
+    this.base = "hillshade"; // or "tiles"
     this.vehicles = [];
     this.trails = new Map();
     this.colours = new Map();
@@ -41,6 +44,7 @@ export class MapView {
 
   setDoc(doc) {
     this.doc = doc;
+    if (this.tiles) this.tiles.setOrigin(doc.origin);
     doc.vehicles.forEach((v, i) => {
       if (!this.colours.has(v.id)) this.colours.set(v.id, this._colourOf(i));
     });
@@ -54,6 +58,19 @@ export class MapView {
 
   setTerrain(image) {
     this.terrain = image;
+    this.dirty = true;
+  }
+
+  setTiles(layer) {
+    this.tiles = layer;
+    if (layer && this.doc) layer.setOrigin(this.doc.origin);
+    if (!layer) this.base = "hillshade";
+    this.dirty = true;
+  }
+
+  /** The base layer: "hillshade" (the scenario's terrain) or "tiles" (the tile source). */
+  setBase(base) {
+    this.base = base === "tiles" && this.tiles ? "tiles" : "hillshade";
     this.dirty = true;
   }
 
@@ -301,7 +318,9 @@ export class MapView {
     const [x0, y0] = this.toScreen(a.min_east_m, a.min_north_m + a.height_m);
     const w = a.width_m * this.view.scale;
     const h = a.height_m * this.view.scale;
-    if (this.terrain) {
+    if (this.base === "tiles") {
+      this.tiles.draw(ctx, this);
+    } else if (this.terrain) {
       ctx.imageSmoothingEnabled = true;
       ctx.drawImage(this.terrain, x0, y0, w, h);
     } else {
@@ -485,9 +504,29 @@ export class MapView {
     ctx.fillRect(16, y, px, 3);
     ctx.font = "12px system-ui, sans-serif";
     ctx.fillText(len >= 1000 ? `${len / 1000} km` : `${len} m`, 16, y - 4);
+    if (this.base === "tiles") this._tileWords();
   }
 
-  /** What is drawn, for the tests: the routes (world metres), the trails, the transform. */
+  /** The tile source's attribution (its HTML as text) and why no tiles show, bottom right. */
+  _tileWords() {
+    const ctx = this.ctx;
+    const s = this.tiles.source;
+    const words = [this.tiles.note, (s.attribution || s.name).replace(/<[^>]*>/g, "")];
+    ctx.font = "11px system-ui, sans-serif";
+    ctx.textAlign = "right";
+    words.filter(Boolean).forEach((text, i) => {
+      const y = this.height - 8 - 15 * i;
+      const w = ctx.measureText(text).width;
+      ctx.fillStyle = "rgba(255,255,255,0.8)";
+      ctx.fillRect(this.width - w - 12, y - 11, w + 8, 15);
+      ctx.fillStyle = "#1d232b";
+      ctx.fillText(text, this.width - 8, y);
+    });
+    ctx.textAlign = "start";
+  }
+
+  /** What is drawn, for the tests: the routes (world metres), the trails, the transform, the
+   *  base layer. */
   geometry() {
     const routes = {};
     if (this.doc) for (const v of this.doc.vehicles) routes[v.id] = v.route_en_m;
@@ -498,6 +537,7 @@ export class MapView {
       trails,
       view: { ...this.view, width: this.width, height: this.height },
       pending: this.pending,
+      base: this.base,
     };
   }
 }
