@@ -49,7 +49,8 @@ Behaviour modelled on ArduPlane 4.x (``commands_logic.cpp``, ``AP_Mission``, ``A
 - Ground: flat at home altitude, or with ``terrain`` (:class:`Ground`, e.g.
   :class:`sitl_stub.terrain.GridTerrain`) the terrain's elevation under the aircraft, looked up
   every physics step, moved by what it misses the home altitude by at home (home is on the
-  ground); on the ground the wheels follow it.
+  ground); on the ground the wheels follow it, and their vertical speed up a slope is the climb
+  a takeoff starts from.
 - Crash: an armed aircraft in the air that reaches the ground other than by landing (NAV_LAND),
   or goes below it (flown into rising terrain), is wrecked where it hit: on the ground, still,
   never moving again, armed refused. ``CRASH_DETECT_DELAY_S`` later it says
@@ -549,6 +550,7 @@ class Autopilot:
                 self._prng,
                 scale,
             )
+            self._roll_on_terrain(st, dt_s)
             return
         mode = self._mode
         if mode == _AUTO and self._mission_state == _MISSION_RUNNING:
@@ -559,6 +561,7 @@ class Autopilot:
             self._state = model.step_scalar(
                 st, 0.0, 0.0, 0.0, ground, False, p, self._wind, dt_s, self._prng, scale
             )
+            self._roll_on_terrain(st, dt_s)
             return
         if (
             mode == _TAKEOFF_MODE
@@ -588,11 +591,24 @@ class Autopilot:
         if not st.on_ground and (new.alt_m < ground or (new.on_ground and self._nav != _NAV_LAND)):
             self._crash(ground)
             return
+        self._roll_on_terrain(st, dt_s)
         if self._nav == _NAV_LAND:
             self._after_land_step(st, events)
         elif mode == _GUIDED and not self._guided_reached and self._loiter_start_s is not None:
             self._guided_reached = True
             events.append(ItemReached(0))
+
+    def _roll_on_terrain(self, prev: FlightState, dt_s: float) -> None:
+        """On the ground over terrain, the wheels are on the ground where the step ended, and
+        roll up or down it: that vertical speed is the climb a takeoff starts from (else the
+        first metres after lift-off up a slope would be below it)."""
+        st = self._state
+        if self._terrain is None or not st.on_ground:
+            return
+        if st.lat_deg == prev.lat_deg and st.lon_deg == prev.lon_deg:
+            return
+        ground = self._terrain.elevation_m(st.lat_deg, st.lon_deg) + self._ground_offset_m
+        self._state = replace(st, alt_m=ground, climb_rate_m_s=(ground - prev.alt_m) / dt_s)
 
     def _crash(self, ground_m: float) -> None:
         """Flown into the ground: wrecked where it hit, on the ground and still."""

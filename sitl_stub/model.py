@@ -292,7 +292,7 @@ def step_scalar(
         airspeed = max(0.0, gs - (wn * ch + we * sh))
         rotate = (p.takeoff_rotate_speed_m_s or p.airspeed_min_m_s) * tas_scale
         roll = 0.0
-        climb = 0.0
+        climb = state.climb_rate_m_s  # rolling up or down the ground (0 on flat ground)
         vn = gs * ch
         ve = gs * sh
         if motor_on and climb_rate_cmd_m_s > 0.0 and airspeed >= rotate:

@@ -87,6 +87,27 @@ def test_flat_ground_without_terrain_is_home_altitude() -> None:
     assert ap.ground_alt_m == HOME[2]
 
 
+@pytest.mark.parametrize("slope", [0.01, 0.1, 0.3])
+def test_a_takeoff_up_a_slope_rolls_up_it_and_climbs_out(slope: float) -> None:
+    """The wheels follow the ground during the roll and their vertical speed carries into the
+    climb: rising ground under the runway is no crash."""
+
+    def rising(lat_deg: np.ndarray, lon_deg: np.ndarray) -> np.ndarray:
+        north = (np.asarray(lat_deg) - HOME[0]) * math.radians(1.0) * 6_367_000.0
+        return HOME[2] + slope * np.maximum(north, 0.0)
+
+    ap = make_over(GridTerrain(rising))
+    ap.replace_mission([home_item(), takeoff(1, 200.0), item(2, WP, 9000.0, 0.0, 1500.0)])
+    assert ap.set_mode(ap.mode.AUTO) and ap.arm() == (True, "")
+    trace = run(ap, 120.0, until=lambda a: a.current_seq == 2)  # the climb-out done
+    assert ap.crash_time_s is None and ap.current_seq == 2
+    rolled = [s for s in trace.states if s.on_ground and s.groundspeed_m_s > 1.0]
+    assert rolled and all(s.alt_m > HOME[2] for s in rolled[5:])  # up the slope
+    end = trace.states[-1]
+    assert not end.on_ground and end.alt_m > ap.ground_alt_m + 50.0
+    assert end.alt_m - HOME[2] >= 200.0  # the takeoff altitude is above home
+
+
 def test_flown_into_a_ridge_it_crashes_stops_and_says_so_as_arduplane() -> None:
     """ArduPlane/is_flying.cpp crash_detection_update: armed and no longer flying, after the
     is_flying() probability decays and CRASH_DETECTION_DELAY_MS of debounce it sends
