@@ -9,6 +9,7 @@ import dataclasses
 import math
 import pickle
 from collections.abc import Sequence
+from typing import Any
 
 import numpy as np
 import pytest
@@ -478,11 +479,11 @@ def test_a_pickled_controller_decides_as_the_one_it_was_taken_from(
 # -- supervision ---------------------------------------------------------------------------------
 
 
-def _team(paper: tuple[Scenario, World, Schedule], **config: object) -> TeamController:
+def _team(paper: tuple[Scenario, World, Schedule], **config: Any) -> TeamController:
     scenario, world, schedule = paper
     t = TeamController(
         scenario, schedule, world, FlightConfig(**config), rng=np.random.default_rng(3)
-    )  # type: ignore[arg-type]
+    )
     t.start(START_UTC)
     return t
 
