@@ -142,10 +142,6 @@ class GridTerrain:
         north = z10 + (z11 - z10) * fx
         return south + (north - south) * fy
 
-    def elevation_array_m(self, lat_deg: FloatArray, lon_deg: FloatArray) -> FloatArray:
-        """The elevation function itself, at arrays (not the grid: for checks and tests)."""
-        return np.asarray(self._elevation(lat_deg, lon_deg), dtype=np.float64)
-
     def _load(self, key: tuple[int, int]) -> array[float]:
         ti, tj = key
         k = np.arange(self._side, dtype=np.float64) * self.cell_deg

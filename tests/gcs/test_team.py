@@ -488,6 +488,11 @@ def _team(paper: tuple[Scenario, World, Schedule], **config: Any) -> TeamControl
     return t
 
 
+def fix_at(team: TeamController, vid: str, s_m: float, t_s: float) -> act.Fix:
+    """A fix on the route at ``s_m`` flying 25 m/s."""
+    return fix(team, vid, s_m, t_s, 25.0)
+
+
 @pytest.mark.parametrize("after", ["stays", "goes_back"])
 def test_a_vehicle_whose_progress_stalls_past_the_bound_is_lost_and_the_others_keep_their_slots(
     team: TeamController, after: str
@@ -524,10 +529,6 @@ def test_a_vehicle_whose_progress_stalls_past_the_bound_is_lost_and_the_others_k
     assert {x.vehicle_id: x.target_s for x in team.members.values()} == slots
     # It is not commanded or timed any more.
     assert team.handle(fix_at(team, vid, s1 + 5000.0, t + 60.0), t + 60.0) == []
-
-
-def fix_at(team: TeamController, vid: str, s_m: float, t_s: float) -> act.Fix:
-    return fix(team, vid, s_m, t_s, 25.0)
 
 
 def test_a_loiter_is_no_stall(team: TeamController) -> None:
