@@ -126,6 +126,23 @@ class Computed:
 
 
 @dataclass(frozen=True)
+class HoldTaken:
+    """The outcome of :class:`Hold` (``error`` None: the vehicle flies to the point and
+    circles it)."""
+
+    hold: Hold
+    error: str | None = None
+
+
+@dataclass(frozen=True)
+class Resumed:
+    """The outcome of :class:`Resume` (``error`` None: back in AUTO at the item)."""
+
+    resume: Resume
+    error: str | None = None
+
+
+@dataclass(frozen=True)
 class PlanningLead:
     """How far ahead (mission s) a changed mission may start: the runner's measure of
     planning plus upload time at the clock's rate."""
@@ -178,6 +195,9 @@ class Upload:
     adjustments: tuple[Adjustment, ...] = ()
     """Said once the mission is on board."""
     decided_s: float = 0.0
+    holding: bool = False
+    """The vehicle holds outside a zone (GUIDED): it is not flying the mission, so its
+    current item says nothing about the splice waypoint and the upload goes ahead."""
 
 
 @dataclass(frozen=True)
@@ -185,6 +205,29 @@ class SetMode:
     vehicle_id: str
     mode: str
     """The flight mode by name (``RTL``, ``LOITER``)."""
+
+
+@dataclass(frozen=True)
+class Hold:
+    """Fly to a point and circle it until told otherwise: the safe fallback short of a
+    forbidden zone (MAV_CMD_DO_REPOSITION with the change-mode flag: GUIDED)."""
+
+    vehicle_id: str
+    lat_deg: float
+    lon_deg: float
+    alt_amsl_m: float
+    zone_id: str
+    decided_s: float
+
+
+@dataclass(frozen=True)
+class Resume:
+    """Back to AUTO from mission item ``seq`` (after a hold, on the route installed since)."""
+
+    vehicle_id: str
+    seq: int
+    zone_id: str
+    decided_s: float
 
 
 @dataclass(frozen=True)
@@ -238,6 +281,8 @@ class PopupJob:
     loiter_margin_m_s: float
     decided_s: float
     lead_s: float
+    holding: frozenset[str] = frozenset()
+    """Vehicles re-planned from the point they hold at (anchored there, not ahead)."""
 
     def run(self) -> Any:
         return apply_popup(
@@ -269,6 +314,8 @@ Input = (
     | SpeedCommanded
     | Installed
     | Computed
+    | HoldTaken
+    | Resumed
     | PlanningLead
 )
-Action = Report | Launch | CommandSpeed | Upload | SetMode | Stop | Compute
+Action = Report | Launch | CommandSpeed | Upload | SetMode | Hold | Resume | Stop | Compute

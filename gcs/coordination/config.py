@@ -72,3 +72,18 @@ class FlightConfig:
     route, or stalled): ``continue``, the others keep their slots; ``retime``, the team time
     moves to the earliest the others can still make together (the lost one no longer holds
     it back); ``abort``, every vehicle is aborted (RTL)."""
+    hold_radius_m: float = 300.0
+    """The circle an autopilot flies round a hold point is taken to be at most this big
+    (ArduPlane's WP_LOITER_RAD, 60 m by default; the stub's 80 m), plus the vehicle's own
+    turn radius when that is larger."""
+    hold_margin_m: float = 300.0
+    """A hold point is at least this far outside the zone beyond that circle."""
+    hold_guard_s: float = 60.0
+    """The hold is commanded this long (mission s) before the vehicle would reach its hold
+    point: room for the command's round trip and a busy machine's scheduling gaps."""
+    hold_replan_every_s: float = 60.0
+    """A vehicle holding with no route around its zone asks for a re-plan from its hold
+    point at most this often."""
+    replan_delay_wall_s: float = 0.0
+    """Test hook: wall seconds added to every pop-up re-plan job (a re-plan that comes back
+    too late); not counted in the planning time that sets the lead."""

@@ -52,12 +52,18 @@ class EventKind(enum.StrEnum):
     (the overrun, or the flight's hard deadline)."""
     ALARM = "alarm"
     """A vehicle said something critical (STATUSTEXT at MAV_SEVERITY_CRITICAL or worse;
-    ``payload``: ``severity``, ``text``)."""
+    ``payload``: ``severity``, ``text``), or its route enters a forbidden zone that appeared
+    in flight and no route around it is on board in time (``payload``: ``zone``,
+    ``entry_s``, ``time_to_entry_s``, ``why``, ``action``), or a re-plan overran its lead."""
     VEHICLE_LOST = "vehicle_lost"
     """A vehicle is lost to the team (``payload``: ``cause`` ``crash`` or ``stall``, ``t_s``
     mission time, ``why``): it reported a crash (STATUSTEXT "Crash ...", HEARTBEAT
     MAV_STATE_EMERGENCY, disarmed on its route), or its progress along its route stalled for
     longer than ``stall_bound_s``. The reason says what the team does (``on_vehicle_lost``)."""
+    FALLBACK = "fallback"
+    """A vehicle's safe fallback short of a forbidden zone it would otherwise enter: a hold
+    taken or refused, and the resumption of AUTO on the route installed since (``payload``:
+    ``zone``, ``action`` hold, resume or failed)."""
     STATE = "state"
     """A vehicle's state changed (``payload``: ``state``, ``was``;
     :class:`~gcs.coordination.member.VehicleState` values)."""

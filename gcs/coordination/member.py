@@ -49,6 +49,9 @@ class VehicleState(enum.StrEnum):
     """Climbed out, but farther than ``off_route_m`` from its route."""
     ON_ROUTE = "on_route"
     LOITERING = "loitering"
+    HOLDING = "holding"
+    """Holding short of a forbidden zone its route enters, with no route around it on board
+    yet (the safe fallback)."""
     LINK_SILENT = "link_silent"
     """In the air with no position report for longer than the silence threshold."""
     ARRIVED = "arrived"
@@ -125,6 +128,11 @@ class Member:
     """``(track, s_m, t_s)``: the farthest it has come along that track and when it got there
     (mission s); a new track (a re-plan, new loiters) starts it again."""
     lost: Lost | None = None
+    splice_seq: int | None = None
+    """The waypoint after which its mission was last replaced in flight."""
+    hold_zone: str | None = None
+    """The zone it is told to hold short of (from the hold command to its resumption): not
+    timed, not watched for progress meanwhile."""
 
     def tas_per_eas(self, s_m: float) -> float:
         """True airspeed flown per unit commanded from ``s_m`` on: the route's atmosphere
@@ -174,6 +182,8 @@ class Member:
             return VehicleState.LINK_SILENT
         if self.phase == "takeoff":
             return VehicleState.CLIMBING
+        if self.hold_zone is not None:
+            return VehicleState.HOLDING
         if self.in_loiter():
             return VehicleState.LOITERING
         if self.cross_track_m > off_route_m:

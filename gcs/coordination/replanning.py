@@ -49,6 +49,16 @@ class MissionChanges:
     popups_done: set[str]
     popups_running: set[str]
     pending: dict[str, act.Upload]
+    replan_due: dict[str, float]
+    replan_overdue: set[str]
+
+    def hold_anchor_s_m(self, m: Member, zone_id: str) -> float | None:
+        """Where the vehicle holds short of the zone (m along its path); None: not holding
+        (:class:`~gcs.coordination.zoneguard.ZoneGuard` holds vehicles)."""
+        return None
+
+    def _no_route(self, vehicle_id: str, problem: str, now: float, zone_id: str | None) -> None:
+        """No route around a zone (or any, ``zone_id`` None) will come for the vehicle now."""
 
     # -- loiter turns --------------------------------------------------------------------------
 
@@ -152,6 +162,13 @@ class MissionChanges:
         m.busy_mission = False
         if self.pending.get(up.vehicle_id) is up:
             del self.pending[up.vehicle_id]
+        if up.in_flight and (r.skipped or r.error is not None):
+            problem = (
+                "it passed the splice waypoint of its new route"
+                if r.skipped
+                else f"the upload of its new route failed ({r.error})"
+            )
+            self._no_route(m.vehicle_id, problem, now, None)
         if r.skipped:
             out.append(
                 act.Report(
@@ -196,6 +213,7 @@ class MissionChanges:
         m.track = route_track(vs)
         m.next_decision_s = -math.inf
         keep = up.keep_seq
+        m.splice_seq = keep
         s_k = 0.0 if keep is None else (m.mission.item_s_m[keep] or 0.0)
         m.loiter_log = [x for x in m.loiter_log if x["s_m"] < s_k]
         for lo in vs.loiters:
@@ -311,17 +329,36 @@ class MissionChanges:
                 out.append(z)
         return out
 
-    def _popup(self, zone: ThreatZone, t: float, lead: float, out: list[act.Action]) -> None:
-        """Hand out the re-plan around a new threat from waypoints ``lead`` s ahead."""
+    def _popup(
+        self,
+        zone: ThreatZone,
+        t: float,
+        lead: float,
+        out: list[act.Action],
+        why: str | None = None,
+    ) -> None:
+        """Hand out the re-plan around a new threat from waypoints ``lead`` s ahead (a vehicle
+        holding short of it: from its hold point)."""
         at_s = t + lead
         anchors: dict[str, Anchor] = {}
         keeps: dict[str, int | None] = {}
+        holding: set[str] = set()
         for m in self.members.values():
             if m.done:
                 continue
             if m.phase == "ground" and m.takeoff_s > at_s:
                 keeps[m.vehicle_id] = None
                 continue
+            s_hold = self.hold_anchor_s_m(m, zone.id)
+            if s_hold is not None:
+                # Its new route starts where it holds; the mission is kept up to the last
+                # waypoint short of that point (it flies on from there once resumed).
+                keep_h = self._keep_behind(m, s_hold)
+                if keep_h is not None:
+                    anchors[m.vehicle_id] = Anchor(s_hold, self._speed_now(m), at_s)
+                    keeps[m.vehicle_id] = keep_h
+                    holding.add(m.vehicle_id)
+                    continue
             gs = max(m.groundspeed_m_s, 10.0)
             keep = self._keep_seq(m, gs * lead) if m.phase == "route" else None
             if keep is None:
@@ -344,14 +381,12 @@ class MissionChanges:
         if zone.id not in {z.id for z in threats}:
             threats.append(zone)
         world = replace(self.world, threats=tuple(threats))
+        said = f"threat {zone.id} appears" if why is None else f"{zone.id}: {why}"
         out.append(
-            act.Report(
-                EventKind.POPUP,
-                f"threat {zone.id} appears; re-planning from {lead:.0f} s ahead",
-                t_s=t,
-            )
+            act.Report(EventKind.POPUP, f"{said}; re-planning from {lead:.0f} s ahead", t_s=t)
         )
         self.popups_running.add(zone.id)
+        self.replan_due[zone.id] = at_s
         job = act.PopupJob(
             zone,
             self.current_schedule(),
@@ -364,14 +399,30 @@ class MissionChanges:
             self.config.loiter_margin_m_s,
             t,
             lead,
+            frozenset(holding),
         )
         out.append(act.Compute(job))
+
+    def _keep_behind(self, m: Member, s_m: float) -> int | None:
+        """The last route waypoint at or short of ``s_m`` along the vehicle's mission."""
+        found = None
+        for k in range(FIRST_ROUTE_SEQ, len(m.mission.items)):
+            s_k = m.mission.item_s_m[k]
+            if s_k is None or s_k > s_m:
+                break
+            if m.mission.items[k].command == MAV_CMD_NAV_WAYPOINT:
+                found = k
+        return found
 
     def _popup_computed(self, job: act.PopupJob, r: act.Computed, out: list[act.Action]) -> None:
         zone, t, lead = job.zone, job.decided_s, job.lead_s
         err = r.error
+        self.replan_due.pop(zone.id, None)
+        self.replan_overdue.discard(zone.id)
         if err is not None:
             self.popups_running.discard(zone.id)
+            for vid in job.keeps:
+                self._no_route(vid, f"its re-plan around {zone.id} failed: {err}", t, zone.id)
             retry = (
                 isinstance(err, InfeasibleError)
                 and "inside forbidden zone" in str(err)
@@ -427,6 +478,7 @@ class MissionChanges:
                     m.phase != "ground",
                     (),
                     t,
+                    holding=m.vehicle_id in job.holding or m.hold_zone is not None,
                 )
             )
 

@@ -37,7 +37,7 @@ from gcs.coordination.member import Member
 from gcs.coordination.missionclock import MissionClock
 from gcs.coordination.team import TeamController
 from gcs.errors import GcsError
-from gcs.mavlink import mission_client
+from gcs.mavlink import commands, mission_client
 from gcs.mavlink.dialect import mavlink2
 from gcs.mavlink.vehicle import Vehicle
 from planner.errors import InfeasibleError
@@ -417,6 +417,10 @@ class FlightRunner:
                     self._spawn(self._compute(a))
                 case act.SetMode():
                     self._spawn(self._set_mode(a))
+                case act.Hold():
+                    self._spawn(self._hold(a))
+                case act.Resume():
+                    self._spawn(self._resume(a))
                 case act.Stop():
                     self._stopped = True
         if changed:
@@ -477,6 +481,41 @@ class FlightRunner:
         self._checkpoint(True)
         return err
 
+    async def _reposition(self, a: act.Hold) -> None:
+        """MAV_CMD_DO_REPOSITION as COMMAND_INT with the change-mode flag: ArduPlane goes to
+        GUIDED and circles the point (ArduPlane/GCS_Mavlink.cpp,
+        handle_command_int_do_reposition); so does the stub. The altitude is AMSL."""
+        v = self.vehicles[a.vehicle_id]
+        await commands.command_int(
+            v.link,
+            v.system_id,
+            int(mavlink2.MAV_CMD_DO_REPOSITION),
+            (-1.0, float(mavlink2.MAV_DO_REPOSITION_FLAGS_CHANGE_MODE), 0.0, 0.0),
+            frame=int(mavlink2.MAV_FRAME_GLOBAL_INT),
+            x=round(a.lat_deg * 1e7),
+            y=round(a.lon_deg * 1e7),
+            z=a.alt_amsl_m,
+            target_component=v.component_id,
+            timeout_s=self._wall_timeout_s(v),
+            retries=self.config.command_retries,
+        )
+
+    async def _hold(self, a: act.Hold) -> None:
+        err = await self._outcome(self._reposition(a))
+        self._feed(act.HoldTaken(a, err))
+
+    async def _auto_at(self, a: act.Resume) -> None:
+        """The item to go on from (MISSION_SET_CURRENT while in GUIDED), then AUTO: ArduPlane
+        resumes its mission at the current item (AP_Mission::resume)."""
+        v = self.vehicles[a.vehicle_id]
+        timeout, retries = self._wall_timeout_s(v), self.config.command_retries
+        await v.set_current_item(a.seq, timeout_s=timeout, retries=retries)
+        await v.set_mode("AUTO", timeout_s=timeout, retries=retries)
+
+    async def _resume(self, a: act.Resume) -> None:
+        err = await self._outcome(self._auto_at(a))
+        self._feed(act.Resumed(a, err))
+
     async def _upload(self, a: act.Upload) -> None:
         """Upload with the adaptive retry policy (:mod:`gcs.mavlink.retry`), restarting the whole
         transfer (a vehicle may drop a stalled one) twice.
@@ -504,7 +543,7 @@ class FlightRunner:
     async def _install(self, a: act.Upload) -> None:
         v = self.vehicles[a.vehicle_id]
         seq = v.state.mission_current_seq
-        if a.keep_seq is not None and seq is not None and seq > a.keep_seq:
+        if a.keep_seq is not None and not a.holding and seq is not None and seq > a.keep_seq:
             self._feed(act.Installed(a, skipped=True))
             return
         err = await self._outcome(self._upload(a))
@@ -523,6 +562,8 @@ class FlightRunner:
         wall = time.perf_counter() - t0
         if isinstance(a.job, act.PopupJob):
             self.plan_wall_s = max(self.plan_wall_s, wall)
+            if self.config.replan_delay_wall_s > 0.0:
+                await asyncio.sleep(self.config.replan_delay_wall_s)  # the test hook: late
         self._feed(act.Computed(a.job, result, error, wall))
         self._feed(act.PlanningLead(self._lead_s()))
 

@@ -12,7 +12,10 @@ the remaining route (eqs. 6-7, wind from telemetry, quantised airspeed, commande
 level change); loiter turns when a vehicle would be early even at its minimum speed (eqs. 8-9,
 the fewest turns that fit, by replacing its mission after a waypoint ahead); a later team
 arrival when one would be late even at its maximum speed; pop-up threats re-planned for the
-vehicles whose routes they touch, from waypoints ahead, and the team re-timed.
+vehicles whose routes they touch, from waypoints ahead, and the team re-timed. A vehicle whose
+route enters a forbidden zone that appeared in flight, and that has no route around it on
+board in time (the re-plan late or failed, the upload failed or skipped), is held short of it
+with an alarm and resumed once one is installed (:mod:`gcs.coordination.zoneguard`).
 
 Supervision: a vehicle that reports a crash (a STATUSTEXT "Crash ...", HEARTBEAT
 MAV_STATE_EMERGENCY in the air, disarmed on its route) or whose progress along its route
@@ -33,15 +36,16 @@ from gcs.coordination.arrival import ArrivalController, Decision, SpeedLimits
 from gcs.coordination.config import FlightConfig
 from gcs.coordination.events import EventKind
 from gcs.coordination.member import FIRST_ROUTE_SEQ, Lost, LostCause, Member, path_en, route_track
-from gcs.coordination.replanning import MissionChanges
 from gcs.coordination.routetrack import Wind
 from gcs.coordination.tracks import TruthSample, closest_approach
+from gcs.coordination.zoneguard import Exposure, ZoneGuard
 from gcs.errors import GcsError
 from planner.atmosphere import eas2tas
 from planner.mission import MAV_CMD_DO_CHANGE_SPEED
 from planner.plan import World
 from planner.scenario import Scenario, Threat
 from planner.schedule import Schedule
+from planner.threats import ThreatZone
 from planner.timing import SpeedLimits as PlannerLimits
 from planner.timing import takeoff_time_s
 
@@ -88,7 +92,7 @@ def reported_wind(fix: act.Fix) -> Wind:
     return Wind()
 
 
-class TeamController(MissionChanges):
+class TeamController(ZoneGuard):
     """The policy of one flight: members, the team arrival time, threats, decisions.
 
     Build it from a schedule (:meth:`__init__`), take :meth:`initial_uploads`, then
@@ -120,6 +124,10 @@ class TeamController(MissionChanges):
         self.popups_running: set[str] = set()
         self.threats_appeared: list[dict[str, Any]] = []
         self.stopped: str | None = None
+        self.guarded: list[ThreatZone] = []
+        self.exposures: dict[str, dict[str, Exposure]] = {}
+        self.replan_due: dict[str, float] = {}
+        self.replan_overdue: set[str] = set()
         self.pending: dict[str, act.Upload] = {}
         """Uploads handed out and not yet answered, per vehicle (a restart compares the
         vehicle's mission with these too)."""
@@ -210,6 +218,10 @@ class TeamController(MissionChanges):
                 self._installed(event, now_s, out)
             case act.Computed():
                 self._computed(event, now_s, out)
+            case act.HoldTaken():
+                self._hold_taken(event, now_s, out)
+            case act.Resumed():
+                self._resumed(event, now_s, out)
             case act.PlanningLead(lead_s=lead):
                 self.lead_s = max(self.config.min_lead_s, lead)
         # A fix changes only its own vehicle's state; anything else may change any.
@@ -263,7 +275,9 @@ class TeamController(MissionChanges):
         for zone in self._due_popups(now):
             self.popups_done.add(zone.id)
             self.threats_appeared.append({"id": zone.id, "t_s": now})
+            self._guard_zone(zone)
             self._popup(zone, now, self.lead_s, out)
+        self._guard_tick(now, out)
 
     def _launched(self, r: act.Launched, now: float, out: list[act.Action]) -> None:
         m = self.members[r.vehicle_id]
@@ -344,6 +358,10 @@ class TeamController(MissionChanges):
         self._watch_progress(m, t, s, out)
         if m.phase != "route":
             return
+        if self.guarded:
+            self._guard(m, t, s, out)
+        if m.hold_zone is not None:
+            return  # holding short of a zone: timed again once it resumes
         if m.in_loiter() or m.busy_mission:
             return
         if not seq_changed and t < m.next_decision_s:
@@ -364,6 +382,7 @@ class TeamController(MissionChanges):
             or s > ref[1] + PROGRESS_M
             or not m.joined
             or m.in_loiter()
+            or m.hold_zone is not None
         ):
             m.progress = (m.track, s, t)
             return
@@ -794,6 +813,8 @@ class TeamController(MissionChanges):
                 eta = m.arrival_s
             if m.phase == "ground":
                 strategy = {"kind": "takeoff_wait", "takeoff_s": round(m.takeoff_s, 3)}
+            elif m.hold_zone is not None:
+                strategy = {"kind": "hold", "zone": m.hold_zone}
             elif m.in_loiter() or m.loiter_turns_left() > 0:
                 strategy = {"kind": "loiter", "turns_left": m.loiter_turns_left()}
             else:

@@ -1,0 +1,230 @@
+"""The safe fallback short of a pop-up zone, on the team controller alone (a fake clock: the
+mission time is passed in; fixes made from the planned routes). Where each route enters the
+zone is worked out here from the zone's disc, not taken from the controller.
+
+The hold is MAV_CMD_DO_REPOSITION (COMMAND_INT, change-mode flag) to a point short of the
+zone: ArduPlane goes to GUIDED and circles it (ArduPlane/GCS_Mavlink.cpp,
+``GCS_MAVLINK_Plane::handle_command_int_do_reposition``: ``plane.set_mode(plane.mode_guided)``
+then ``plane.set_guided_WP()``), as the stub does (``sitl_stub/commands.py``
+``_cmd_reposition``); the resumption is MISSION_SET_CURRENT then AUTO.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+
+import numpy as np
+import pytest
+
+from gcs.coordination import actions as act
+from gcs.coordination.events import EventKind
+from gcs.coordination.member import VehicleState
+from gcs.coordination.team import TeamController
+from planner.popup import popup_zones
+from planner.threats import RadarSite, build_threats
+from tests.gcs import test_team
+from tests.gcs.test_team import airborne, fix, of, reports
+
+TOUCHED = ("UAV1", "UAV2")
+"""The paper's POPUP1 lies across these two routes (tests/gcs/test_team.py shows it)."""
+
+
+team = test_team.team  # the paper team, started (the fixture)
+
+
+def popup(team: TeamController) -> tuple[RadarSite, float]:
+    zones = build_threats(team.scenario, {vid: m.takeoff_s for vid, m in team.members.items()})
+    (zone,) = popup_zones(zones)
+    assert isinstance(zone, RadarSite) and zone.forbidden
+    return zone, float(zone.appears_at_s or 0.0)
+
+
+def inside(zone: RadarSite, e: float, n: float) -> float:
+    """How far inside the disc (m; negative: outside)."""
+    return zone.radius_m - math.hypot(e - zone.east_m, n - zone.north_m)
+
+
+class Flight:
+    """Every vehicle flying its planned route at its planned speed, one fix each 2 s; a held
+    vehicle circles its hold point (its fixes there)."""
+
+    def __init__(self, team: TeamController, t0: float) -> None:
+        self.team = team
+        self.s: dict[str, float] = {}
+        self.speed: dict[str, float] = {}
+        self.held: dict[str, act.Hold] = {}
+        for vid, m in team.members.items():
+            airborne(team, vid, m.takeoff_s)
+            phase, s_m, speed = m.schedule.state_at(t0)
+            assert phase == "leg", vid
+            self.s[vid], self.speed[vid] = s_m, speed
+            team.handle(act.SpeedCommanded(vid, speed, "plan", t0), t0)
+            team.handle(fix(team, vid, s_m, t0, speed), t0)
+
+    def gs(self, vid: str) -> float:
+        m = self.team.members[vid]
+        return self.speed[vid] * m.schedule.tas_per_eas(self.s[vid])
+
+    def entry_s(self, vid: str, zone: RadarSite) -> float | None:
+        """Where the planned path ahead first enters the disc (own sampling, 20 m)."""
+        m = self.team.members[vid]
+        for s in np.arange(self.s[vid], m.schedule.path.length_m, 20.0):
+            p = m.schedule.path.pose_at(float(s))
+            if inside(zone, p.east_m, p.north_m) > 0.0:
+                return float(s)
+        return None
+
+    def step(self, t: float, answer_holds: bool = True) -> list[act.Action]:
+        out: list[act.Action] = []
+        for vid in self.team.members:
+            if vid not in self.held:
+                self.s[vid] += self.gs(vid) * 2.0
+            got = self.team.handle(fix(self.team, vid, self.s[vid], t, self.speed[vid]), t)
+            for h in of(got, act.Hold):
+                self.held[vid] = h
+                if answer_holds:
+                    got += self.team.handle(act.HoldTaken(h), t)
+            out += got
+        out += self.team.handle(act.Tick(), t)
+        return out
+
+
+def answer(team: TeamController, actions: Sequence[act.Action], t: float) -> list[act.Action]:
+    """Carry out uploads and resumptions at once, as a runner would; their outcomes."""
+    out: list[act.Action] = []
+    for a in actions:
+        if isinstance(a, act.Upload):
+            out += answer(team, team.handle(act.Installed(a), t), t)
+        elif isinstance(a, act.Resume):
+            out += team.handle(act.Resumed(a), t)
+    return [*actions, *out]
+
+
+def test_a_re_plan_that_comes_back_after_the_vehicles_would_enter_holds_them_short_in_time_and_the_late_route_resumes_them(  # noqa: E501
+    team: TeamController,
+) -> None:
+    zone, t_p = popup(team)
+    flight = Flight(team, t_p - 2.0)
+    (job,) = [a.job for a in of(team.handle(act.Tick(), t_p), act.Compute)]
+    assert isinstance(job, act.PopupJob)
+    entry_s = {}
+    for vid in team.members:
+        s_e = flight.entry_s(vid, zone)
+        if s_e is not None:
+            entry_s[vid] = s_e
+    assert set(entry_s) == set(TOUCHED)
+    # When each would enter, flying on as it does (updated as it goes; frozen once held).
+    entry_t = {vid: t_p + (s_e - flight.s[vid]) / flight.gs(vid) for vid, s_e in entry_s.items()}
+    # The re-plan is slow: no result until after both would have entered.
+    alarms: dict[str, act.Report] = {}
+    team_alarms: list[str] = []
+    holds_at: dict[str, float] = {}
+    t = t_p
+    while t < max(entry_t.values()) + 120.0:
+        t += 2.0
+        out = flight.step(t)
+        for r in reports(out, EventKind.ALARM):
+            if r.vehicle is None:
+                team_alarms.append(r.reason)
+            else:
+                assert r.vehicle not in alarms, "one alarm per vehicle and zone"
+                alarms[r.vehicle] = r
+        for h in of(out, act.Hold):
+            holds_at[h.vehicle_id] = t
+        for vid, s_e in entry_s.items():
+            if vid not in holds_at or holds_at[vid] == t:
+                entry_t[vid] = t + (s_e - flight.s[vid]) / flight.gs(vid)
+    assert set(holds_at) == set(TOUCHED)
+    for vid in TOUCHED:
+        m, h, r = team.members[vid], flight.held[vid], alarms[vid]
+        # Before the vehicle would have entered, with room for the command to get there.
+        assert holds_at[vid] <= entry_t[vid] - 30.0, (vid, holds_at[vid], entry_t[vid])
+        assert r.t_s == holds_at[vid] and r.payload["zone"] == zone.id
+        assert r.payload["time_to_entry_s"] == pytest.approx(entry_t[vid] - holds_at[vid], abs=5)
+        assert "still running" in r.payload["why"] and zone.id in r.reason
+        # Where it was told, and the point it holds at, are outside the disc: the point by
+        # the hold circle and the margin.
+        pose = m.schedule.path.pose_at(flight.s[vid])
+        assert inside(zone, pose.east_m, pose.north_m) < 0.0
+        he, hn = team.frame.to_local(h.lat_deg, h.lon_deg)
+        cfg = team.config
+        assert -inside(zone, float(he), float(hn)) >= cfg.hold_radius_m + cfg.hold_margin_m - 1.0
+        assert m.state is VehicleState.HOLDING
+        assert team.snapshot(t)["vehicles"][list(team.members).index(vid)]["strategy"] == {
+            "kind": "hold",
+            "zone": zone.id,
+        }
+    # The re-plan overran its lead (60 s): said once, not waited for.
+    assert [x for x in team_alarms if "not done within its lead" in x] == [team_alarms[0]]
+    assert team.replan_overdue == {zone.id}
+    # UAV3's route does not enter the zone: untouched, never held.
+    assert "UAV3" not in flight.held and team.members["UAV3"].hold_zone is None
+    # The late result: installed on the holding vehicles (their current item says nothing
+    # while they hold), then each resumes AUTO past its hold point on a route that keeps out.
+    t += 10.0
+    out = answer(team, team.handle(act.Computed(job, job.run()), t), t)
+    uploads = {u.vehicle_id: u for u in of(out, act.Upload)}
+    assert {vid for vid in TOUCHED if uploads[vid].holding} == set(TOUCHED)
+    out += flight.step(t + 2.0)
+    out = answer(team, out, t + 2.0)
+    resumes = {r.vehicle_id: r for r in of(out, act.Resume)}
+    assert set(resumes) == set(TOUCHED)
+    said = {r.vehicle for r in reports(out, EventKind.FALLBACK) if r.payload["action"] == "resume"}
+    assert said == set(TOUCHED)
+    for vid in TOUCHED:
+        m = team.members[vid]
+        assert m.hold_zone is None and m.state is not VehicleState.HOLDING
+        # The route resumed on, from the item it resumes at, keeps out of the disc.
+        s_from = m.mission.item_s_m[resumes[vid].seq] or 0.0
+        for s in np.arange(s_from, m.schedule.path.length_m, 50.0):
+            p = m.schedule.path.pose_at(float(s))
+            assert inside(zone, p.east_m, p.north_m) < 0.0, (vid, s)
+
+
+def test_a_failed_upload_of_the_route_around_the_zone_falls_back_to_the_hold(
+    team: TeamController,
+) -> None:
+    zone, t_p = popup(team)
+    flight = Flight(team, t_p - 2.0)
+    (job,) = [a.job for a in of(team.handle(act.Tick(), t_p), act.Compute)]
+    out = team.handle(act.Computed(job, job.run()), t_p + 1.0)
+    for u in of(out, act.Upload):
+        if u.vehicle_id == "UAV1":
+            team.handle(act.Installed(u, error="vehicle 1: mission upload timed out"), t_p + 2.0)
+        else:
+            answer(team, [u], t_p + 2.0)
+    t, held = t_p + 2.0, []
+    while t < t_p + 3000.0 and not held:
+        t += 2.0
+        out = flight.step(t)
+        held = of(out, act.Hold)
+    assert [h.vehicle_id for h in held] == ["UAV1"]
+    (alarm,) = [r for r in reports(out, EventKind.ALARM) if r.vehicle == "UAV1"]
+    assert "upload of its new route failed" in alarm.payload["why"]
+    assert alarm.payload["time_to_entry_s"] > 30.0
+    # Holding with nothing coming: it asks for a re-plan from where it holds.
+    jobs = [a.job for a in of(out, act.Compute)]
+    for _ in range(3):
+        if jobs:
+            break
+        t += 2.0
+        jobs = [a.job for a in of(flight.step(t), act.Compute)]
+    (retry,) = jobs
+    assert isinstance(retry, act.PopupJob) and retry.holding == frozenset({"UAV1"})
+    assert retry.anchors["UAV1"].s_m == pytest.approx(team.exposures["UAV1"][zone.id].hold_s_m)
+    # The others got their routes: never held.
+    assert set(flight.held) == {"UAV1"}
+
+
+def test_a_route_clear_of_the_zone_is_never_held(team: TeamController) -> None:
+    _, t_p = popup(team)
+    flight = Flight(team, t_p - 2.0)
+    team.handle(act.Tick(), t_p)  # the re-plan never comes back
+    t = t_p
+    while t < t_p + 4000.0 and not team.members["UAV3"].done:
+        t += 5.0
+        out = flight.step(t)
+        assert not [a for a in of(out, act.Hold) if a.vehicle_id == "UAV3"]
+        assert not [r for r in reports(out, EventKind.ALARM) if r.vehicle == "UAV3"]
+    assert "UAV3" not in team.exposures or not team.exposures["UAV3"]
