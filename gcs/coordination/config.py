@@ -85,5 +85,6 @@ class FlightConfig:
     """A vehicle holding with no route around its zone asks for a re-plan from its hold
     point at most this often."""
     replan_delay_wall_s: float = 0.0
-    """Test hook: wall seconds added to every pop-up re-plan job (a re-plan that comes back
-    too late); not counted in the planning time that sets the lead."""
+    """Test hook: wall seconds added to every pop-up re-plan job but those from a hold point
+    (a re-plan that comes back too late); not counted in the planning time that sets the
+    lead."""

@@ -130,6 +130,9 @@ class Member:
     lost: Lost | None = None
     splice_seq: int | None = None
     """The waypoint after which its mission was last replaced in flight."""
+    rejoin_seq: int | None = None
+    """After a hold: the item it resumed at. Until it passes it, it flies to it from where it
+    held (perhaps back along the route), which is no stall."""
     hold_zone: str | None = None
     """The zone it is told to hold short of (from the hold command to its resumption): not
     timed, not watched for progress meanwhile."""

@@ -60,6 +60,9 @@ class MissionChanges:
     def _no_route(self, vehicle_id: str, problem: str, now: float, zone_id: str | None) -> None:
         """No route around a zone (or any, ``zone_id`` None) will come for the vehicle now."""
 
+    def _replan_now(self, vehicle_id: str, zone_id: str) -> None:
+        """A vehicle holding short of the zone is re-planned from its hold point at once."""
+
     # -- loiter turns --------------------------------------------------------------------------
 
     def _keep_seq(self, m: Member, lead_m: float) -> int | None:
@@ -69,6 +72,8 @@ class MissionChanges:
         for k in range(seq, len(m.mission.items)):
             it = m.mission.items[k]
             s = m.mission.item_s_m[k]
+            if s is not None and s >= m.track.length_m:
+                return None  # the run-out past the goal: nothing to splice after
             if it.command == MAV_CMD_NAV_WAYPOINT and s is not None and s >= s_now + lead_m:
                 return k
         return None
@@ -467,6 +472,14 @@ class MissionChanges:
             if m.phase == "ground":
                 m.takeoff_s = vs.takeoff_s
             keep = job.keeps[m.vehicle_id]
+            s_hold = self.hold_anchor_s_m(m, zone.id)
+            s_keep = None if keep is None else m.mission.item_s_m[keep]
+            if s_hold is not None and m.vehicle_id not in job.holding and (s_keep or 0.0) < s_hold:
+                # It holds past the waypoint this route starts from: flying back to it would
+                # waste the hold; it is re-planned from where it holds instead.
+                self._no_route(m.vehicle_id, "its new route starts behind where it holds", t, None)
+                self._replan_now(m.vehicle_id, zone.id)
+                continue
             m.busy_mission = True
             out.append(
                 act.Upload(

@@ -562,7 +562,7 @@ class FlightRunner:
         wall = time.perf_counter() - t0
         if isinstance(a.job, act.PopupJob):
             self.plan_wall_s = max(self.plan_wall_s, wall)
-            if self.config.replan_delay_wall_s > 0.0:
+            if self.config.replan_delay_wall_s > 0.0 and not a.job.holding:
                 await asyncio.sleep(self.config.replan_delay_wall_s)  # the test hook: late
         self._feed(act.Computed(a.job, result, error, wall))
         self._feed(act.PlanningLead(self._lead_s()))

@@ -375,6 +375,8 @@ class TeamController(ZoneGuard):
     def _watch_progress(self, m: Member, t: float, s: float, out: list[act.Action]) -> None:
         """Lose a vehicle whose progress along its route stalls (or goes backwards) for longer
         than ``stall_bound_s``: watched once it has joined its route, not in a loiter."""
+        if m.rejoin_seq is not None and (m.last_seq or 0) > m.rejoin_seq:
+            m.rejoin_seq = None
         ref = m.progress
         if (
             ref is None
@@ -383,6 +385,7 @@ class TeamController(ZoneGuard):
             or not m.joined
             or m.in_loiter()
             or m.hold_zone is not None
+            or m.rejoin_seq is not None
         ):
             m.progress = (m.track, s, t)
             return

@@ -139,6 +139,11 @@ class ZoneGuard(MissionChanges):
                 if exp.state == "holding":
                     exp.next_replan_s = now + self.config.hold_replan_every_s
 
+    def _replan_now(self, vehicle_id: str, zone_id: str) -> None:
+        exp = self.exposures.get(vehicle_id, {}).get(zone_id)
+        if exp is not None:
+            exp.next_replan_s = -math.inf
+
     # -- watching ---------------------------------------------------------------------------
 
     def _guard_tick(self, now: float, out: list[act.Action]) -> None:
@@ -338,6 +343,7 @@ class ZoneGuard(MissionChanges):
             return
         del exps[up.zone_id]
         m.hold_zone = None
+        m.rejoin_seq = up.seq
         m.next_decision_s = -math.inf
         m.progress = None
         what = f"route around {up.zone_id} on board: resumed AUTO at item {up.seq}; re-timed"

@@ -91,13 +91,16 @@ class Flight:
 
 
 def answer(team: TeamController, actions: Sequence[act.Action], t: float) -> list[act.Action]:
-    """Carry out uploads and resumptions at once, as a runner would; their outcomes."""
+    """Carry out uploads, resumptions and planning jobs at once, as a runner would; their
+    outcomes."""
     out: list[act.Action] = []
     for a in actions:
         if isinstance(a, act.Upload):
             out += answer(team, team.handle(act.Installed(a), t), t)
         elif isinstance(a, act.Resume):
             out += team.handle(act.Resumed(a), t)
+        elif isinstance(a, act.Compute) and isinstance(a.job, act.PopupJob):
+            out += answer(team, team.handle(act.Computed(a.job, a.job.run()), t), t)
     return [*actions, *out]
 
 
@@ -160,14 +163,17 @@ def test_a_re_plan_that_comes_back_after_the_vehicles_would_enter_holds_them_sho
     assert team.replan_overdue == {zone.id}
     # UAV3's route does not enter the zone: untouched, never held.
     assert "UAV3" not in flight.held and team.members["UAV3"].hold_zone is None
-    # The late result: installed on the holding vehicles (their current item says nothing
-    # while they hold), then each resumes AUTO past its hold point on a route that keeps out.
+    # The late result: a holding vehicle gets it whatever its current item says (it is not
+    # flying its mission) unless the new route starts behind where it holds (it passed the
+    # splice waypoint): that one is re-planned from its hold point. Then each resumes AUTO past
+    # its hold point on a route that keeps out.
     t += 10.0
     out = answer(team, team.handle(act.Computed(job, job.run()), t), t)
-    uploads = {u.vehicle_id: u for u in of(out, act.Upload)}
-    assert {vid for vid in TOUCHED if uploads[vid].holding} == set(TOUCHED)
-    out += flight.step(t + 2.0)
-    out = answer(team, out, t + 2.0)
+    for _ in range(3):
+        t += 2.0
+        out += answer(team, flight.step(t), t)
+    uploads = {u.vehicle_id: u for u in of(out, act.Upload) if u.vehicle_id in TOUCHED}
+    assert set(uploads) == set(TOUCHED) and all(u.holding for u in uploads.values())
     resumes = {r.vehicle_id: r for r in of(out, act.Resume)}
     assert set(resumes) == set(TOUCHED)
     said = {r.vehicle for r in reports(out, EventKind.FALLBACK) if r.payload["action"] == "resume"}
