@@ -11,6 +11,7 @@
         [--speed-bias VEHICLE,FRACTION] [--utc-offset VEHICLE,SECONDS] [--db URL]
         [--abort VEHICLE|all,AT_S[,rtl|loiter]] [--hill LAT,LON,RADIUS_M,HEIGHT_M]
         [--on-vehicle-lost continue|retime|abort] [--stall-bound S] [--hard-deadline S]
+        [--replan-delay S]
 
 Common options: ``--vehicle SYSID`` (default: the first vehicle heard), ``--wait S`` (how long
 to wait for it), ``--timeout S`` and ``--retries N`` per protocol exchange (default: a timeout
@@ -417,6 +418,14 @@ def parser() -> argparse.ArgumentParser:
         "reach its vehicles again (--connect, else the flight's own connections), compare "
         "their missions with the kept ones and go on; nothing launched or uploaded twice",
     )
+    rh.add_argument(
+        "--replan-delay",
+        type=float,
+        default=0.0,
+        metavar="S",
+        help="test hook: add S wall seconds to every pop-up re-plan (a re-plan that comes back "
+        "too late: the vehicles whose routes enter the zone hold short of it)",
+    )
     rh.add_argument("--tolerance", type=float, default=1.0, help="pass mark for arrivals (s)")
     rh.add_argument("--quiet", action="store_true", help="no progress lines")
     rh.set_defaults(fn=rehearse_cmd)
@@ -502,6 +511,8 @@ def _rehearsal_options(args: argparse.Namespace) -> object:
     ):
         if not (math.isfinite(value) and value > 0.0):
             raise UsageError(f"{option} must be a positive number of seconds, got {value:g}")
+    if not (math.isfinite(args.replan_delay) and args.replan_delay >= 0.0):
+        raise UsageError(f"--replan-delay must be >= 0 seconds, got {args.replan_delay:g}")
     speed_bias = _per_vehicle(args.speed_bias, "--speed-bias", "FRACTION", ids, (-0.5, 0.5))
     utc_offsets = _per_vehicle(args.utc_offset, "--utc-offset", "SECONDS", ids, (-1e6, 1e6))
     if args.connect and (blackouts or args.wind or args.loss or speed_bias or utc_offsets or hills):
@@ -535,6 +546,7 @@ def _rehearsal_options(args: argparse.Namespace) -> object:
             on_vehicle_lost=args.on_vehicle_lost,
             stall_bound_s=args.stall_bound,
             hard_deadline_s=args.hard_deadline,
+            replan_delay_wall_s=args.replan_delay,
         ),
         db_url=args.db,
         resume=args.resume,
@@ -590,6 +602,18 @@ async def rehearse_cmd(args: argparse.Namespace) -> str:
     if opts.report_dir is not None:
         written = write_report(record, opts.report_dir)  # the record carries its world
         print(f"gcs: report in {opts.report_dir} ({', '.join(p.name for p in written)})")
+    for alarm in record["alarms"]:
+        print(f"gcs: alarm at {alarm['t_s']:.1f} s {alarm['vehicle'] or 'team'}: {alarm['reason']}")
+    entered = record["zone_entries"]
+    if entered:
+        raise GcsError(
+            "rehearsal failed: forbidden zone entered (flown track): "
+            + "; ".join(
+                f"{z['vehicle']} inside {z['zone']} for {z['inside_s']:g} s, "
+                f"{-z['closest_m']:.0f} m deep"
+                for z in entered
+            )
+        )
     if record["state"] == "failed":
         raise GcsError(f"rehearsal failed: {record['state_reason']}")
     if not passed(record, args.tolerance):

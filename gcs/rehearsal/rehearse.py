@@ -625,6 +625,7 @@ def flight_record(
         )
     sep = min_separation(tracks, until_utc_s=until)
     ids = {v.system_id: vid for vid, v in coord.vehicles.items()}
+    zones = zone_clearances(coord, {ids[k]: v for k, v in tracks.items() if k in ids})
     ref = coord.team_ref_s
     return {
         "format": FLIGHT_FORMAT,
@@ -638,6 +639,13 @@ def flight_record(
         "min_separation_m": None if sep is None else round(sep[0], 1),
         "min_separation_pair": None if sep is None else [ids.get(sep[1]), ids.get(sep[2])],
         "min_separation_utc_s": None if sep is None else round(sep[3], 3),
+        "zone_clearances": zones,
+        "zone_entries": [z for z in zones if z["inside_samples"] > 0],
+        "alarms": [
+            {"vehicle": ev.vehicle, "t_s": round(ev.t_s, 3), "reason": ev.reason}
+            for ev in coord.events
+            if ev.kind is EventKind.ALARM
+        ],
         "wall_s": round(wall_s, 2),
         "speedup": None if opts.connect else opts.speedup,
         "wind": None
@@ -663,6 +671,47 @@ def flight_record(
     }
 
 
+def zone_clearances(
+    coord: FlightRunner, tracks: Mapping[str, Sequence[TruthSample]]
+) -> list[dict[str, Any]]:
+    """Per vehicle and forbidden zone (the operator's included), from the flown track alone
+    (the simulator's truth when it is ours): the closest it came to the zone below its
+    ceiling once the zone was there (m, negative inside), and how many samples were inside."""
+    assert coord.start_utc_s is not None and coord.team is not None
+    frame = coord.scenario.frame()
+    out: list[dict[str, Any]] = []
+    zones = [z for z in coord.team.zones() if z.forbidden]
+    for vid, samples in tracks.items():
+        if not samples:
+            continue
+        utc = np.array([smp.utc_s for smp in samples])
+        alt = np.array([smp.alt_m for smp in samples])
+        east, north = frame.to_local(
+            np.array([smp.lat_deg for smp in samples]), np.array([smp.lon_deg for smp in samples])
+        )
+        for zone in zones:
+            appears = zone.appears_at_s
+            since = -math.inf if appears is None else coord.start_utc_s + appears
+            keep = (utc >= since) & (alt < zone.ceiling_m)
+            if not keep.any():
+                continue
+            d = zone.distance_m(np.atleast_1d(east)[keep], np.atleast_1d(north)[keep])
+            inside = d < 0.0
+            out.append(
+                {
+                    "vehicle": vid,
+                    "zone": zone.id,
+                    "closest_m": round(float(d.min()), 1),
+                    "inside_samples": int(inside.sum()),
+                    "first_inside_utc_s": round(float(utc[keep][inside][0]), 3)
+                    if inside.any()
+                    else None,
+                    "inside_s": round(float(inside.sum()) * _period(samples), 1),
+                }
+            )
+    return out
+
+
 def _team_source(vehicles: Sequence[Mapping[str, Any]]) -> str:
     sources = {v["arrival_source"] for v in vehicles}
     return sources.pop() if len(sources) == 1 else "mixed"
@@ -680,15 +729,25 @@ def _period(samples: Sequence[TruthSample]) -> float:
 
 
 def passed(record: Mapping[str, Any], tolerance_s: float) -> bool:
-    """Every vehicle not aborted arrived within tolerance and the separation held (a lost
-    vehicle never arrived)."""
+    """Every vehicle not aborted arrived within tolerance, the separation held and no vehicle
+    entered a forbidden zone (a lost vehicle never arrived)."""
     ok = all(
         v["error_s"] is not None and abs(v["error_s"]) <= tolerance_s
         for v in record["vehicles"]
         if v.get("state") != "aborted"
     )
     sep = record.get("min_separation_m")
-    return ok and (sep is None or sep >= record["separation_m"])
+    entered = record.get("zone_entries") or []
+    return ok and not entered and (sep is None or sep >= record["separation_m"])
 
 
-__all__ = ["Abort", "Blackout", "Hill", "RehearsalOptions", "flight_record", "passed", "rehearse"]
+__all__ = [
+    "Abort",
+    "Blackout",
+    "Hill",
+    "RehearsalOptions",
+    "flight_record",
+    "passed",
+    "rehearse",
+    "zone_clearances",
+]

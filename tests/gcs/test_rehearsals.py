@@ -441,3 +441,47 @@ def test_a_vehicle_flown_into_a_hill_only_the_simulator_has_is_reported_and_the_
     b_rows = [r for r in rows if r["sysid"] == 2 and not r["on_ground"]]
     passed_s = _closest_utc_s(b_rows, (14000.0, 6000.0), frame)
     assert abs(passed_s - b["target_arrival_utc_s"]) <= 1.0, (passed_s, b)
+
+
+async def test_a_re_plan_that_lands_after_the_aircraft_reach_the_pop_up_holds_them_outside_it(
+    tmp_path: Path,
+) -> None:
+    """The paper flight with every pop-up re-plan made 8 s of wall time late (1600 s of
+    mission at 200x, far past UAV1's and UAV2's entry into POPUP1): each is held short of
+    the disc with an alarm (MAV_CMD_DO_REPOSITION in GUIDED: ArduPlane/GCS_Mavlink.cpp
+    handle_command_int_do_reposition; the stub's _cmd_reposition), then resumes AUTO on the
+    late route around it. The stub's truth log, read here, has no sample inside the disc."""
+    from gcs.coordination.config import FlightConfig
+
+    truth = tmp_path / "truth.jsonl"
+    record = await rehearse(
+        _demo_run(seed=1, truth=truth, config=FlightConfig(seed=1, replan_delay_wall_s=8.0))
+    )
+    scenario = load_scenario(PAPER)
+    (popup,) = [t for t in scenario.threats if t.id == "POPUP1"]
+    frame = scenario.frame()
+    ce, cn = popup.center.east_m, popup.center.north_m
+    appeared = record["threats_appeared"][0]["utc_s"]
+    rows = [json.loads(line) for line in truth.read_text().splitlines()[1:]]
+    closest = math.inf
+    for r in rows:
+        if r["utc_s"] < appeared or r["alt_m"] >= popup.ceiling_m:
+            continue
+        e, n = frame.to_local(r["lat_deg"], r["lon_deg"])
+        closest = min(closest, math.hypot(float(e) - ce, float(n) - cn) - popup.radius_m)
+    assert closest > 0.0, closest
+    print(f"closest approach to POPUP1 from the truth log: {closest:.0f} m")
+    assert record["zone_entries"] == []
+    print("closest by the record:", record["zone_clearances"])
+    alarms = [a for a in record["alarms"] if a["vehicle"]]
+    print("alarms:", *record["alarms"], sep="\n  ")
+    assert {a["vehicle"] for a in alarms} >= {"UAV1", "UAV2"}, alarms
+    assert all("enters POPUP1" in a["reason"] and "holding" in a["reason"] for a in alarms)
+    said = [(e["vehicle"], e["reason"]) for e in record["events"] if e["kind"] == "fallback"]
+    print("fallback:", *said, sep="\n  ")
+    for vid in ("UAV1", "UAV2"):
+        reasons = [r for v, r in said if v == vid]
+        assert any(r.startswith("holding at") for r in reasons), reasons
+        assert any("resumed AUTO" in r for r in reasons), reasons
+    assert record["state"] == "completed", record["state_reason"]
+    assert all(v["state"] == "arrived" for v in record["vehicles"])
