@@ -59,6 +59,7 @@ bench: $(STAMP)
 	$(PY) bench/bench_gcs_mission.py
 	$(PY) bench/bench_gcs_mission_loss.py
 	$(PY) bench/bench_gcs_ingest.py
+	$(PY) bench/bench_framing.py
 
 clean:
 	rm -rf $(VENV) $(OUT) .mypy_cache .ruff_cache .pytest_cache .hypothesis
