@@ -187,10 +187,9 @@ class ZoneGuard(MissionChanges):
             if exp.track is not m.track:
                 self._locate(m, exp, s_now)
             if exp.entry_s_m is None:
+                # Kept while its route keeps out (found again only when the route changes).
                 if exp.state == "holding":
                     self._resume(m, exp, t, out)
-                elif exp.state == "watching":
-                    del exps[zone.id]
                 continue
             if exp.state == "watching":
                 gs = max(m.groundspeed_m_s, 10.0)
