@@ -484,8 +484,10 @@ async def _idle_exit(team: SimTeam, idle_s: float, stop: asyncio.Event) -> None:
         now = time.monotonic()
         idle_since = now if idle_since is None else idle_since
         if now - idle_since >= idle_s:
-            print(f"sitl_stub: no client for {idle_s:g} s; stopping", flush=True)
             stop.set()
+            # The ground station that started it may be gone, and its end of stdout with it.
+            with contextlib.suppress(OSError):
+                print(f"sitl_stub: no client for {idle_s:g} s; stopping", flush=True)
             return
 
 
@@ -546,11 +548,13 @@ async def serve(
             for task in tasks:
                 task.cancel()
             stats = team.stats()
-            print(
-                f"sitl_stub: stopping; simulated {stats.sim_elapsed_s:.1f} s in "
-                f"{stats.wall_elapsed_s:.1f} s wall ({stats.rate_fraction:.1%} of requested rate)",
-                flush=True,
-            )
+            with contextlib.suppress(OSError):  # stdout may be a pipe whose reader is gone
+                print(
+                    f"sitl_stub: stopping; simulated {stats.sim_elapsed_s:.1f} s in "
+                    f"{stats.wall_elapsed_s:.1f} s wall "
+                    f"({stats.rate_fraction:.1%} of requested rate)",
+                    flush=True,
+                )
     finally:
         for sig in (signal.SIGINT, signal.SIGTERM):
             loop.remove_signal_handler(sig)

@@ -7,9 +7,13 @@ import contextlib
 import itertools
 import json
 import math
+import os
 import re
 import signal
+import socket
+import subprocess
 import sys
+import time
 from collections.abc import AsyncIterator
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -118,6 +122,39 @@ async def test_idle_exit_stops_a_simulator_whose_clients_are_gone() -> None:
         if proc.returncode is None:
             proc.kill()
             await proc.wait()
+
+
+def test_idle_exit_stops_a_simulator_whose_parent_was_killed() -> None:
+    """Its stdout and stderr are pipes to a ground station that is SIGKILLed (as a service
+    killed mid-flight): writing its last words to the dead pipe must not keep it running."""
+    base = free_port_base(1)
+    child = (
+        "import subprocess, sys, time\n"
+        "p = subprocess.Popen([sys.executable, '-m', 'sitl_stub', '--vehicles', '1',"
+        f" '--tcp-base', '{base}', '--home', '-35.36,149.16,584,90', '--idle-exit', '1.5'],"
+        " stdout=subprocess.PIPE, stderr=subprocess.PIPE)\n"
+        "p.stdout.readline(); print(p.pid, flush=True); time.sleep(120)\n"
+    )
+    parent = subprocess.Popen([sys.executable, "-c", child], stdout=subprocess.PIPE, text=True)
+    assert parent.stdout is not None
+    pid = int(parent.stdout.readline())  # once it is ready
+    parent.stdout.close()
+    try:
+        with socket.create_connection(("127.0.0.1", base), timeout=5):
+            time.sleep(2.0)
+            parent.kill()
+            parent.wait()
+        deadline = time.monotonic() + 15.0
+        while time.monotonic() < deadline:
+            try:
+                os.kill(pid, 0)
+            except ProcessLookupError:
+                return
+            time.sleep(0.2)
+        pytest.fail("the simulator ran on after its parent died and its client left")
+    finally:
+        with contextlib.suppress(ProcessLookupError):
+            os.kill(pid, signal.SIGKILL)
 
 
 async def test_cli_rejects_bad_home_with_clear_message() -> None:
