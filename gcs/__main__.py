@@ -388,9 +388,10 @@ def parser() -> argparse.ArgumentParser:
     rh.add_argument(
         "--stall-bound",
         type=float,
-        default=10.0,
+        default=300.0,
         metavar="S",
-        help="a vehicle making no progress along its route this long (mission s) is lost",
+        help="a vehicle making no progress along its route this long (mission s) is lost "
+        "(one that stops moving is lost after 10 s)",
     )
     rh.add_argument(
         "--hard-deadline",

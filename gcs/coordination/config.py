@@ -63,10 +63,17 @@ class FlightConfig:
     """The flight ends, failed, this long after the latest arrival as planned, whatever the
     team time has become since: the overrun follows the team time, which a late vehicle or the
     operator moves; this never moves, so a flight always ends."""
-    stall_bound_s: float = 10.0
+    stall_bound_s: float = 300.0
     """A vehicle on its route (climbed out, joined it once, not in a loiter) whose progress
-    along it stalls or goes backwards for longer than this is lost: it crashed, or it no longer
-    flies its mission. Measured on its fixes' mission times, so a link blackout is no stall."""
+    along it stalls or goes backwards for longer than this is lost: it no longer flies its
+    mission. Long enough for the turns an aircraft flies on its mission (a turn back to a
+    waypoint its climb-out carried it past takes minutes). Measured on its fixes' mission
+    times, so a link blackout is no stall."""
+    stopped_bound_s: float = 10.0
+    """An airborne vehicle past its climb-out whose fixes move less than ``stopped_m`` in this
+    long is lost: an aeroplane that stops moving has crashed (a loiter, a hold or a turn
+    moves it)."""
+    stopped_m: float = 50.0
     on_vehicle_lost: LostPolicy = "continue"
     """The operator's choice when a vehicle is lost (it reported a crash, disarmed on its
     route, or stalled): ``continue``, the others keep their slots; ``retime``, the team time

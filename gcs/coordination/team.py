@@ -373,10 +373,26 @@ class TeamController(ZoneGuard):
     # -- supervision ----------------------------------------------------------------------------
 
     def _watch_progress(self, m: Member, t: float, s: float, out: list[act.Action]) -> None:
-        """Lose a vehicle whose progress along its route stalls (or goes backwards) for longer
-        than ``stall_bound_s``: watched once it has joined its route, not in a loiter."""
+        """Lose a vehicle that stops (moves less than ``stopped_m`` in ``stopped_bound_s``), or
+        whose progress along its route stalls (or goes backwards) for longer than
+        ``stall_bound_s``: watched once it has joined its route, not in a loiter."""
         if m.rejoin_seq is not None and (m.last_seq or 0) > m.rejoin_seq:
             m.rejoin_seq = None
+        cfg = self.config
+        e, n, still = m.east_m or 0.0, m.north_m or 0.0, m.still
+        moved_m = math.inf if still is None else math.hypot(e - still[0], n - still[1])
+        if still is None or moved_m > cfg.stopped_m:
+            m.still = (e, n, t)
+        elif t - still[2] > cfg.stopped_bound_s:
+            self._lose(
+                m,
+                "stall",
+                f"stopped: moved {moved_m:.0f} m in {t - still[2]:.1f} s (at {s:.0f} m of "
+                f"{m.track.length_m:.0f} m)",
+                t,
+                out,
+            )
+            return
         ref = m.progress
         if (
             ref is None

@@ -501,7 +501,11 @@ def test_a_vehicle_whose_progress_stalls_past_the_bound_is_lost_and_the_others_k
     m, t0 = flying(team, vid, 600.0)
     slots = {x.vehicle_id: x.target_s for x in team.members.values()}
     ref = team.team_ref_s
-    bound = FlightConfig().stall_bound_s
+    # Standing still it is lost after stopped_bound_s; flying backwards, after stall_bound_s
+    # (shortened here: backwards for the default 300 s it would first be late and move the
+    # team time, which is not what this test is about).
+    team.config = dataclasses.replace(team.config, stall_bound_s=10.0)
+    bound = team.config.stopped_bound_s if after == "stays" else team.config.stall_bound_s
     s0 = 20_000.0
     # On its route at 25 m/s, 2 fixes a second; a 30 s gap in them (a link blackout) with the
     # progress made meanwhile is no stall.
@@ -522,7 +526,10 @@ def test_a_vehicle_whose_progress_stalls_past_the_bound_is_lost_and_the_others_k
     (r,) = lost
     assert r.vehicle == vid and r.t_s == t
     assert r.payload["cause"] == "stall" and r.payload["policy"] == "continue"
-    assert f"no progress along its route for {t - t1:.1f} s" in r.reason
+    if after == "stays":
+        assert f"stopped: moved 0 m in {t - t1:.1f} s" in r.reason
+    else:
+        assert f"no progress along its route for {t - t1:.1f} s" in r.reason
     assert "the others keep their slots" in r.reason
     assert m.phase == "lost" and m.state is VehicleState.LOST and m.done
     assert team.team_ref_s == ref
@@ -541,7 +548,8 @@ def test_a_loiter_is_no_stall(team: TeamController) -> None:
     items[loiter_seq] = dataclasses.replace(items[loiter_seq], command=MAV_CMD_NAV_LOITER_TURNS)
     m.mission = dataclasses.replace(m.mission, items=tuple(items))
     for k in range(1, 200):
-        f = fix_at(team, vid, 20_000.0, t0 + 0.5 * k)
+        # Circling there: it moves (back and forth along the route here), its s goes nowhere.
+        f = fix_at(team, vid, 20_000.0 + 250.0 * math.sin(k * math.pi / 16), t0 + 0.5 * k)
         out = team.handle(act.Fix(**{**f.__dict__, "mission_seq": loiter_seq}), t0 + 0.5 * k)
         assert not reports(out, EventKind.VEHICLE_LOST)
     assert m.state is VehicleState.LOITERING
