@@ -447,10 +447,11 @@ async def test_a_re_plan_that_lands_after_the_aircraft_reach_the_pop_up_holds_th
     tmp_path: Path,
 ) -> None:
     """The paper flight with every pop-up re-plan made 8 s of wall time late (1600 s of
-    mission at 200x, far past UAV1's and UAV2's entry into POPUP1): each is held short of
-    the disc with an alarm (MAV_CMD_DO_REPOSITION in GUIDED: ArduPlane/GCS_Mavlink.cpp
-    handle_command_int_do_reposition; the stub's _cmd_reposition), then resumes AUTO on the
-    late route around it. The stub's truth log, read here, has no sample inside the disc."""
+    mission at 200x, past UAV1's entry into POPUP1, and UAV2's too on a busy machine): each
+    that would enter is held short of the disc with an alarm (MAV_CMD_DO_REPOSITION in
+    GUIDED: ArduPlane/GCS_Mavlink.cpp handle_command_int_do_reposition; the stub's
+    _cmd_reposition), then resumes AUTO on a route around it. The stub's truth log, read
+    here, has no sample inside the disc."""
     from gcs.coordination.config import FlightConfig
 
     truth = tmp_path / "truth.jsonl"
@@ -475,11 +476,14 @@ async def test_a_re_plan_that_lands_after_the_aircraft_reach_the_pop_up_holds_th
     print("closest by the record:", record["zone_clearances"])
     alarms = [a for a in record["alarms"] if a["vehicle"]]
     print("alarms:", *record["alarms"], sep="\n  ")
-    assert {a["vehicle"] for a in alarms} >= {"UAV1", "UAV2"}, alarms
+    # UAV1 always reaches the disc before the late result; UAV2 does when the re-plan's own
+    # wall time is long too (a busy machine).
+    held = {a["vehicle"] for a in alarms}
+    assert "UAV1" in held and held <= {"UAV1", "UAV2"}, alarms
     assert all("enters POPUP1" in a["reason"] and "holding" in a["reason"] for a in alarms)
     said = [(e["vehicle"], e["reason"]) for e in record["events"] if e["kind"] == "fallback"]
     print("fallback:", *said, sep="\n  ")
-    for vid in ("UAV1", "UAV2"):
+    for vid in held:
         reasons = [r for v, r in said if v == vid]
         assert any(r.startswith("holding at") for r in reasons), reasons
         assert any("resumed AUTO" in r for r in reasons), reasons
