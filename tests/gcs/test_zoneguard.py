@@ -47,7 +47,7 @@ def inside(zone: RadarSite, e: float, n: float) -> float:
 
 class Flight:
     """Every vehicle flying its planned route at its planned speed, one fix each 2 s; a held
-    vehicle circles its hold point (its fixes there)."""
+    vehicle goes round its hold point (its fixes up to 150 m either side of it)."""
 
     def __init__(self, team: TeamController, t0: float) -> None:
         self.team = team
@@ -78,9 +78,12 @@ class Flight:
     def step(self, t: float, answer_holds: bool = True) -> list[act.Action]:
         out: list[act.Action] = []
         for vid in self.team.members:
+            s_m = self.s[vid]
             if vid not in self.held:
-                self.s[vid] += self.gs(vid) * 2.0
-            got = self.team.handle(fix(self.team, vid, self.s[vid], t, self.speed[vid]), t)
+                s_m = self.s[vid] = s_m + self.gs(vid) * 2.0
+            else:  # round its hold point: to and fro along the route, 150 m either side
+                s_m += 150.0 * math.sin(0.2 * t)
+            got = self.team.handle(fix(self.team, vid, s_m, t, self.speed[vid]), t)
             for h in of(got, act.Hold):
                 self.held[vid] = h
                 if answer_holds:
