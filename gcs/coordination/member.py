@@ -127,9 +127,9 @@ class Member:
     progress: tuple[RouteTrack, float, float] | None = None
     """``(track, s_m, t_s)``: the farthest it has come along that track and when it got there
     (mission s); a new track (a re-plan, new loiters) starts it again."""
-    still: tuple[float, float, float] | None = None
-    """``(east_m, north_m, t_s)``: where a fix last found it more than ``stopped_m`` from the
-    one before, and when (mission s)."""
+    still: tuple[float, float, float, int] | None = None
+    """``(east_m, north_m, t_s, fixes)``: where a fix last found it more than ``stopped_m`` from
+    the one before, when (mission s), and how many fixes since found it there."""
     lost: Lost | None = None
     splice_seq: int | None = None
     """The waypoint after which its mission was last replaced in flight."""

@@ -52,6 +52,8 @@ from planner.timing import takeoff_time_s
 __all__ = ["PROGRESS_M", "TeamController", "TeamTimeRefused", "is_crash_text"]
 
 PROGRESS_M = 1.0
+STOPPED_FIXES = 8
+"""Fixes in a row, over ``stopped_bound_s``, that find a vehicle where it was."""
 """Along-route distance (m) a fix must gain on the farthest one yet to count as progress."""
 
 
@@ -382,8 +384,11 @@ class TeamController(ZoneGuard):
         e, n, still = m.east_m or 0.0, m.north_m or 0.0, m.still
         moved_m = math.inf if still is None else math.hypot(e - still[0], n - still[1])
         if still is None or moved_m > cfg.stopped_m:
-            m.still = (e, n, t)
-        elif t - still[2] > cfg.stopped_bound_s:
+            m.still, still = (e, n, t, 0), None
+        else:
+            m.still = still = (still[0], still[1], still[2], still[3] + 1)
+        # Standing still on fixes all along the bound (one late fix after a gap says nothing).
+        if still is not None and t - still[2] > cfg.stopped_bound_s and still[3] >= STOPPED_FIXES:
             self._lose(
                 m,
                 "stall",
