@@ -38,7 +38,6 @@ import time
 from collections import deque
 from collections.abc import Callable
 from dataclasses import dataclass, field
-from itertools import islice
 
 from gcs.errors import GcsError
 
@@ -97,10 +96,6 @@ class _VehicleClock:
     """Its UTC seconds per monotonic second, fitted on its own reports."""
     outliers: list[float] = field(default_factory=list)
     """Offset samples in a row too far from its offset to be taken (yet)."""
-    anchors: dict[int, _Observation] = field(default_factory=dict)
-    """The least delayed of its newest N reports, by N, at the rate it was found with: found
-    again when it has a new report (a change of the team's rate of a few parts in 10^4 does
-    not change which report is least delayed)."""
 
 
 class MissionClock:
@@ -115,7 +110,6 @@ class MissionClock:
         self._vehicles: dict[int, _VehicleClock] = {}
         self._rate = 1.0
         self._max_returned_s = -math.inf
-        self._team_utc_at_zero: float | None = None
         self.accepted = 0
         self.rejected = 0
         self.resets = 0  # vehicles whose UTC jumped back by more than JUMP_BACK_S
@@ -202,10 +196,8 @@ class MissionClock:
             self.backlogged += 1
             return
         vc.recent.append(_Observation(rx_mono_s, utc_s))
-        vc.anchors.clear()
         self._update_offsets(rx_mono_s)
         self._fit(vc)
-        self._team_utc_at_zero = None
 
     def _update_offsets(self, mono_s: float) -> None:
         """Each vehicle's UTC against the team's (the lower median of the vehicles' UTC now),
@@ -237,30 +229,21 @@ class MissionClock:
         """A vehicle's own UTC at ``mono_s``: the latest extrapolation of its newest
         ``reports`` reports (the least delayed one wins)."""
         rate = self._rate
-        best = vc.anchors.get(reports)
-        if best is None:
-            recent = vc.recent
-            best = max(
-                islice(recent, max(len(recent) - reports, 0), None),
-                key=lambda o: o.utc_s - rate * o.rx_mono_s,
-            )
-            vc.anchors[reports] = best
-        return best.utc_s + rate * (mono_s - best.rx_mono_s)
+        recent = vc.recent
+        first = max(len(recent) - reports, 0)
+        return max(
+            recent[k].utc_s + rate * (mono_s - recent[k].rx_mono_s)
+            for k in range(first, len(recent))
+        )
 
     def _team_at(self, mono_s: float) -> float:
-        """Team UTC at ``mono_s``: the lower median of the vehicles' UTC less their offsets.
-
-        Every vehicle's UTC runs at the team's rate between reports, so the median is one
-        vehicle's line until the next report: kept as its UTC at monotonic 0."""
-        at_zero = self._team_utc_at_zero
-        if at_zero is None:
-            estimates = sorted(
-                self._vehicle_at(vc, 0.0) - vc.offset_s
-                for vc in self._vehicles.values()
-                if vc.has_utc and vc.recent
-            )
-            at_zero = self._team_utc_at_zero = estimates[(len(estimates) - 1) // 2]
-        return at_zero + self._rate * mono_s
+        """Team UTC at ``mono_s``: the lower median of the vehicles' UTC less their offsets."""
+        estimates = sorted(
+            self._vehicle_at(vc, mono_s) - vc.offset_s
+            for vc in self._vehicles.values()
+            if vc.has_utc and vc.recent
+        )
+        return estimates[(len(estimates) - 1) // 2]
 
     def _fit(self, vc: _VehicleClock) -> None:
         """The team's rate: the median of the vehicles' own rates, each the slope of its UTC
