@@ -100,12 +100,16 @@ class Member:
     heading_deg: float | None = None
     joining: bool = False
     """Off its route by more than ``off_route_m`` when last late (said once per episode)."""
+    late_after_arrivals: bool = False
+    """Late once others had arrived (the team time no longer moves; said once)."""
     link_silent: bool = False
     last_seq: int | None = None
     next_decision_s: float = -math.inf
     busy_command: bool = False
     busy_mission: bool = False
     last_loiter_s: float = -math.inf
+    loiter_entered_s: float | None = None
+    """Mission time its current mission item last became a loiter (turns flown since)."""
     arrival_s: float | None = None
     """Mission time it passed its goal (from its own telemetry)."""
     near_goal: list[TruthSample] = field(default_factory=list)

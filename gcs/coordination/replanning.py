@@ -378,8 +378,9 @@ class MissionChanges:
             s_k = m.mission.item_s_m[keep]
             assert s_k is not None
             # The vehicle reaches the splice waypoint at its own time, not at t + lead: the
-            # waypoint is the first one at least that far ahead and may be much farther.
-            t_k = t + (s_k - (m.s_m or 0.0)) / gs
+            # waypoint is the first one at least that far ahead and may be much farther, with
+            # loiter turns of the kept mission before it.
+            t_k = self._reaches_s(m, t, s_k, gs)
             anchors[m.vehicle_id] = Anchor(s_k, self._speed_now(m), t_k)
             keeps[m.vehicle_id] = keep
         threats = self.in_force(t)
@@ -407,6 +408,23 @@ class MissionChanges:
             frozenset(holding),
         )
         out.append(act.Compute(job))
+
+    @staticmethod
+    def _reaches_s(m: Member, t: float, s_k: float, gs_m_s: float) -> float:
+        """When the vehicle reaches ``s_k`` along its route, at ``gs_m_s``: the path from
+        where it is plus the loiters still to fly short of ``s_k`` (the one it is in counted
+        from when it entered it); a loiter at ``s_k`` itself belongs to what is replaced."""
+        path_m = max(s_k - (m.s_m or 0.0), 0.0)
+        done = m.loiters_done()
+        loiter_m = 0.0
+        for i, lo in enumerate(m.track.loiters):
+            if i < done or lo.s_m >= s_k - 1.0:
+                continue
+            length = lo.length_m
+            if i == done and m.in_loiter() and m.loiter_entered_s is not None:
+                length = max(length - (t - m.loiter_entered_s) * gs_m_s, 0.0)
+            loiter_m += length
+        return t + (path_m + loiter_m) / gs_m_s
 
     def _keep_behind(self, m: Member, s_m: float) -> int | None:
         """The last route waypoint at or short of ``s_m`` along the vehicle's mission."""

@@ -37,6 +37,7 @@ from gcs.coordination.config import FlightConfig
 from gcs.coordination.events import EventKind
 from gcs.coordination.member import FIRST_ROUTE_SEQ, Lost, LostCause, Member, path_en, route_track
 from gcs.coordination.routetrack import Wind
+from gcs.coordination.separation import Position, SeparationWatch
 from gcs.coordination.tracks import TruthSample, closest_approach
 from gcs.coordination.zoneguard import Exposure, ZoneGuard
 from gcs.errors import GcsError
@@ -137,6 +138,8 @@ class TeamController(ZoneGuard):
         """Moves with every change of the team time (an operator's stale move is refused)."""
         self.hard_deadline_s = 0.0
         """Mission time the flight ends at, failed, if it has not before (never moves)."""
+        self.separation = SeparationWatch(scenario.separation_m)
+        """Every fix against the other flying vehicles' (an alarm below the separation)."""
         for vs in schedule.vehicles:
             v = scenario.vehicle(vs.vehicle_id)
             limits = SpeedLimits(v.speed_min_m_s, v.speed_max_m_s, schedule.step_m_s)
@@ -331,6 +334,7 @@ class TeamController(ZoneGuard):
                     round(fix.groundspeed_m_s or 0.0, 2),
                 ]
             )
+        self._watch_separation(m, t, fix, out)
         seq = fix.mission_seq
         if m.phase == "takeoff":
             if m.launched_s is not None and seq is not None and seq >= FIRST_ROUTE_SEQ:
@@ -348,6 +352,8 @@ class TeamController(ZoneGuard):
         if seq_changed and seq is not None:
             self._passed_items(m, m.last_seq, seq)
             m.last_seq = seq
+            if m.in_loiter():
+                m.loiter_entered_s = t
         self._watch_goal(m, fix, e, n, out)
         if m.phase != "route":
             return
@@ -373,6 +379,31 @@ class TeamController(ZoneGuard):
         self._decide(m, t, s, fix, out)
 
     # -- supervision ----------------------------------------------------------------------------
+
+    def _watch_separation(self, m: Member, t: float, fix: act.Fix, out: list[act.Action]) -> None:
+        """An alarm when the vehicle comes closer than the separation to another one flying
+        (once per encounter)."""
+        if m.launched_s is None or m.east_m is None or m.north_m is None or fix.alt_amsl_m is None:
+            return
+        watch = self.__dict__.get("separation")
+        if watch is None:  # a controller from a checkpoint kept before the watch existed
+            watch = self.separation = SeparationWatch(self.scenario.separation_m)
+        pos = Position(t, m.east_m, m.north_m, fix.alt_amsl_m, fix.ve_m_s or 0.0, fix.vn_m_s or 0.0)
+        flying = [
+            x.vehicle_id for x in self.members.values() if x.launched_s is not None and not x.done
+        ]
+        for sf in watch.update(m.vehicle_id, pos, flying):
+            out.append(
+                act.Report(
+                    EventKind.ALARM,
+                    f"separation {sf.distance_m:.0f} m from {sf.other} at {t:.1f} s, below "
+                    f"{watch.separation_m:g} m",
+                    m.vehicle_id,
+                    value=round(sf.distance_m, 1),
+                    t_s=t,
+                    payload={"other": sf.other, "distance_m": round(sf.distance_m, 1)},
+                )
+            )
 
     def _watch_progress(self, m: Member, t: float, s: float, out: list[act.Action]) -> None:
         """Lose a vehicle that stops (moves less than ``stopped_m`` in ``stopped_bound_s``), or
@@ -484,7 +515,8 @@ class TeamController(ZoneGuard):
         if ref is None or all(m.done for m in self.members.values()):
             return
         earliest, vid, why = self.earliest_team_time_s(now)
-        new_ref = earliest + self.config.late_margin_s
+        margin_s = self._late_margin_s(earliest, now)
+        new_ref = earliest + margin_s
         if new_ref >= ref - self.config.tolerance_s:
             out.append(
                 act.Report(
@@ -499,7 +531,7 @@ class TeamController(ZoneGuard):
             new_ref,
             now,
             f"team arrival moved {ref:.1f} -> {new_ref:.1f} s without {lost.vehicle_id} "
-            f"(lost): the earliest {vid} can make ({why}) plus {self.config.late_margin_s:g} s",
+            f"(lost): the earliest {vid} can make ({why}) plus {margin_s:.1f} s",
             None,
             out,
         )
@@ -612,12 +644,35 @@ class TeamController(ZoneGuard):
 
     # -- lateness: move the team time ---------------------------------------------------------
 
+    def _late_margin_s(self, earliest_s: float, now_s: float) -> float:
+        """The margin a moved team time keeps past the earliest arrival: ``late_margin_s``,
+        less in the last minutes (2 % of the time still to fly), where the others have no
+        room left to absorb more than the late vehicle needs."""
+        return min(self.config.late_margin_s, 0.02 * max(earliest_s - now_s, 0.0))
+
     def _late(self, m: Member, d: Decision, t: float, out: list[act.Action]) -> None:
         ref = self.team_ref_s
         if ref is None:
             return
-        new_ref = d.eta_min_s - m.offset_s + self.config.late_margin_s
+        new_ref = d.eta_min_s - m.offset_s + self._late_margin_s(d.eta_min_s, t)
         if new_ref <= ref:
+            return
+        arrived = sorted(x.vehicle_id for x in self.members.values() if x.arrival_s is not None)
+        if arrived:
+            # Moving the team time now would only make the arrived ones miss it: the late
+            # vehicle is late, and said so.
+            if not m.late_after_arrivals:
+                m.late_after_arrivals = True
+                out.append(
+                    act.Report(
+                        EventKind.ALARM,
+                        f"late by {d.eta_min_s - m.target_s:.1f} s at top speed after "
+                        f"{', '.join(arrived)} arrived: the team time stays {ref:.1f} s",
+                        m.vehicle_id,
+                        value=round(d.eta_min_s - m.target_s, 3),
+                        t_s=t,
+                    )
+                )
             return
         self._set_team_time(
             new_ref,
@@ -635,6 +690,8 @@ class TeamController(ZoneGuard):
         self.version += 1
         out.append(act.Report(EventKind.ARRIVAL, reason, vehicle, value=new_ref, t_s=t))
         for other in self.members.values():
+            if other.arrival_s is not None:
+                continue  # its slot was the one it met
             other.target_s = new_ref + other.offset_s
             other.next_decision_s = -math.inf
             if other.phase == "ground":

@@ -30,6 +30,7 @@ from gcs.coordination.bus import EventBus
 from gcs.rehearsal.rehearse import Abort, RehearsalOptions, passed, rehearse
 from gcs.service.fleet import Fleet, VehicleBusy
 from planner.scenario import load_scenario, parse_scenario
+from tests.flightstory import story
 from tests.gcs.conftest import assert_flight_kept, free_udp_port, start_stub
 from tests.sitl_stub.conftest import free_port_base, mavproxy_router
 
@@ -281,7 +282,10 @@ async def test_connect_rehearsal_flies_separately_started_vehicles_one_behind_ma
     assert record["speedup"] is None  # not ours to know: the vehicles were only reached
     assert record["arrival_source"] == "simulator"
     errors = _errors(record)
-    assert all(e is not None and abs(e) <= 1.0 for e in errors.values()), errors
+    assert all(e is not None and abs(e) <= 1.0 for e in errors.values()), (
+        errors,
+        story(record["events"]),
+    )
     for v in record["vehicles"]:
         # The coordinator's own arrival, from telemetry alone, agrees with the truth.
         assert v["telemetry_arrival_utc_s"] is not None, v["id"]

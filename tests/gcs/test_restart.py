@@ -18,6 +18,7 @@ from gcs.coordination.tracks import closest_approach
 from gcs.rehearsal.truth import read_truth
 from gcs.store.repository import Store
 from planner.scenario import load_scenario
+from tests.flightstory import story_of_lines
 from tests.gcs.conftest import PAPER, start_stub
 from tests.sitl_stub.conftest import free_port_base
 
@@ -99,7 +100,7 @@ async def test_engine_killed_after_the_popup_resumes_on_the_same_database(tmp_pa
         )
         async with asyncio.timeout(150):
             stdout, stderr = await second.communicate()
-        assert second.returncode == 0, (stdout.decode()[-3000:], stderr.decode()[-3000:])
+        assert second.returncode == 0, (story_of_lines(stdout.decode()), stderr.decode()[-3000:])
     finally:
         if stub.returncode is None:
             stub.send_signal(signal.SIGINT)

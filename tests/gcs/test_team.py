@@ -19,6 +19,7 @@ from gcs.coordination import actions as act
 from gcs.coordination.config import FlightConfig
 from gcs.coordination.events import EventKind
 from gcs.coordination.member import FIRST_ROUTE_SEQ, Member, VehicleState
+from gcs.coordination.separation import Position, SeparationWatch
 from gcs.coordination.team import TeamController, TeamTimeRefused
 from gcs.errors import GcsError
 from planner.mission import MAV_CMD_NAV_LOITER_TURNS, MAV_CMD_NAV_WAYPOINT
@@ -294,6 +295,48 @@ def test_a_late_vehicle_moves_the_team_time_with_the_reason_and_re_times_the_gro
     assert (cmds[0].airspeed_m_s if cmds else m.level_m_s) == v_max
 
 
+def test_a_vehicle_late_after_another_arrived_is_an_alarm_and_the_team_time_stays(
+    team: TeamController,
+) -> None:
+    vid = "UAV2"
+    m = team.members[vid]
+    airborne(team, vid, m.takeoff_s)
+    other = team.members["UAV1"]
+    other.phase, other.arrival_s = "arrived", other.target_s  # it met its slot
+    old_ref, old_target = team.team_ref_s, other.target_s
+    t0 = m.takeoff_s + 600.0
+    earliest = still_air_eta_s(team, vid, 2_000.0, t0, m.limits.airspeed_max_m_s)
+    assert earliest > m.target_s + 5.0
+    out = team.handle(fix(team, vid, 2_000.0, t0, 25.0), t0)
+    assert not reports(out, EventKind.ARRIVAL)
+    (alarm,) = reports(out, EventKind.ALARM)
+    assert alarm.vehicle == vid and "after UAV1 arrived" in alarm.reason
+    assert alarm.value == pytest.approx(earliest - m.target_s, abs=1.0)
+    assert team.team_ref_s == old_ref and other.target_s == old_target
+    # Said once, not on every fix.
+    out = team.handle(fix(team, vid, 2_050.0, t0 + 2.0, 25.0), t0 + 2.0)
+    assert not reports(out, EventKind.ALARM)
+
+
+def test_a_team_time_moved_in_the_last_seconds_keeps_a_small_margin(
+    team: TeamController,
+) -> None:
+    vid = "UAV2"
+    m = team.members[vid]
+    airborne(team, vid, m.takeoff_s)
+    v_max = m.limits.airspeed_max_m_s
+    s0 = m.track.length_m - 600.0  # about 20 s from the goal at top speed
+    t0 = m.target_s - 600.0 / (v_max * m.tas_per_eas(s0)) + 3.0  # 3 s late at top speed
+    earliest = still_air_eta_s(team, vid, s0, t0, v_max)
+    out = team.handle(fix(team, vid, s0, t0, v_max), t0)
+    (moved,) = reports(out, EventKind.ARRIVAL)
+    assert moved.value is not None
+    margin = moved.value + m.offset_s - earliest
+    # 2 % of the ~20 s left, not the 2 s a move far from the goal keeps.
+    assert 0.0 <= margin <= 0.02 * (earliest - t0) + 0.5
+    assert margin < FlightConfig().late_margin_s / 2
+
+
 def test_a_vehicle_off_its_route_does_not_move_the_team_time_while_it_joins(
     team: TeamController,
 ) -> None:
@@ -385,6 +428,38 @@ def test_a_popup_re_plans_the_vehicles_whose_routes_it_touches_and_no_other(
             assert uploads[vid].schedule.path.length_m == pytest.approx(before.length_m)
     assert all(u.keep_seq == job.keeps[u.vehicle_id] for u in uploads.values())
     assert team.team_ref_s == outcome.schedule.required_arrival_s
+
+
+def test_a_popup_times_the_splice_waypoint_with_the_loiter_turns_flown_before_it(
+    team: TeamController,
+) -> None:
+    """A vehicle with loiter turns on board short of its splice waypoint reaches the waypoint
+    after flying them: the re-plan starts it there at that time, not at the path's time."""
+    vid = "UAV3"
+    m = team.members[vid]
+    t0, s0, job = _early(team, vid)
+    (up,) = of(team.handle(act.Computed(job, job.run()), t0 + 1), act.Upload)
+    team.handle(act.Installed(up), t0 + 2)
+    (lo,) = [x for x in m.track.loiters if x.s_m > s0]
+    zones = build_threats(team.scenario, {v: x.takeoff_s for v, x in team.members.items()})
+    (zone,) = popup_zones(zones)
+    t_p = float(zone.appears_at_s or 0.0)
+    for v, x in team.members.items():
+        airborne(team, v, x.takeoff_s)
+    # UAV3 2 km short of its loiter when the threat appears; the lead reaches past it.
+    s1, gs = lo.s_m - 2_000.0, 17.0
+    team.handle(fix(team, vid, s1, t_p - 1.0, gs / m.schedule.tas_per_eas(s1)), t_p - 1.0)
+    m.next_decision_s = math.inf
+    team.lead_s = (2_000.0 + 3_000.0) / gs
+    out = team.handle(act.Tick(), t_p)
+    (pj,) = [a.job for a in of(out, act.Compute)]
+    assert isinstance(pj, act.PopupJob)
+    anchor = pj.anchors[vid]
+    assert anchor.s_m > lo.s_m + 1.0  # the loiter is in the kept part of the mission
+    assert m.groundspeed_m_s == pytest.approx(gs, rel=1e-3)
+    flown_first = (anchor.s_m - m.s_m + lo.length_m) / m.groundspeed_m_s
+    assert anchor.t_s == pytest.approx(t_p - 1.0 + flown_first, abs=1.0)
+    assert lo.length_m / gs > 60.0  # what the path alone would have missed
 
 
 def test_a_threat_added_before_the_start_is_queued_for_its_time(
@@ -650,3 +725,65 @@ def test_the_flight_ends_at_its_hard_deadline_whatever_the_team_time_became(
     (stop,) = of(out, act.Stop)
     assert stop.reason.startswith(f"hard deadline {team.hard_deadline_s:.1f} s passed")
     assert stop.reason.endswith("UAV1, UAV2, UAV3 not arrived") and team.finished
+
+
+# -- separation in flight -------------------------------------------------------------------------
+
+
+def test_two_vehicles_closer_than_the_separation_are_an_alarm_once_per_encounter(
+    team: TeamController,
+) -> None:
+    """UAV1 is put where UAV2 is, 300 m beside it, then 5 km away, then beside it again: an
+    alarm at each approach, the distance measured here from the two positions."""
+    d_s = team.scenario.separation_m
+    m1, t0 = flying(team, "UAV1", 600.0)
+    m2 = team.members["UAV2"]
+    airborne(team, "UAV2", t0)
+    f2 = fix(team, "UAV2", 20_000.0, t0, 25.0)
+    team.handle(f2, t0)
+    e2, n2 = (float(x) for x in team.frame.to_local(f2.lat_deg, f2.lon_deg))
+
+    def beside(offset_m: float, t_s: float) -> act.Fix:
+        lat, lon = team.frame.to_geodetic(e2 + offset_m, n2)
+        f = fix(team, "UAV1", 20_000.0, t_s, 25.0)
+        return dataclasses.replace(
+            f, lat_deg=float(lat), lon_deg=float(lon), alt_amsl_m=f2.alt_amsl_m,
+            ve_m_s=0.0, vn_m_s=0.0,
+        )  # fmt: skip
+
+    alarms: list[act.Report] = []
+    for offset, dt in [(300.0, 0.5), (250.0, 1.0), (5_000.0, 1.5), (300.0, 2.0)]:
+        t = t0 + dt
+        # UAV2's fix at t0, moved on along its velocity to t: where the watch expects it.
+        expected = math.hypot(e2 + offset - (e2 + f2.ve_m_s * dt), n2 - (n2 + f2.vn_m_s * dt))
+        got = reports(team.handle(beside(offset, t), t), EventKind.ALARM)
+        alarms += got
+        if got:
+            assert got[0].value == pytest.approx(expected, abs=0.5)
+            assert expected < d_s
+    assert [a.vehicle for a in alarms] == ["UAV1", "UAV1"]
+    assert all("from UAV2" in a.reason and f"below {d_s:g} m" in a.reason for a in alarms)
+    assert m1.launched_s is not None and m2.launched_s is not None
+
+
+def test_the_separation_watch_skips_stale_fixes_and_clears_a_pair_once_apart() -> None:
+    w = SeparationWatch(500.0, stale_s=5.0)
+    w.update("A", Position(0.0, 0.0, 0.0, 100.0, ve_m_s=10.0), ["A", "B"])
+    # B at 10 s: A's fix is 10 s old, past the stale bound: not compared.
+    assert w.update("B", Position(10.0, 100.0, 0.0, 100.0), ["A", "B"]) == []
+    # A at 11 s, 1 km west of B's fix at 10 s (B still): apart.
+    assert w.update("A", Position(11.0, -900.0, 0.0, 100.0, ve_m_s=10.0), ["A", "B"]) == []
+    # At 12 s A is expected at 890 m west, B at 500 m west, 300 m up: 3-D distance.
+    (sf,) = w.update("B", Position(12.0, -500.0, 0.0, 400.0), ["A", "B"])
+    assert (sf.vehicle, sf.other) == ("B", "A")
+    assert sf.distance_m == pytest.approx(math.hypot(390.0, 300.0))
+    assert w.closest[("A", "B")] == (pytest.approx(sf.distance_m), 12.0)
+    # Still close, then apart by less than 1.2 d_s (no new alarm), apart, close again.
+    # (A expected at 885 m west at 12.5 s, 880 m at 13 s, 875 m at 13.5 s.)
+    assert w.update("B", Position(12.5, -300.0, 0.0, 100.0), ["A", "B"]) == []  # 585 m
+    assert ("A", "B") in w.close
+    assert w.update("B", Position(13.0, -200.0, 0.0, 100.0), ["A", "B"]) == []  # 680 m
+    assert ("A", "B") not in w.close
+    assert len(w.update("B", Position(13.5, -600.0, 0.0, 100.0), ["A", "B"])) == 1  # 275 m
+    # A vehicle not flying (arrived) is not compared.
+    assert w.update("C", Position(13.5, 200.0, 0.0, 100.0), ["C", "B"]) == []

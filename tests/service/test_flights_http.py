@@ -18,6 +18,7 @@ from gcs.api.demo import sse_messages
 from planner.plan import build_world, plan
 from planner.retime import build_schedule
 from planner.scenario import load_scenario
+from tests.flightstory import story
 from tests.gcs.conftest import PAPER
 from tests.service.conftest import Service
 
@@ -183,7 +184,7 @@ async def test_paper_flight_over_http_with_a_no_fly_zone_a_later_team_time_and_f
 
     assert record["arrival_source"] == "simulator"
     errors = {v["id"]: v["error_s"] for v in record["vehicles"]}
-    assert all(e is not None and abs(e) <= 1.0 for e in errors.values()), errors
+    assert all(e is not None and abs(e) <= 1.0 for e in errors.values()), (errors, story(events))
     # The team time the vehicles met is the operator's (+120 s), or later if one forced it.
     assert record["required_arrival_s"] >= ref + 120.0 - 1e-3
     assert {a["strategy"] for a in record["adjustments"]} >= {"takeoff_delay", "speed", "loiter"}

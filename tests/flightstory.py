@@ -1,0 +1,28 @@
+"""A flight's story for a failed assertion: its events without the routine ones (speed
+commands, link gaps, clock offsets), one line each, so a CI log shows why a flight missed."""
+
+from __future__ import annotations
+
+from collections.abc import Iterable, Mapping
+from typing import Any
+
+ROUTINE = frozenset({"speed", "link", "clock"})
+
+
+def story(events: Iterable[Mapping[str, Any]], *, limit: int = 80) -> str:
+    lines = [
+        f"{e.get('t_s') or 0.0:9.1f} s {e.get('vehicle') or 'team':5} {e['kind']:9} {e['reason']}"
+        for e in events
+        if e["kind"] not in ROUTINE
+    ]
+    if len(lines) > limit:
+        lines = [*lines[: limit // 2], "...", *lines[-limit // 2 :]]
+    return "\n".join(lines)
+
+
+def story_of_lines(text: str, *, limit: int = 80) -> str:
+    """The same for ``rehearse``'s printed log (``  t s   VEHICLE kind  reason`` lines)."""
+    kept = [ln for ln in text.splitlines() if not any(f" {k} " in ln[:32] for k in ROUTINE)]
+    if len(kept) > limit:
+        kept = [*kept[: limit // 2], "...", *kept[-limit // 2 :]]
+    return "\n".join(kept)
