@@ -252,6 +252,7 @@ def apply_popup(
             if where[v.id][0] == "leg" and anchor is not None
             else None,
             loiter_margin_m_s=loiter_margin_m_s,
+            terrain=world.terrain,
         )
         retimed.append(r.schedule)
         adjustments.extend(r.adjustments)

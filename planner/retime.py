@@ -37,6 +37,7 @@ from planner.schedule import (
     Stage,
     VehicleSchedule,
 )
+from planner.terrain import Terrain
 from planner.threats import ThreatZone, active
 from planner.timing import (
     SPEED_STEP_M_S,
@@ -55,6 +56,8 @@ from planner.timing import (
 )
 
 SITE_STEP_M = 100.0
+FREE_SITE = "path"
+"""The ``buffer_id`` of loiter turns on the path outside any buffer (:func:`free_loiter_site`)."""
 
 
 # --- loiter sites ----------------------------------------------------------------------
@@ -138,6 +141,40 @@ def find_loiter_site(
     return detour
 
 
+def free_loiter_site(
+    vehicle: Vehicle,
+    vs: VehicleSchedule,
+    s_from_m: float,
+    radius_m: float,
+    threats: Sequence[ThreatZone],
+    terrain: Terrain,
+) -> _Site | None:
+    """Where to loiter on the path after ``s_from_m`` when no buffer serves: the first circle
+    tangent to the path (no detour) that keeps a radius clear of every threat zone, forbidden
+    or not, and the vehicle's terrain clearance all round at the path's altitude there."""
+    lead = max(4.0 * radius_m, 1000.0)
+    path = vs.path
+    angles = np.linspace(0.0, 2.0 * math.pi, 36, endpoint=False)
+    for s in np.arange(s_from_m + lead, path.length_m - lead, SITE_STEP_M):
+        p = path.pose_at(float(s))
+        for clockwise in (True, False):
+            sign = 1.0 if clockwise else -1.0
+            ce = p.east_m + sign * radius_m * math.cos(p.heading_rad)
+            cn = p.north_m - sign * radius_m * math.sin(p.heading_rad)
+            if any(
+                float(t.distance_m(np.array([ce]), np.array([cn]))[0]) < 2.0 * radius_m
+                for t in threats
+            ):
+                continue
+            ground = terrain.elevation_m(
+                ce + radius_m * np.cos(angles), cn + radius_m * np.sin(angles)
+            )
+            if float(np.max(ground)) + vehicle.clearance_m > vs.alt_at(float(s)):
+                continue
+            return _Site(float(s), (ce, cn), (p.east_m, p.north_m), clockwise, 0.0, FREE_SITE)
+    return None
+
+
 # --- timing one vehicle ----------------------------------------------------------------
 
 
@@ -206,11 +243,14 @@ def retime_on_path(
     threats: Sequence[ThreatZone],
     at: tuple[float, float] | None = None,
     loiter_margin_m_s: float = 0.0,
+    terrain: Terrain | None = None,
 ) -> Retimed:
     """Re-time one vehicle from ``now_s`` to arrive at ``target_s`` on its current path.
 
     ``at`` = (s_m, speed_m_s) anchors the vehicle where it really is (airborne, on a leg)
-    instead of where the schedule has it at ``now_s``.
+    instead of where the schedule has it at ``now_s``. With ``terrain``, a surplus that no
+    buffer can absorb (none ahead, or its detour alone is longer than the time to lose) gets
+    its turns on the path where the airspace and the terrain allow (:func:`free_loiter_site`).
     """
     limits = _limits(v, step_m_s)
     if at is None:
@@ -258,17 +298,30 @@ def retime_on_path(
             )
     remaining = length - s0
     site = find_loiter_site(scenario, v, vs.path, s0, radius, threats)
-    loiter_site = None if site is None else LoiterSite(site.s_m - s0, radius, site.detour_m)
-    timing: Timing = time_path(
-        v.id,
-        remaining,
-        target_s - start_t,
-        limits,
-        site=loiter_site,
-        current_m_s=speed_now if phase in ("leg", "loiter") and speed_now > 0.0 else None,
-        loiter_margin_m_s=loiter_margin_m_s,
-        tas_per_eas=ratio,
-    )
+
+    def timed(at_site: _Site | None) -> Timing:
+        return time_path(
+            v.id,
+            remaining,
+            target_s - start_t,
+            limits,
+            site=None
+            if at_site is None
+            else LoiterSite(at_site.s_m - s0, radius, at_site.detour_m),
+            current_m_s=speed_now if phase in ("leg", "loiter") and speed_now > 0.0 else None,
+            loiter_margin_m_s=loiter_margin_m_s,
+            tas_per_eas=ratio,
+        )
+
+    try:
+        timing = timed(site)
+    except InfeasibleError:
+        free = None
+        if terrain is not None and (site is None or site.detour_m > 0.0):
+            free = free_loiter_site(v, vs, s0, radius, threats, terrain)
+        if free is None or target_s - start_t < remaining / ratio / v.speed_max_m_s:
+            raise
+        site, timing = free, timed(free)
     legs, loiters, arrival = _timeline(
         timing.pieces,
         s0_m=s0,
@@ -304,7 +357,9 @@ def retime_on_path(
                 v.id,
                 "loiter",
                 float(lo.turns),
-                f"{lo.turns} turns of {lo.radius_m:g} m in buffer {lo.buffer_id} at "
+                f"{lo.turns} turns of {lo.radius_m:g} m "
+                + ("on the path" if lo.buffer_id == FREE_SITE else f"in buffer {lo.buffer_id}")
+                + " at "
                 f"{lo.s_m / 1000:.1f} km along the path (+{lo.length_m:.0f} m, eq. 8): "
                 f"{remaining / 1000:.1f} km at {v.speed_min_m_s:g} m/s would arrive "
                 f"{target_s - start_t - remaining / ratio / v.speed_min_m_s:.1f} s early",
@@ -608,6 +663,7 @@ def retime_vehicle(
     target_s: float,
     threats: Sequence[ThreatZone],
     loiter_margin_m_s: float = 0.0,
+    terrain: Terrain | None = None,
 ) -> tuple[VehicleSchedule, tuple[Adjustment, ...]]:
     """Re-time one airborne vehicle from where it really is (``s_m`` along its path, flying
     ``speed_m_s``) at ``now_s`` to arrive at ``target_s``: speeds, and loiter turns in a buffer
@@ -629,5 +685,6 @@ def retime_vehicle(
         threats=threats,
         at=(s_m, speed_m_s),
         loiter_margin_m_s=loiter_margin_m_s,
+        terrain=terrain,
     )
     return r.schedule, tuple(r.adjustments)

@@ -21,6 +21,7 @@ from planner.popup import apply_popup
 from planner.retime import retime_vehicle
 from planner.schedule import Adjustment, Anchor, Schedule, VehicleSchedule
 from planner.schedulefile import PathMission
+from planner.terrain import Terrain
 from planner.threats import ThreatZone
 
 AbortMode = Literal["rtl", "loiter"]
@@ -251,6 +252,8 @@ class LoiterJob:
     threats: tuple[ThreatZone, ...]
     loiter_margin_m_s: float
     decided_s: float
+    terrain: Terrain | None = None
+    """With it, turns on the path where no buffer serves (clear of threats and terrain)."""
 
     def run(self) -> tuple[VehicleSchedule, list[Adjustment]]:
         vs, adjustments = retime_vehicle(
@@ -262,6 +265,7 @@ class LoiterJob:
             target_s=self.target_s,
             threats=list(self.threats),
             loiter_margin_m_s=self.loiter_margin_m_s,
+            terrain=self.terrain,
         )
         return vs, list(adjustments)
 

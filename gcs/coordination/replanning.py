@@ -117,6 +117,7 @@ class MissionChanges:
             tuple(self.in_force(t)),
             self.config.loiter_margin_m_s,
             t,
+            self.world.terrain,
         )
         out.append(act.Compute(job))
 

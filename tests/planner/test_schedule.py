@@ -16,7 +16,7 @@ from planner.deconflict import separation
 from planner.errors import ArrivalTimeError, InfeasibleError, SeparationError
 from planner.plan import build_world, plan
 from planner.popup import replay_popups
-from planner.retime import build_schedule, check_arrival, check_feasible
+from planner.retime import build_schedule, check_arrival, check_feasible, retime_vehicle
 from planner.scenario import load_scenario, parse_scenario
 from planner.schedule import Schedule
 from tests.planner.conftest import small_scenario
@@ -309,3 +309,83 @@ def test_team_time_moved_after_the_build_is_refused_without_blaming_a_vehicle(
         f"requested arrival {requested:.1f} s is not held: the team arrives at "
         f"{after.required_arrival_s:.1f} s ("
     )
+
+
+def _airborne_surplus(data: dict[str, Any]) -> tuple[Schedule, float, float, Any]:
+    """Vehicle A 3 km along its route at 1000 s, with 600 s more than its minimum speed
+    takes to the goal: ``(schedule, s_m, target_s, world)``."""
+    scenario = parse_scenario(data)
+    world = build_world(scenario)
+    s = build_schedule(scenario, plan(scenario, "astar"), world=world)
+    vs = s.vehicle("A")
+    s0 = 3_000.0
+    slowest = (vs.path.length_m - s0) / vs.tas_per_eas(s0) / scenario.vehicle("A").speed_min_m_s
+    return s, s0, 1_000.0 + slowest + 600.0, world
+
+
+def test_a_surplus_no_buffer_absorbs_gets_turns_on_the_path_clear_of_threats_and_terrain() -> None:
+    s, s0, target, world = _airborne_surplus(small_scenario())
+    zones = list(world.threats)
+    with pytest.raises(InfeasibleError, match="no buffer"):
+        retime_vehicle(
+            s, "A", now_s=1_000.0, s_m=s0, speed_m_s=20.0, target_s=target, threats=zones
+        )
+    # Ground 10 km high west of 9 km east: no circle may reach over it.
+    wall = _Wall(9_000.0)
+    vs, adjustments = retime_vehicle(
+        s, "A", now_s=1_000.0, s_m=s0, speed_m_s=20.0, target_s=target, threats=zones,
+        terrain=wall,
+    )  # fmt: skip
+    (lo,) = vs.loiters
+    assert lo.buffer_id == "path" and lo.detour_m == 0.0
+    assert vs.arrival_s == pytest.approx(target, abs=0.5)
+    assert any("on the path" in a.reason for a in adjustments if a.strategy == "loiter")
+    # The circle, checked here: tangent to the path, 2 radii clear of the SAM disc, and the
+    # ground under it (72 points) at least the clearance below the loiter's altitude.
+    p = vs.path.pose_at(lo.s_m)
+    assert math.hypot(p.east_m - lo.centre_east_m, p.north_m - lo.centre_north_m) == (
+        pytest.approx(lo.radius_m)
+    )
+    assert math.hypot(lo.centre_east_m - 20_000.0, lo.centre_north_m - 20_000.0) >= (
+        6_000.0 + 2.0 * lo.radius_m
+    )
+    assert lo.centre_east_m - lo.radius_m >= 9_000.0
+    a = np.linspace(0.0, 2.0 * math.pi, 72)
+    ground = wall.elevation_m(
+        lo.centre_east_m + lo.radius_m * np.cos(a), lo.centre_north_m + lo.radius_m * np.sin(a)
+    )
+    clearance = s.scenario.vehicle("A").clearance_m
+    assert float(ground.max()) + clearance <= vs.alt_at(lo.s_m) + 1.0
+    # On flat ground the first clear point after the lead is taken: nearer.
+    flat, _ = retime_vehicle(
+        s, "A", now_s=1_000.0, s_m=s0, speed_m_s=20.0, target_s=target, threats=zones,
+        terrain=world.terrain,
+    )  # fmt: skip
+    assert flat.loiters[0].s_m < lo.s_m
+
+
+class _Wall:
+    """Terrain 10 km high west of ``east_m``, at 100 m east of it."""
+
+    def __init__(self, east_m: float) -> None:
+        self.east_m = east_m
+
+    def elevation_m(self, east_m: Any, north_m: Any) -> Any:
+        e = np.asarray(east_m, dtype=np.float64)
+        return np.where(e < self.east_m, 10_000.0, 100.0) + 0.0 * np.asarray(north_m)
+
+
+def test_no_turns_on_the_path_where_a_threat_covers_it() -> None:
+    s, s0, target, world = _airborne_surplus(small_scenario())
+    # A radar disc (not forbidden) over the whole map: nowhere 2 radii clear of it to circle.
+    data = small_scenario()
+    data["threats"] = [
+        {"kind": "radar", "id": "WIDE", "center": {"east_m": 20000, "north_m": 20000},
+         "radius_m": 30000, "forbidden": False},
+    ]  # fmt: skip
+    wide = list(build_world(parse_scenario(data)).threats)
+    with pytest.raises(InfeasibleError, match="no buffer"):
+        retime_vehicle(
+            s, "A", now_s=1_000.0, s_m=s0, speed_m_s=20.0, target_s=target, threats=wide,
+            terrain=world.terrain,
+        )  # fmt: skip
