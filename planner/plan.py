@@ -35,6 +35,7 @@ from planner.scenario import (
     SrtmTerrainSpec,
     SyntheticTerrainSpec,
     Vehicle,
+    Waves,
     Windows,
 )
 from planner.search import solve_exact
@@ -86,13 +87,9 @@ def build_terrain(scenario: Scenario) -> Terrain:
 def timing_limits(scenario: Scenario) -> list[TimingLimits]:
     """Each vehicle's timing limits under the scenario's arrival constraint."""
     arrival = scenario.arrival
-    order = [v.id for v in scenario.vehicles]
-    offsets = dict.fromkeys(order, 0.0)
+    offsets = scenario.arrival_offsets_s()
     own: dict[str, tuple[float, float]] = {}
-    if isinstance(arrival, Spaced):
-        for k, vid in enumerate(arrival.order or order):
-            offsets[vid] = k * arrival.interval_s
-    elif isinstance(arrival, Windows):
+    if isinstance(arrival, Windows):
         own = {w.vehicle: (w.earliest_s, w.latest_s) for w in arrival.windows}
     out = []
     for v in scenario.vehicles:
@@ -110,7 +107,7 @@ def required_arrival_s(scenario: Scenario) -> float | None:
     arrival = scenario.arrival
     if isinstance(arrival, Simultaneous):
         return arrival.required_s
-    if isinstance(arrival, Spaced):
+    if isinstance(arrival, Spaced | Waves):
         return arrival.first_s
     return None
 

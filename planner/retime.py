@@ -25,7 +25,7 @@ from planner.deconflict import Separation, check_separation, separation
 from planner.errors import ArrivalTimeError, InfeasibleError
 from planner.flightpath import FlightPath
 from planner.plan import Plan, World, build_world, required_arrival_s
-from planner.scenario import Scenario, Spaced, Vehicle, Windows
+from planner.scenario import Scenario, Spaced, Vehicle, Waves, Windows
 from planner.schedule import (
     Adjustment,
     Anchor,
@@ -422,14 +422,6 @@ def arrival_window(
     )
 
 
-def _offsets(scenario: Scenario) -> dict[str, float]:
-    arrival = scenario.arrival
-    ids = [v.id for v in scenario.vehicles]
-    if isinstance(arrival, Spaced):
-        return {vid: k * arrival.interval_s for k, vid in enumerate(arrival.order or ids)}
-    return dict.fromkeys(ids, 0.0)
-
-
 def arrival_targets(
     scenario: Scenario,
     windows: Sequence[ArrivalWindow],
@@ -454,7 +446,7 @@ def arrival_targets(
                 )
             out[w.vehicle_id] = min(max(natural_s[w.vehicle_id], lo), hi)
         return out, None, "each vehicle within its own arrival window"
-    offsets = _offsets(scenario)
+    offsets = scenario.arrival_offsets_s()
     ref, reason = team_arrival(windows, requested_s, offsets_s=offsets)
     return {w.vehicle_id: ref + offsets[w.vehicle_id] for w in windows}, ref, reason
 
@@ -535,7 +527,7 @@ def build_schedule(
     bounds = (
         None
         if isinstance(scenario.arrival, Windows)
-        else team_window(windows, offsets_s=_offsets(scenario))
+        else team_window(windows, offsets_s=scenario.arrival_offsets_s())
     )
     events = [Event(0.0, "arrival", f"team arrival {format_arrival(ref)}: {reason}")]
     # The pre-plan picture of Fig. 6b: everyone leaves at the earliest common takeoff and
@@ -572,7 +564,7 @@ def build_schedule(
         tuple(stages),
         tuple(events),
         step_m_s,
-        _offsets(scenario),
+        scenario.arrival_offsets_s(),
         bounds,
     )
 
@@ -595,7 +587,14 @@ def check_arrival(schedule: Schedule) -> None:
     requested, ref = schedule.requested_arrival_s, schedule.required_arrival_s
     if requested is None or ref is None or abs(ref - requested) <= TIME_TOL_S:
         return
-    what = "first arrival" if isinstance(schedule.scenario.arrival, Spaced) else "arrival"
+    arrival = schedule.scenario.arrival
+    what = (
+        "first arrival"
+        if isinstance(arrival, Spaced)
+        else "first wave's arrival"
+        if isinstance(arrival, Waves)
+        else "arrival"
+    )
     w = schedule.team_window
     if w is not None and requested < w.earliest_s - TIME_TOL_S:
         message = (

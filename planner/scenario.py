@@ -295,7 +295,32 @@ class Windows(_Model):
     windows: Annotated[list[Window], Field(min_length=1)]
 
 
-ArrivalConstraint = Annotated[Simultaneous | Spaced | Windows, Field(discriminator="kind")]
+_Group = Annotated[list[str], Field(min_length=1)]
+
+
+class Waves(_Model):
+    """Groups of vehicles that arrive together, ``gap_s`` between one group and the next:
+    the groups named (``groups``, every vehicle in one), or only their sizes (``sizes``,
+    summing to the team: the vehicles that can arrive soonest fly in the first)."""
+
+    kind: Literal["waves"]
+    gap_s: Annotated[float, Field(gt=0.0)]
+    first_s: MissionTimeS | None = Field(
+        default=None, description="the first wave's arrival; the earliest feasible if absent"
+    )
+    groups: (
+        Annotated[list[Annotated[list[str], Field(min_length=1)]], Field(min_length=1)] | None
+    ) = None
+    sizes: Annotated[list[Annotated[int, Field(ge=1)]], Field(min_length=1)] | None = None
+
+    @model_validator(mode="after")
+    def _one_of(self) -> Self:
+        if (self.groups is None) == (self.sizes is None):
+            raise ValueError("give either groups (vehicles by wave) or sizes (vehicles per wave)")
+        return self
+
+
+ArrivalConstraint = Annotated[Simultaneous | Spaced | Windows | Waves, Field(discriminator="kind")]
 
 
 class CostWeights(_Model):
@@ -357,6 +382,24 @@ class Scenario(_Model):
             _names_every_vehicle(
                 "arrival.order", named, ids, rule="the order names each vehicle exactly once"
             )
+        if isinstance(arrival, Waves) and arrival.groups is not None:
+            named = [
+                (f"arrival.groups[{k}][{j}]", vid)
+                for k, group in enumerate(arrival.groups)
+                for j, vid in enumerate(group)
+            ]
+            _names_every_vehicle(
+                "arrival.groups", named, ids, rule="each vehicle flies in exactly one wave"
+            )
+        if (
+            isinstance(arrival, Waves)
+            and arrival.sizes is not None
+            and sum(arrival.sizes) != len(self.vehicles)
+        ):
+            raise ValueError(
+                f"arrival.sizes: the waves hold {sum(arrival.sizes)} vehicles, the team "
+                f"has {len(self.vehicles)}"
+            )
         if isinstance(arrival, Windows):
             named = [
                 (f"arrival.windows[{k}].vehicle", w.vehicle) for k, w in enumerate(arrival.windows)
@@ -365,6 +408,47 @@ class Scenario(_Model):
                 "arrival.windows", named, ids, rule="each vehicle needs exactly one window"
             )
         return self
+
+    def arrival_offsets_s(self) -> dict[str, float]:
+        """Each vehicle's arrival after the team's reference time (s): 0 for simultaneous
+        arrivals and windows, its place in the order times ``interval_s`` when spaced, its
+        wave's index times ``gap_s`` in waves. Waves given by size are filled in the order of
+        each vehicle's soonest arrival: its takeoff window's start plus the straight line to
+        its goal at its top speed (an airborne vehicle from 0)."""
+        arrival = self.arrival
+        ids = [v.id for v in self.vehicles]
+        if isinstance(arrival, Spaced):
+            return {vid: k * arrival.interval_s for k, vid in enumerate(arrival.order or ids)}
+        if isinstance(arrival, Waves):
+            groups = arrival.groups
+            if groups is None:
+                assert arrival.sizes is not None
+                frame = self.frame()
+
+                def soonest_s(v: Vehicle) -> float:
+                    (se, sn), (ge, gn) = v.start.local(frame), v.goal.local(frame)
+                    t0 = 0.0 if v.airborne else v.takeoff_window_s[0]
+                    return t0 + math.hypot(ge - se, gn - sn) / v.speed_max_m_s
+
+                ranked = [v.id for v in sorted(self.vehicles, key=soonest_s)]
+                groups, k = [], 0
+                for size in arrival.sizes:
+                    groups.append(ranked[k : k + size])
+                    k += size
+            return {vid: k * arrival.gap_s for k, group in enumerate(groups) for vid in group}
+        return dict.fromkeys(ids, 0.0)
+
+    def with_team_arrival_s(self, t_s: float) -> Scenario | None:
+        """The scenario with its team arrival requested at ``t_s`` (``required_s``, or the
+        first slot or wave's ``first_s``); None for windows, which have no team time."""
+        arrival = self.arrival
+        if isinstance(arrival, Simultaneous):
+            arrival = arrival.model_copy(update={"required_s": t_s})
+        elif isinstance(arrival, Spaced | Waves):
+            arrival = arrival.model_copy(update={"first_s": t_s})
+        else:
+            return None
+        return self.model_copy(update={"arrival": arrival})
 
     def vehicle(self, vehicle_id: str) -> Vehicle:
         for v in self.vehicles:

@@ -319,15 +319,10 @@ class FlightRunner:
     def _plan(self) -> tuple[Schedule, World]:
         scenario = self.scenario
         if self.requested_arrival_s is not None:
-            arrival = scenario.arrival
-            if arrival.kind == "simultaneous":
-                arrival = arrival.model_copy(update={"required_s": self.requested_arrival_s})
-            elif arrival.kind == "spaced":
-                arrival = arrival.model_copy(update={"first_s": self.requested_arrival_s})
-            else:
+            requested = scenario.with_team_arrival_s(self.requested_arrival_s)
+            if requested is None:
                 raise InfeasibleRequest("a required arrival time needs a team arrival kind")
-            scenario = scenario.model_copy(update={"arrival": arrival})
-            self.scenario = scenario
+            scenario = self.scenario = requested
         world = build_world(scenario)
         try:
             p = plan(scenario, method=self.config.method, rng=self.rng, world=world)

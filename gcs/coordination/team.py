@@ -44,7 +44,7 @@ from gcs.errors import GcsError
 from planner.atmosphere import eas2tas
 from planner.mission import MAV_CMD_DO_CHANGE_SPEED
 from planner.plan import World
-from planner.scenario import Scenario, Threat
+from planner.scenario import Scenario, Threat, Windows
 from planner.schedule import Schedule
 from planner.threats import ThreatZone
 from planner.timing import SpeedLimits as PlannerLimits
@@ -650,9 +650,52 @@ class TeamController(ZoneGuard):
         room left to absorb more than the late vehicle needs."""
         return min(self.config.late_margin_s, 0.02 * max(earliest_s - now_s, 0.0))
 
+    def _late_in_window(self, m: Member, d: Decision, t: float, out: list[act.Action]) -> None:
+        """Arrival windows: no team time; the late vehicle's own slot moves to the earliest it
+        can make (plus the margin) while that is in its window, else an alarm, once, and it
+        flies at top speed to the earliest."""
+        arrival = self.scenario.arrival
+        assert isinstance(arrival, Windows)
+        w = next(x for x in arrival.windows if x.vehicle == m.vehicle_id)
+        new = d.eta_min_s + self._late_margin_s(d.eta_min_s, t)
+        if new <= m.target_s:
+            return
+        old = m.target_s
+        if new <= w.latest_s:
+            m.target_s = new
+            out.append(
+                act.Report(
+                    EventKind.ARRIVAL,
+                    f"slot moved {old:.1f} -> {new:.1f} s within its window "
+                    f"[{w.earliest_s:g}, {w.latest_s:g}] s: it cannot arrive before "
+                    f"{d.eta_min_s:.1f} s even at {m.limits.airspeed_max_m_s:g} m/s",
+                    m.vehicle_id,
+                    value=round(new, 3),
+                    t_s=t,
+                )
+            )
+        else:
+            m.target_s = d.eta_min_s
+            if not m.late_after_arrivals:
+                m.late_after_arrivals = True
+                out.append(
+                    act.Report(
+                        EventKind.ALARM,
+                        f"misses its window [{w.earliest_s:g}, {w.latest_s:g}] s: it cannot "
+                        f"arrive before {d.eta_min_s:.1f} s even at "
+                        f"{m.limits.airspeed_max_m_s:g} m/s",
+                        m.vehicle_id,
+                        value=round(d.eta_min_s - w.latest_s, 3),
+                        t_s=t,
+                    )
+                )
+        m.next_decision_s = -math.inf
+
     def _late(self, m: Member, d: Decision, t: float, out: list[act.Action]) -> None:
         ref = self.team_ref_s
         if ref is None:
+            if isinstance(self.scenario.arrival, Windows):
+                self._late_in_window(m, d, t, out)
             return
         new_ref = d.eta_min_s - m.offset_s + self._late_margin_s(d.eta_min_s, t)
         if new_ref <= ref:

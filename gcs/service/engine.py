@@ -865,14 +865,12 @@ def _signing(key_hex: str) -> SigningConfig:
 
 
 def _with_arrival(scenario: Scenario, required_arrival_s: float) -> Scenario:
-    arrival = scenario.arrival
-    if arrival.kind == "simultaneous":
-        arrival = arrival.model_copy(update={"required_s": required_arrival_s})
-    elif arrival.kind == "spaced":
-        arrival = arrival.model_copy(update={"first_s": required_arrival_s})
-    else:
-        raise InvalidInput("required_arrival_s: needs a team arrival kind (simultaneous, spaced)")
-    return scenario.model_copy(update={"arrival": arrival})
+    out = scenario.with_team_arrival_s(required_arrival_s)
+    if out is None:
+        raise InvalidInput(
+            "required_arrival_s: needs a team arrival kind (simultaneous, spaced, waves)"
+        )
+    return out
 
 
 def _plan(scenario: Scenario, seed: int, config: FlightConfig) -> tuple[Schedule, World]:

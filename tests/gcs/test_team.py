@@ -8,6 +8,7 @@ from __future__ import annotations
 import dataclasses
 import math
 import pickle
+import re
 from collections.abc import Sequence
 from typing import Any
 
@@ -23,9 +24,10 @@ from gcs.coordination.separation import Position, SeparationWatch
 from gcs.coordination.team import TeamController, TeamTimeRefused
 from gcs.errors import GcsError
 from planner.mission import MAV_CMD_NAV_LOITER_TURNS, MAV_CMD_NAV_WAYPOINT
-from planner.plan import World
+from planner.plan import World, build_world, plan
 from planner.popup import popup_zones
-from planner.scenario import Scenario, Threat
+from planner.retime import build_schedule
+from planner.scenario import Scenario, Threat, parse_scenario
 from planner.schedule import Schedule
 from planner.threats import build_threats
 
@@ -787,3 +789,62 @@ def test_the_separation_watch_skips_stale_fixes_and_clears_a_pair_once_apart() -
     assert len(w.update("B", Position(13.5, -600.0, 0.0, 100.0), ["A", "B"])) == 1  # 275 m
     # A vehicle not flying (arrived) is not compared.
     assert w.update("C", Position(13.5, 200.0, 0.0, 100.0), ["C", "B"]) == []
+
+
+# -- arrival windows ------------------------------------------------------------------------------
+
+
+@pytest.fixture(scope="module")
+def windows_team_parts(
+    paper: tuple[Scenario, World, Schedule],
+) -> tuple[Scenario, World, Schedule]:
+    scenario, _world, _ = paper
+    own = {"UAV1": (5_300.0, 7_000.0), "UAV2": (5_300.0, 5_320.0), "UAV3": (5_300.0, 7_000.0)}
+    arrival = {
+        "kind": "windows",
+        "windows": [{"vehicle": v, "earliest_s": a, "latest_s": b} for v, (a, b) in own.items()],
+    }
+    data = scenario.model_dump(mode="json", exclude_none=True) | {"arrival": arrival}
+    scen = parse_scenario(data)
+    w = build_world(scen)
+    p = plan(scen, rng=np.random.default_rng(1), world=w)
+    return scen, w, build_schedule(scen, p, world=w)
+
+
+def test_windows_a_late_vehicle_moves_its_own_slot_within_its_window_or_alarms(
+    windows_team_parts: tuple[Scenario, World, Schedule],
+) -> None:
+    scenario, world, schedule = windows_team_parts
+    team = TeamController(scenario, schedule, world, FlightConfig(), rng=np.random.default_rng(3))
+    team.start(START_UTC)
+    assert team.team_ref_s is None
+    slots = {v: m.target_s for v, m in team.members.items()}
+    # UAV1 far enough behind to be ~200 s late at top speed: inside its wide window.
+    m1 = team.members["UAV1"]
+    airborne(team, "UAV1", m1.takeoff_s)
+    v_max = m1.limits.airspeed_max_m_s
+    s1 = 5_000.0
+    t1 = m1.target_s + 200.0 - still_air_eta_s(team, "UAV1", s1, 0.0, v_max)
+    earliest = still_air_eta_s(team, "UAV1", s1, t1, v_max)
+    out = team.handle(fix(team, "UAV1", s1, t1, 25.0), t1)
+    (moved,) = reports(out, EventKind.ARRIVAL)
+    assert "within its window [5300, 7000] s" in moved.reason
+    said = float(re.search(r"cannot arrive before ([\d.]+) s", moved.reason).group(1))  # type: ignore[union-attr]
+    assert m1.target_s == pytest.approx(said + FlightConfig().late_margin_s, abs=0.05)
+    # The controller times the climb profile's true airspeed leg by leg; this estimate
+    # takes one ratio for the rest of the route.
+    assert said == pytest.approx(earliest, abs=25.0)
+    assert all(team.members[v].target_s == slots[v] for v in ("UAV2", "UAV3"))
+    assert not reports(out, EventKind.ALARM)
+    # UAV2 late past the end of its narrow window: an alarm, once; it flies at top speed.
+    m2 = team.members["UAV2"]
+    airborne(team, "UAV2", m2.takeoff_s)
+    t2 = m2.takeoff_s + 600.0
+    assert still_air_eta_s(team, "UAV2", 2_000.0, t2, v_max) > 5_320.0
+    out = team.handle(fix(team, "UAV2", 2_000.0, t2, 25.0), t2)
+    (alarm,) = reports(out, EventKind.ALARM)
+    assert alarm.vehicle == "UAV2" and "misses its window [5300, 5320] s" in alarm.reason
+    cmds = of(out, act.CommandSpeed)
+    assert cmds and cmds[0].airspeed_m_s == m2.limits.airspeed_max_m_s
+    out = team.handle(fix(team, "UAV2", 2_050.0, t2 + 2.0, 30.0), t2 + 2.0)
+    assert not reports(out, EventKind.ALARM)

@@ -200,9 +200,20 @@ def _windows(*vehicles: str) -> dict[str, Any]:
     return small_scenario(arrival={"kind": "windows", "windows": windows})
 
 
+def _waves(**fields: Any) -> dict[str, Any]:
+    return small_scenario(arrival={"kind": "waves", "gap_s": 120, **fields})
+
+
 @pytest.mark.parametrize(
     ("data", "expected"),
     [
+        (_waves(groups=[["A"], ["Z"]]), "arrival.groups[1][0]: unknown vehicle 'Z'"),
+        (_waves(groups=[["A", "B"], ["A"]]), "arrival.groups[1][0]: vehicle 'A' is named twice"),
+        (
+            _waves(groups=[["A"]]),
+            "arrival.groups: vehicle 'B' missing (each vehicle flies in exactly one wave)",
+        ),
+        (_waves(sizes=[1, 2]), "arrival.sizes: the waves hold 3 vehicles, the team has 2"),
         (_spaced(["A", "Z"]), "arrival.order[1]: unknown vehicle 'Z'"),
         (_spaced(["A", "A"]), "arrival.order[1]: vehicle 'A' is named twice"),
         (
@@ -235,3 +246,27 @@ def test_published_schema_is_current() -> None:
     published = json.loads((ROOT / "docs" / "scenario.schema.json").read_text())
     assert published == json.loads(json.dumps(json_schema()))
     assert set(Scenario.model_fields) <= set(published["properties"])
+
+
+def test_waves_need_groups_or_sizes_and_a_positive_gap() -> None:
+    assert "either groups" in _error(_waves())
+    assert "either groups" in _error(_waves(groups=[["A", "B"]], sizes=[2]))
+    assert _error(_waves(gap_s=0, sizes=[2])).startswith("s.yaml: arrival")
+
+
+def test_wave_offsets_follow_the_groups_or_the_soonest_arrivals() -> None:
+    given = parse_scenario(_waves(groups=[["B"], ["A"]]))
+    assert given.arrival_offsets_s() == {"B": 0.0, "A": 120.0}
+    # By size: B (36 km... to its goal 35 km away) against A (49 km): B can arrive sooner.
+    data = _waves(sizes=[1, 1])
+    free = parse_scenario(data)
+    a, b = data["vehicles"]
+    dist = {
+        v["id"]: math.hypot(
+            v["goal"]["east_m"] - v["start"]["east_m"], v["goal"]["north_m"] - v["start"]["north_m"]
+        )
+        for v in (a, b)
+    }
+    first = min(dist, key=lambda k: dist[k])
+    assert free.arrival_offsets_s()[first] == 0.0
+    assert max(free.arrival_offsets_s().values()) == 120.0
