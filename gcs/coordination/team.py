@@ -32,23 +32,21 @@ from typing import Any
 import numpy as np
 
 from gcs.coordination import actions as act
-from gcs.coordination.arrival import ArrivalController, Decision, SpeedLimits
+from gcs.coordination.arrival import ArrivalController, SpeedLimits
 from gcs.coordination.config import FlightConfig
 from gcs.coordination.events import EventKind
 from gcs.coordination.member import FIRST_ROUTE_SEQ, Lost, LostCause, Member, path_en, route_track
 from gcs.coordination.routetrack import Wind
 from gcs.coordination.separation import Position, SeparationWatch
+from gcs.coordination.teamtime import TeamTime, TeamTimeRefused
 from gcs.coordination.tracks import TruthSample, closest_approach
 from gcs.coordination.zoneguard import Exposure, ZoneGuard
-from gcs.errors import GcsError
 from planner.atmosphere import eas2tas
 from planner.mission import MAV_CMD_DO_CHANGE_SPEED
 from planner.plan import World
-from planner.scenario import Scenario, Threat, Windows
+from planner.scenario import Scenario, Threat
 from planner.schedule import Schedule
 from planner.threats import ThreatZone
-from planner.timing import SpeedLimits as PlannerLimits
-from planner.timing import takeoff_time_s
 
 __all__ = ["PROGRESS_M", "TeamController", "TeamTimeRefused", "is_crash_text"]
 
@@ -63,20 +61,6 @@ def is_crash_text(text: str) -> bool:
     detected" (or "Crash detected. No action taken"; ArduPlane/is_flying.cpp), ArduCopter's
     "Crash: Disarming" (ArduCopter/crash_check.cpp). A hard landing is not one."""
     return text.lstrip().lower().startswith("crash")
-
-
-class TeamTimeRefused(GcsError):
-    """A team arrival time that some vehicle cannot make: names the earliest feasible time
-    and the vehicle that forces it."""
-
-    def __init__(self, requested_s: float, earliest_s: float, vehicle_id: str, why: str) -> None:
-        super().__init__(
-            f"team arrival {requested_s:.1f} s refused: {vehicle_id} cannot arrive before "
-            f"{earliest_s + 0.0:.1f} s ({why}); earliest feasible {earliest_s:.1f} s"
-        )
-        self.requested_s = requested_s
-        self.earliest_s = earliest_s
-        self.vehicle_id = vehicle_id
 
 
 def reported_wind(fix: act.Fix) -> Wind:
@@ -95,7 +79,7 @@ def reported_wind(fix: act.Fix) -> Wind:
     return Wind()
 
 
-class TeamController(ZoneGuard):
+class TeamController(ZoneGuard, TeamTime):
     """The policy of one flight: members, the team arrival time, threats, decisions.
 
     Build it from a schedule (:meth:`__init__`), take :meth:`initial_uploads`, then
@@ -508,34 +492,6 @@ class TeamController(ZoneGuard):
         elif policy == "abort":
             out.extend(self.abort(None, "rtl", now)[1])
 
-    def _retime_without(self, lost: Member, now: float, out: list[act.Action]) -> None:
-        """The team time moves to the earliest the vehicles still flying to their slots can
-        make together (plus the late margin), if that is earlier than it is."""
-        ref = self.team_ref_s
-        if ref is None or all(m.done for m in self.members.values()):
-            return
-        earliest, vid, why = self.earliest_team_time_s(now)
-        margin_s = self._late_margin_s(earliest, now)
-        new_ref = earliest + margin_s
-        if new_ref >= ref - self.config.tolerance_s:
-            out.append(
-                act.Report(
-                    EventKind.ARRIVAL,
-                    f"team arrival stays {ref:.1f} s without {lost.vehicle_id}: {vid} cannot "
-                    f"arrive before {earliest:.1f} s ({why})",
-                    t_s=now,
-                )
-            )
-            return
-        self._set_team_time(
-            new_ref,
-            now,
-            f"team arrival moved {ref:.1f} -> {new_ref:.1f} s without {lost.vehicle_id} "
-            f"(lost): the earliest {vid} can make ({why}) plus {margin_s:.1f} s",
-            None,
-            out,
-        )
-
     def _passed_items(self, m: Member, old: int | None, new: int) -> None:
         """DO_CHANGE_SPEED items the vehicle ran set the airspeed it flies."""
         lo = FIRST_ROUTE_SEQ if old is None else old
@@ -641,194 +597,6 @@ class TeamController(ZoneGuard):
                 EventKind.SPEED, r.reason, m.vehicle_id, "speed", r.airspeed_m_s, t_s=r.decided_s
             )
         )
-
-    # -- lateness: move the team time ---------------------------------------------------------
-
-    def _late_margin_s(self, earliest_s: float, now_s: float) -> float:
-        """The margin a moved team time keeps past the earliest arrival: ``late_margin_s``,
-        less in the last minutes (2 % of the time still to fly), where the others have no
-        room left to absorb more than the late vehicle needs."""
-        return min(self.config.late_margin_s, 0.02 * max(earliest_s - now_s, 0.0))
-
-    def _late_in_window(self, m: Member, d: Decision, t: float, out: list[act.Action]) -> None:
-        """Arrival windows: no team time; the late vehicle's own slot moves to the earliest it
-        can make (plus the margin) while that is in its window, else an alarm, once, and it
-        flies at top speed to the earliest."""
-        arrival = self.scenario.arrival
-        assert isinstance(arrival, Windows)
-        w = next(x for x in arrival.windows if x.vehicle == m.vehicle_id)
-        new = d.eta_min_s + self._late_margin_s(d.eta_min_s, t)
-        if new <= m.target_s:
-            return
-        old = m.target_s
-        if new <= w.latest_s:
-            m.target_s = new
-            out.append(
-                act.Report(
-                    EventKind.ARRIVAL,
-                    f"slot moved {old:.1f} -> {new:.1f} s within its window "
-                    f"[{w.earliest_s:g}, {w.latest_s:g}] s: it cannot arrive before "
-                    f"{d.eta_min_s:.1f} s even at {m.limits.airspeed_max_m_s:g} m/s",
-                    m.vehicle_id,
-                    value=round(new, 3),
-                    t_s=t,
-                )
-            )
-        else:
-            m.target_s = d.eta_min_s
-            if not m.late_after_arrivals:
-                m.late_after_arrivals = True
-                out.append(
-                    act.Report(
-                        EventKind.ALARM,
-                        f"misses its window [{w.earliest_s:g}, {w.latest_s:g}] s: it cannot "
-                        f"arrive before {d.eta_min_s:.1f} s even at "
-                        f"{m.limits.airspeed_max_m_s:g} m/s",
-                        m.vehicle_id,
-                        value=round(d.eta_min_s - w.latest_s, 3),
-                        t_s=t,
-                    )
-                )
-        m.next_decision_s = -math.inf
-
-    def _late(self, m: Member, d: Decision, t: float, out: list[act.Action]) -> None:
-        ref = self.team_ref_s
-        if ref is None:
-            if isinstance(self.scenario.arrival, Windows):
-                self._late_in_window(m, d, t, out)
-            return
-        new_ref = d.eta_min_s - m.offset_s + self._late_margin_s(d.eta_min_s, t)
-        if new_ref <= ref:
-            return
-        arrived = sorted(x.vehicle_id for x in self.members.values() if x.arrival_s is not None)
-        if arrived:
-            # Moving the team time now would only make the arrived ones miss it: the late
-            # vehicle is late, and said so.
-            if not m.late_after_arrivals:
-                m.late_after_arrivals = True
-                out.append(
-                    act.Report(
-                        EventKind.ALARM,
-                        f"late by {d.eta_min_s - m.target_s:.1f} s at top speed after "
-                        f"{', '.join(arrived)} arrived: the team time stays {ref:.1f} s",
-                        m.vehicle_id,
-                        value=round(d.eta_min_s - m.target_s, 3),
-                        t_s=t,
-                    )
-                )
-            return
-        self._set_team_time(
-            new_ref,
-            t,
-            f"team arrival moved {ref:.1f} -> {new_ref:.1f} s: {m.vehicle_id} cannot arrive "
-            f"before {d.eta_min_s:.1f} s even at {m.limits.airspeed_max_m_s:g} m/s",
-            m.vehicle_id,
-            out,
-        )
-
-    def _set_team_time(
-        self, new_ref: float, t: float, reason: str, vehicle: str | None, out: list[act.Action]
-    ) -> None:
-        self.team_ref_s = new_ref
-        self.version += 1
-        out.append(act.Report(EventKind.ARRIVAL, reason, vehicle, value=new_ref, t_s=t))
-        for other in self.members.values():
-            if other.arrival_s is not None:
-                continue  # its slot was the one it met
-            other.target_s = new_ref + other.offset_s
-            other.next_decision_s = -math.inf
-            if other.phase == "ground":
-                self._retime_takeoff(other, t, out)
-
-    def _planner_limits(self, m: Member) -> PlannerLimits:
-        v = self.scenario.vehicle(m.vehicle_id)
-        return PlannerLimits(v.speed_min_m_s, v.speed_max_m_s, v.cruise_m_s, m.limits.step_m_s)
-
-    def _retime_takeoff(self, m: Member, t: float, out: list[act.Action]) -> None:
-        v = self.scenario.vehicle(m.vehicle_id)
-        window = (max(v.takeoff_window_s[0], t), max(v.takeoff_window_s[1], t))
-        new = takeoff_time_s(
-            m.schedule.path.length_m,
-            m.target_s,
-            self._planner_limits(m),
-            window,
-            m.schedule.tas_per_eas(),
-        )
-        if abs(new - m.takeoff_s) > 0.5:
-            m.takeoff_s = new
-            out.append(
-                act.Report(
-                    EventKind.TAKEOFF,
-                    f"take off at {new:.1f} s to arrive at {m.target_s:.1f} s (eq. 5)",
-                    m.vehicle_id,
-                    "takeoff_delay",
-                    round(new, 3),
-                    t_s=t,
-                )
-            )
-
-    def earliest_team_time_s(self, now_s: float) -> tuple[float, str, str]:
-        """The earliest team arrival every vehicle can still make: ``(time_s, vehicle,
-        why)``, the vehicle being the one that forces it."""
-        best: tuple[float, str, str] | None = None
-        for m in self.members.values():
-            if m.done:
-                continue
-            if m.phase == "ground":
-                v = self.scenario.vehicle(m.vehicle_id)
-                t0 = max(now_s, v.takeoff_window_s[0])
-                tas = v.speed_max_m_s * m.schedule.tas_per_eas()
-                earliest = t0 + m.schedule.path.length_m / tas
-                why = f"on the ground: taking off at {t0:.0f} s and flying at top speed"
-            elif m.last_decision is not None:
-                # The ETA at top speed from its last decision, moved on to now.
-                earliest = m.last_decision.eta_min_s
-                why = f"at {m.limits.airspeed_max_m_s:g} m/s from where it is"
-            else:
-                earliest = m.target_s  # climbing: no estimate yet; keep its slot
-                why = "still climbing out"
-            earliest -= m.offset_s
-            if best is None or earliest > best[0]:
-                best = (earliest, m.vehicle_id, why)
-        if best is None:
-            raise GcsError("no vehicle of the team is still flying to its slot")
-        return best
-
-    def move_team_time(
-        self, arrival_s: float, now_s: float, *, version: int | None = None
-    ) -> list[act.Action]:
-        """The operator moves the team arrival to ``arrival_s`` (mission s).
-
-        Raises
-        ------
-        TeamTimeRefused
-            A vehicle cannot arrive by then (the earliest feasible time and that vehicle).
-        GcsError
-            ``version`` is not the current one (someone moved it first), or the team has no
-            common arrival time (per-vehicle windows).
-        """
-        if self.team_ref_s is None:
-            raise GcsError("this flight's arrivals are per-vehicle windows: no team time to move")
-        if version is not None and version != self.version:
-            raise GcsError(f"team time version {version} is stale (now {self.version})")
-        if not math.isfinite(arrival_s):
-            raise GcsError(f"team arrival must be a number of seconds, got {arrival_s!r}")
-        if arrival_s > self.hard_deadline_s:
-            raise GcsError(
-                f"team arrival {arrival_s:.1f} s is past the flight's hard deadline "
-                f"{self.hard_deadline_s:.1f} s"
-            )
-        earliest, vid, why = self.earliest_team_time_s(now_s)
-        if arrival_s < earliest - 1e-6:
-            raise TeamTimeRefused(arrival_s, earliest, vid, why)
-        out: list[act.Action] = []
-        old = self.team_ref_s
-        self._set_team_time(
-            arrival_s, now_s, f"team arrival moved {old:.1f} -> {arrival_s:.1f} s by the operator",
-            None, out,
-        )  # fmt: skip
-        self._states(out, now_s)
-        return out
 
     # -- arrival --------------------------------------------------------------------------------
 
