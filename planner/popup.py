@@ -206,6 +206,7 @@ def apply_popup(
             current.step_m_s,
             threats,
             anchors.get(v.id),
+            world.terrain,
         )
         for v in scenario.vehicles
         if where[v.id][0] != "arrived"

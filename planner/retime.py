@@ -403,21 +403,29 @@ def arrival_window(
     step_m_s: float,
     threats: Sequence[ThreatZone],
     anchor: Anchor | None = None,
+    terrain: Terrain | None = None,
 ) -> ArrivalWindow:
-    """The vehicle's feasible arrival window from ``now_s`` (eq. 1), from where it is."""
+    """The vehicle's feasible arrival window from ``now_s`` (eq. 1), from where it is (with
+    ``terrain``, a vehicle with no buffer ahead may still loiter on its path where the
+    airspace and the terrain allow, as :func:`retime_on_path` would)."""
     phase, s0, _ = anchored_state(vs, now_s, anchor)
     start = now_s
     if phase == "loiter":
         start = next(lo.t_end_s for lo in vs.loiters if lo.t_start_s <= now_s < lo.t_end_s)
     radius = flyable_loiter_radius_m(v.min_turn_radius_m)
     site = find_loiter_site(scenario, v, vs.path, s0, radius, threats)
+    can_loiter = site is not None or (
+        terrain is not None
+        and phase != "ground"
+        and free_loiter_site(v, vs, s0, radius, threats, terrain) is not None
+    )
     return vehicle_window(
         v.id,
         now_s=start,
         remaining_m=vs.path.length_m - s0,
         limits=_limits(v, step_m_s),
         takeoff_window_s=v.takeoff_window_s if phase == "ground" else None,
-        can_loiter=site is not None,
+        can_loiter=can_loiter,
         tas_per_eas=vs.tas_per_eas(s0),
     )
 

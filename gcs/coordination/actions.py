@@ -149,6 +149,9 @@ class PlanningLead:
     planning plus upload time at the clock's rate."""
 
     lead_s: float
+    """For a pop-up re-plan (the team's planning)."""
+    loiter_lead_s: float | None = None
+    """For loiter turns (one vehicle re-timed: fast); None: ``lead_s``."""
 
 
 # -- actions --------------------------------------------------------------------------------

@@ -44,6 +44,7 @@ class MissionChanges:
     team_ref_s: float | None
     version: int
     lead_s: float
+    loiter_lead_s: float
     extra_threats: list[Threat]
     removed_threats: set[str]
     popups_done: set[str]
@@ -55,6 +56,11 @@ class MissionChanges:
     def hold_anchor_s_m(self, m: Member, zone_id: str) -> float | None:
         """Where the vehicle holds short of the zone (m along its path); None: not holding
         (:class:`~gcs.coordination.zoneguard.ZoneGuard` holds vehicles)."""
+        return None
+
+    def hold_short_s_m(self, m: Member, zone: ThreatZone, before_s_m: float) -> float | None:
+        """Where the vehicle would hold short of the zone, its route entering it ahead of it
+        and short of ``before_s_m``; None: it does not, or no zone guard."""
         return None
 
     def _no_route(self, vehicle_id: str, problem: str, now: float, zone_id: str | None) -> None:
@@ -85,7 +91,8 @@ class MissionChanges:
         self, m: Member, d: Decision, t: float, s: float, wind: Wind, out: list[act.Action]
     ) -> None:
         gs = max(m.groundspeed_m_s, 10.0)
-        keep = self._keep_seq(m, gs * self.lead_s)
+        # A controller from a checkpoint kept before loiters had their own lead has none.
+        keep = self._keep_seq(m, gs * self.__dict__.get("loiter_lead_s", self.lead_s))
         if keep is None:
             return
         s_k = m.mission.item_s_m[keep]
@@ -378,6 +385,15 @@ class MissionChanges:
                 continue
             s_k = m.mission.item_s_m[keep]
             assert s_k is not None
+            s_short = self.hold_short_s_m(m, zone, s_k)
+            keep_short = None if s_short is None else self._keep_behind(m, s_short)
+            if s_short is not None and keep_short is not None and keep_short >= (m.last_seq or 0):
+                # It reaches the zone before that waypoint: its new route starts where it
+                # will hold short of the zone (held there by the guard until it is on board).
+                t_hold = max(self._reaches_s(m, t, s_short, gs), at_s)
+                anchors[m.vehicle_id] = Anchor(s_short, self._speed_now(m), t_hold)
+                keeps[m.vehicle_id] = keep_short
+                continue
             # The vehicle reaches the splice waypoint at its own time, not at t + lead: the
             # waypoint is the first one at least that far ahead and may be much farther, with
             # loiter turns of the kept mission before it.

@@ -152,6 +152,8 @@ class FlightRunner:
         self.state_reason = ""
         """Why the flight is in its state, when it was said (a failure's reason)."""
         self.plan_wall_s = 1.0
+        self.loiter_wall_s = 0.2
+        """The longest loiter job so far (wall s): it sets the loiter lead."""
         self.on_checkpoint: Callable[[bytes], None] | None = None
         """Called with a pickled controller after every change worth keeping (see
         :data:`CHECKPOINT_WALL_S`); :meth:`resume` takes it back."""
@@ -336,6 +338,14 @@ class FlightRunner:
         """How far ahead (mission s) a changed mission may start: planning and upload time."""
         wall = self.plan_wall_s + 0.3
         return max(self.config.min_lead_s, 1.5 * wall * self.clock.rate)
+
+    def _loiter_lead_s(self) -> float:
+        """The same for loiter turns: one vehicle re-timed (milliseconds) and its upload (a
+        second allowed)."""
+        return max(self.config.min_lead_s, 1.5 * (self.loiter_wall_s + 1.0) * self.clock.rate)
+
+    def _planning_lead(self) -> act.PlanningLead:
+        return act.PlanningLead(self._lead_s(), self._loiter_lead_s())
 
     # -- vehicles -------------------------------------------------------------------------------
 
@@ -522,7 +532,8 @@ class FlightRunner:
         """
         v = self.vehicles[a.vehicle_id]
         loop = asyncio.get_running_loop()
-        end_s = loop.time() + 0.5 * self._lead_s() / self.clock.rate if a.in_flight else None
+        lead = self._loiter_lead_s() if a.what == "loiter inserted" else self._lead_s()
+        end_s = loop.time() + 0.5 * lead / self.clock.rate if a.in_flight else None
         for attempt in range(3):
             within_s = None if end_s is None else end_s - loop.time()
             try:
@@ -555,12 +566,14 @@ class FlightRunner:
                 log.exception("planning job failed")
             error = err
         wall = time.perf_counter() - t0
+        if isinstance(a.job, act.LoiterJob):
+            self.loiter_wall_s = max(self.loiter_wall_s, wall)
         if isinstance(a.job, act.PopupJob):
             self.plan_wall_s = max(self.plan_wall_s, wall)
             if self.config.replan_delay_wall_s > 0.0 and not a.job.holding:
                 await asyncio.sleep(self.config.replan_delay_wall_s)  # the test hook: late
         self._feed(act.Computed(a.job, result, error, wall))
-        self._feed(act.PlanningLead(self._lead_s()))
+        self._feed(self._planning_lead())
 
     # -- before the start -----------------------------------------------------------------------
 
@@ -602,7 +615,7 @@ class FlightRunner:
                 start_utc_s = self.clock.now_utc_s() + max(5.0, 2.0 * self.clock.rate)
             self._dispatch(team.start(start_utc_s))
         self._set_state(FlightState.RUNNING)
-        self._feed(act.PlanningLead(self._lead_s()))
+        self._feed(self._planning_lead())
         try:
             async with asyncio.TaskGroup() as tg:
                 self._group = tg
@@ -645,7 +658,7 @@ class FlightRunner:
     async def _timeline(self) -> None:
         """Ticks of the mission clock: launches, pop-ups, the overrun, the clocks."""
         while not self._over():
-            self._feed(act.PlanningLead(self._lead_s()))
+            self._feed(self._planning_lead())
             self._feed(act.Tick())
             self._check_clocks()
             if self._checkpoint_dirty:

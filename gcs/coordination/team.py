@@ -104,6 +104,7 @@ class TeamController(ZoneGuard, TeamTime):
         self.team_ref_s: float | None = schedule.required_arrival_s
         self.start_utc_s: float | None = None
         self.lead_s = self.config.min_lead_s
+        self.loiter_lead_s = self.config.min_lead_s
         self.members: dict[str, Member] = {}
         self.extra_threats: list[Threat] = []
         self.removed_threats: set[str] = set()
@@ -211,8 +212,11 @@ class TeamController(ZoneGuard, TeamTime):
                 self._hold_taken(event, now_s, out)
             case act.Resumed():
                 self._resumed(event, now_s, out)
-            case act.PlanningLead(lead_s=lead):
+            case act.PlanningLead(lead_s=lead, loiter_lead_s=loiter_lead):
                 self.lead_s = max(self.config.min_lead_s, lead)
+                self.loiter_lead_s = max(
+                    self.config.min_lead_s, lead if loiter_lead is None else loiter_lead
+                )
         # A fix changes only its own vehicle's state; anything else may change any.
         self._states(out, now_s, event.vehicle_id if isinstance(event, act.Fix) else None)
         for a in out:

@@ -216,20 +216,36 @@ class ZoneGuard(MissionChanges):
         exp.entry_s_m = route_entry_m(m, exp.zone, s_from)
         if exp.entry_s_m is None or exp.state in ("holding", "commanding"):
             return
-        # The last point short of the entry (the route flown so far included) far enough
-        # outside the zone for the circle the autopilot flies round it.
+        s_k, en, alt, clear = self._hold_point(m, exp.zone, exp.entry_s_m)
+        exp.hold_s_m, exp.hold_en_m, exp.hold_alt_m, exp.hold_clear_m = s_k, en, alt, clear
+
+    def _hold_point(
+        self, m: Member, zone: ThreatZone, entry_s_m: float
+    ) -> tuple[float, tuple[float, float], float, float]:
+        """The last point short of the entry (the route flown so far included) far enough
+        outside the zone for the circle the autopilot flies round it: ``(s_m, (east_m,
+        north_m), alt_m, clearance_m)``."""
         v = self.scenario.vehicle(m.vehicle_id)
         clearance = max(self.config.hold_radius_m, v.min_turn_radius_m) + self.config.hold_margin_m
-        n = max(2, int(math.ceil(exp.entry_s_m / SAMPLE_M)) + 1)
-        s = np.linspace(exp.entry_s_m, 0.0, n)
+        n = max(2, int(math.ceil(entry_s_m / SAMPLE_M)) + 1)
+        s = np.linspace(entry_s_m, 0.0, n)
         e, nn, alt = _samples(m, s)
-        d = exp.zone.distance_m(e, nn)
+        d = zone.distance_m(e, nn)
         ok = d >= clearance
         k = int(np.argmax(ok)) if ok.any() else int(np.argmax(d))
-        exp.hold_s_m = float(s[k])
-        exp.hold_en_m = (float(e[k]), float(nn[k]))
-        exp.hold_alt_m = float(alt[k])
-        exp.hold_clear_m = float(d[k])
+        return float(s[k]), (float(e[k]), float(nn[k])), float(alt[k]), float(d[k])
+
+    def hold_short_s_m(self, m: Member, zone: ThreatZone, before_s_m: float) -> float | None:
+        """Where the vehicle would hold short of a forbidden zone its route enters ahead of
+        it, short of ``before_s_m`` (m along its path), else None."""
+        if not zone.forbidden:
+            return None
+        s_now = m.s_m or 0.0
+        entry = route_entry_m(m, zone, s_now)
+        if entry is None or entry >= before_s_m:
+            return None
+        s_hold = self._hold_point(m, zone, entry)[0]
+        return s_hold if s_hold > s_now else None
 
     # -- the fallback ------------------------------------------------------------------------
 
