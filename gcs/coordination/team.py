@@ -305,6 +305,7 @@ class TeamController(ZoneGuard, TeamTime):
         t = self._t(fix.utc_s)
         if m.last_fix_s is not None and t <= m.last_fix_s:
             return
+        dt_s = 0.0 if m.last_fix_s is None else t - m.last_fix_s
         m.last_fix_s = t
         e, n = self.frame.to_local(fix.lat_deg, fix.lon_deg)
         e, n = float(e), float(n)
@@ -341,7 +342,9 @@ class TeamController(ZoneGuard, TeamTime):
             self._passed_items(m, m.last_seq, seq)
             m.last_seq = seq
             if m.in_loiter():
-                m.loiter_entered_s = t
+                m.loiter_entered_s, m.loiter_flown_m = t, 0.0
+        elif m.in_loiter():
+            m.loiter_flown_m += (fix.groundspeed_m_s or 0.0) * min(dt_s, 10.0)
         self._watch_goal(m, fix, e, n, out)
         if m.phase != "route":
             return
@@ -358,7 +361,11 @@ class TeamController(ZoneGuard, TeamTime):
             self._guard(m, t, s, out)
         if m.hold_zone is not None:
             return  # holding short of a zone: timed again once it resumes
-        if m.in_loiter() or m.busy_mission:
+        if m.busy_mission:
+            return
+        if m.in_loiter():
+            if t >= m.next_decision_s:
+                self._decide_in_loiter(m, t, fix, out)
             return
         if not seq_changed and t < m.next_decision_s:
             return
@@ -581,6 +588,35 @@ class TeamController(ZoneGuard, TeamTime):
             if d.verdict == "early":
                 m.last_loiter_s = t
                 self._loiter(m, d, t, s, inputs["wind"], out)
+
+    def _decide_in_loiter(self, m: Member, t: float, fix: act.Fix, out: list[act.Action]) -> None:
+        """In loiter turns: the rest of the turns (those flown counted from the ground
+        distance since it entered them) and the route after, timed as anywhere else; its
+        airspeed is trimmed (ArduPlane flies the turns at the commanded airspeed), and one
+        that would be late even at top speed moves the team time now, while the others can
+        still follow, not when it comes out."""
+        k = m.loiters_done()
+        if k >= len(m.track.loiters):
+            return
+        lo = m.track.loiters[k]
+        d = m.controller.decide(
+            m.track,
+            s_m=lo.s_m,
+            now_s=t,
+            target_s=m.target_s,
+            wind=self._wind(m, fix),
+            current_level_m_s=m.level_m_s,
+            loiters_done=k,
+            loiter_flown_m=min(m.loiter_flown_m, lo.length_m),
+            tas_per_eas=m.tas_per_eas(lo.s_m),
+        )
+        m.last_decision = d
+        m.next_decision_s = t + ArrivalController.period_s(m.target_s - t)
+        if d.command_m_s is not None and not m.busy_command:
+            m.busy_command = True
+            out.append(act.CommandSpeed(m.vehicle_id, d.command_m_s, d.reason, t))
+        if d.verdict == "late":
+            self._late(m, d, t, out)
 
     def _speed_commanded(self, r: act.SpeedCommanded, out: list[act.Action]) -> None:
         m = self.members[r.vehicle_id]

@@ -895,3 +895,68 @@ def test_loiter_turns_splice_at_the_loiter_lead_not_the_team_re_plan_lead(
     gs = m.groundspeed_m_s
     spacing = FlightConfig().waypoint_spacing_m
     assert s0 + gs * 90.0 <= job.s_m <= s0 + gs * 90.0 + spacing + 1.0
+
+
+def test_a_vehicle_in_its_loiter_turns_is_timed_and_a_late_one_moves_the_team_time_at_once(
+    team: TeamController,
+) -> None:
+    """In loiter turns the vehicle is still timed (the turns left from the ground distance
+    flown in them): its airspeed trimmed, and when the team time comes too soon for the turns
+    left even at top speed it moves now, not when the vehicle comes out."""
+    vid = "UAV3"
+    m = team.members[vid]
+    t0, _, job = _early(team, vid)
+    (up,) = of(team.handle(act.Computed(job, job.run()), t0 + 1), act.Upload)
+    team.handle(act.Installed(up), t0 + 2)
+    if m.busy_command:  # the early fix's speed command: answered
+        team.handle(act.SpeedCommanded(vid, 15.0, "early", t0), t0 + 2)
+    (lo,) = [x for x in m.track.loiters if x.s_m > job.s_m - 1.0]
+    k_loiter = next(
+        k for k, it in enumerate(m.mission.items) if it.command == MAV_CMD_NAV_LOITER_TURNS
+    )
+    t1 = t0 + 600.0
+    base = fix(team, vid, lo.s_m, t1, 20.0)
+    for c in of(team.handle(dataclasses.replace(base, mission_seq=k_loiter), t1), act.CommandSpeed):
+        team.handle(act.SpeedCommanded(vid, c.airspeed_m_s, c.reason, c.decided_s), t1)
+    assert m.in_loiter() and m.loiter_entered_s == t1
+    gs = base.groundspeed_m_s
+    assert gs is not None
+
+    def on_circle(i: int) -> act.Fix:
+        """Fix ``i`` (2 s apart) round the loiter circle at the fixes' ground speed."""
+        a = (1.0 if lo.clockwise else -1.0) * 2.0 * i * gs / lo.radius_m
+        e = lo.centre_east_m + lo.radius_m * math.sin(a)
+        n = lo.centre_north_m + lo.radius_m * math.cos(a)
+        lat, lon = team.frame.to_geodetic(e, n)
+        return dataclasses.replace(
+            base, utc_s=base.utc_s + 2.0 * i, lat_deg=float(lat), lon_deg=float(lon),
+            mission_seq=k_loiter,
+        )  # fmt: skip
+
+    # 200 s in the turns (fixes every 2 s).
+    trims = []
+    before = m.last_decision
+    for i in range(1, 101):
+        for c in of(team.handle(on_circle(i), t1 + 2.0 * i), act.CommandSpeed):
+            trims.append(c.airspeed_m_s)
+            team.handle(act.SpeedCommanded(vid, c.airspeed_m_s, c.reason, c.decided_s), t1 + 2 * i)
+    assert m.phase == "route"
+    assert m.last_decision is not before and m.next_decision_s > t1  # timed in the turns
+    assert m.loiter_flown_m == pytest.approx(100 * 2.0 * gs)
+    t2 = t1 + 200.0
+    left_m = lo.length_m - m.loiter_flown_m + m.track.length_m - lo.s_m
+    assert left_m > 10_000.0
+    # The slot moved to 60 s from now: nothing flies the turns left that fast.
+    old_ref = team.team_ref_s
+    assert old_ref is not None
+    for x in team.members.values():
+        x.target_s = t2 + 60.0 + x.offset_s
+        x.next_decision_s = -math.inf
+    team.team_ref_s = t2 + 60.0
+    out = team.handle(on_circle(101), t2 + 2.0)
+    (moved,) = reports(out, EventKind.ARRIVAL)
+    assert moved.vehicle == vid and "cannot arrive before" in moved.reason
+    tas_max = m.limits.airspeed_max_m_s * m.tas_per_eas(lo.s_m)
+    assert moved.value == pytest.approx(t2 + 2.0 + left_m / tas_max, rel=0.05)
+    (cmd,) = of(out, act.CommandSpeed)
+    assert cmd.airspeed_m_s == m.limits.airspeed_max_m_s
