@@ -349,7 +349,10 @@ async def test_two_flights_at_once_on_one_fleet_each_to_its_own_time(tmp_path: P
     # The second started on the time it asked for (the pop-up may move either later).
     start = next(e for e in records[1]["events"] if e["kind"] == "start")
     assert "team arrival 5600.0 s" in start["reason"], start
-    assert records[1]["required_arrival_s"] - records[0]["required_arrival_s"] > 150.0
+    # Both re-timed around POPUP1 (each about 100 s later, from the 5450 s or so the first
+    # would make and the 5600 s asked), the second still the later by most of the gap.
+    assert records[1]["required_arrival_s"] >= 5600.0 - 1e-3
+    assert records[1]["required_arrival_s"] - records[0]["required_arrival_s"] > 100.0
     for record in records:
         assert record["arrival_source"] == "simulator"
         errors = _errors(record)
