@@ -111,7 +111,8 @@ class Member:
     loiter_entered_s: float | None = None
     """Mission time its current mission item last became a loiter (turns flown since)."""
     loiter_flown_m: float = 0.0
-    """Ground distance flown since then (groundspeed times the time between fixes)."""
+    """Ground distance flown since then (each fix's groundspeed times the time since the one
+    before, link gaps included: the aircraft flew on)."""
     arrival_s: float | None = None
     """Mission time it passed its goal (from its own telemetry)."""
     near_goal: list[TruthSample] = field(default_factory=list)

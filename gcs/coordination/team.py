@@ -344,7 +344,7 @@ class TeamController(ZoneGuard, TeamTime):
             if m.in_loiter():
                 m.loiter_entered_s, m.loiter_flown_m = t, 0.0
         elif m.in_loiter():
-            m.loiter_flown_m += (fix.groundspeed_m_s or 0.0) * min(dt_s, 10.0)
+            m.loiter_flown_m += (fix.groundspeed_m_s or 0.0) * dt_s
         self._watch_goal(m, fix, e, n, out)
         if m.phase != "route":
             return
