@@ -12,6 +12,7 @@ from pathlib import Path
 
 import pytest
 
+from tests.flightstory import story
 from tests.service.conftest import serve
 from tests.service.test_flights_http import _all_events, _flight, _ok, _until
 
@@ -61,7 +62,9 @@ async def _kill_and_restart(data: Path) -> None:
     # Every arrival within 2 s of its slot, read from the simulator's truth log.
     assert record["arrival_source"] == "simulator"
     for v in record["vehicles"]:
-        assert v["error_s"] is not None and abs(v["error_s"]) <= 2.0, v
+        assert v["error_s"] is not None and abs(v["error_s"]) <= 2.0, (
+            v["id"], v["error_s"], story(after),
+        )  # fmt: skip
     # The events go on from the first process's, numbered on; nobody was launched again and
     # each vehicle was found holding its mission.
     seqs = [e["seq"] for e in after]
