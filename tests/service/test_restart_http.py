@@ -61,6 +61,7 @@ async def _kill_and_restart(data: Path) -> None:
         after = await _all_events(client, fid)
     # Every arrival within 2 s of its slot, read from the simulator's truth log.
     assert record["arrival_source"] == "simulator"
+    print(story(after, limit=200))  # shown when the test fails
     for v in record["vehicles"]:
         assert v["error_s"] is not None and abs(v["error_s"]) <= 2.0, (
             v["id"], v["error_s"], story(after),
