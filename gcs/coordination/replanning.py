@@ -91,8 +91,7 @@ class MissionChanges:
         self, m: Member, d: Decision, t: float, s: float, wind: Wind, out: list[act.Action]
     ) -> None:
         gs = max(m.groundspeed_m_s, 10.0)
-        # A controller from a checkpoint kept before loiters had their own lead has none.
-        keep = self._keep_seq(m, gs * self.__dict__.get("loiter_lead_s", self.lead_s))
+        keep = self._keep_seq(m, gs * self.loiter_lead_s)
         if keep is None:
             return
         s_k = m.mission.item_s_m[keep]

@@ -380,9 +380,7 @@ class TeamController(ZoneGuard, TeamTime):
         (once per encounter)."""
         if m.launched_s is None or m.east_m is None or m.north_m is None or fix.alt_amsl_m is None:
             return
-        watch = self.__dict__.get("separation")
-        if watch is None:  # a controller from a checkpoint kept before the watch existed
-            watch = self.separation = SeparationWatch(self.scenario.separation_m)
+        watch = self.separation
         pos = Position(t, m.east_m, m.north_m, fix.alt_amsl_m, fix.ve_m_s or 0.0, fix.vn_m_s or 0.0)
         flying = [
             x.vehicle_id for x in self.members.values() if x.launched_s is not None and not x.done
@@ -800,6 +798,12 @@ class TeamController(ZoneGuard, TeamTime):
         state = dict(self.__dict__)
         state["world"] = None
         return state
+
+    def __setstate__(self, state: dict[str, Any]) -> None:
+        """A checkpoint kept before a part of the controller existed gets that part new."""
+        self.__dict__.update(state)
+        self.__dict__.setdefault("separation", SeparationWatch(self.scenario.separation_m))
+        self.__dict__.setdefault("loiter_lead_s", self.lead_s)
 
     def rebind_world(self, world: World) -> None:
         self.world = world
