@@ -100,8 +100,9 @@ class Member:
     heading_deg: float | None = None
     joining: bool = False
     """Off its route by more than ``off_route_m`` when last late (said once per episode)."""
-    late_after_arrivals: bool = False
-    """Late once others had arrived (the team time no longer moves; said once)."""
+    late_said: bool = False
+    """A lateness the team time cannot follow (others had arrived, or past its window) was
+    said (an alarm, once)."""
     link_silent: bool = False
     last_seq: int | None = None
     next_decision_s: float = -math.inf

@@ -32,7 +32,7 @@ from typing import Any
 import numpy as np
 
 from gcs.coordination import actions as act
-from gcs.coordination.arrival import ArrivalController, SpeedLimits
+from gcs.coordination.arrival import ArrivalController, Decision, SpeedLimits
 from gcs.coordination.config import FlightConfig
 from gcs.coordination.events import EventKind
 from gcs.coordination.member import FIRST_ROUTE_SEQ, Lost, LostCause, Member, path_en, route_track
@@ -552,12 +552,8 @@ class TeamController(ZoneGuard, TeamTime):
             "tas_per_eas": m.tas_per_eas(s),
         }
         d = m.controller.decide(m.track, **inputs)
-        m.last_decision = d
+        self._apply_decision(m, d, t, out)
         time_left = m.target_s - t
-        m.next_decision_s = t + ArrivalController.period_s(time_left)
-        if d.command_m_s is not None and not m.busy_command:
-            m.busy_command = True
-            out.append(act.CommandSpeed(m.vehicle_id, d.command_m_s, d.reason, t))
         cfg = self.config
         if d.verdict == "late" and m.cross_track_m > cfg.off_route_m:
             if not m.joining:
@@ -608,13 +604,18 @@ class TeamController(ZoneGuard, TeamTime):
             loiter_flown_m=min(m.loiter_flown_m, lo.length_m),
             tas_per_eas=m.tas_per_eas(lo.s_m),
         )
+        self._apply_decision(m, d, t, out)
+        if d.verdict == "late":
+            self._late(m, d, t, out)
+
+    def _apply_decision(self, m: Member, d: Decision, t: float, out: list[act.Action]) -> None:
+        """Keep the decision, time the next one, and command the airspeed it asks for (one
+        command at a time)."""
         m.last_decision = d
         m.next_decision_s = t + ArrivalController.period_s(m.target_s - t)
         if d.command_m_s is not None and not m.busy_command:
             m.busy_command = True
             out.append(act.CommandSpeed(m.vehicle_id, d.command_m_s, d.reason, t))
-        if d.verdict == "late":
-            self._late(m, d, t, out)
 
     def _speed_commanded(self, r: act.SpeedCommanded, out: list[act.Action]) -> None:
         m = self.members[r.vehicle_id]

@@ -113,20 +113,23 @@ class TeamTime:
             )
         else:
             m.target_s = d.eta_min_s
-            if not m.late_after_arrivals:
-                m.late_after_arrivals = True
-                out.append(
-                    act.Report(
-                        EventKind.ALARM,
-                        f"misses its window [{w.earliest_s:g}, {w.latest_s:g}] s: it cannot "
-                        f"arrive before {d.eta_min_s:.1f} s even at "
-                        f"{m.limits.airspeed_max_m_s:g} m/s",
-                        m.vehicle_id,
-                        value=round(d.eta_min_s - w.latest_s, 3),
-                        t_s=t,
-                    )
-                )
+            self._say_late(
+                m,
+                f"misses its window [{w.earliest_s:g}, {w.latest_s:g}] s: it cannot arrive "
+                f"before {d.eta_min_s:.1f} s even at {m.limits.airspeed_max_m_s:g} m/s",
+                d.eta_min_s - w.latest_s,
+                t,
+                out,
+            )
         m.next_decision_s = -math.inf
+
+    @staticmethod
+    def _say_late(m: Member, reason: str, late_s: float, t: float, out: list[act.Action]) -> None:
+        """A lateness the team time cannot follow: an alarm, said once per vehicle."""
+        if m.late_said:
+            return
+        m.late_said = True
+        out.append(act.Report(EventKind.ALARM, reason, m.vehicle_id, value=round(late_s, 3), t_s=t))
 
     def _late(self, m: Member, d: Decision, t: float, out: list[act.Action]) -> None:
         ref = self.team_ref_s
@@ -141,18 +144,14 @@ class TeamTime:
         if arrived:
             # Moving the team time now would only make the arrived ones miss it: the late
             # vehicle is late, and said so.
-            if not m.late_after_arrivals:
-                m.late_after_arrivals = True
-                out.append(
-                    act.Report(
-                        EventKind.ALARM,
-                        f"late by {d.eta_min_s - m.target_s:.1f} s at top speed after "
-                        f"{', '.join(arrived)} arrived: the team time stays {ref:.1f} s",
-                        m.vehicle_id,
-                        value=round(d.eta_min_s - m.target_s, 3),
-                        t_s=t,
-                    )
-                )
+            self._say_late(
+                m,
+                f"late by {d.eta_min_s - m.target_s:.1f} s at top speed after "
+                f"{', '.join(arrived)} arrived: the team time stays {ref:.1f} s",
+                d.eta_min_s - m.target_s,
+                t,
+                out,
+            )
             return
         self._set_team_time(
             new_ref,
