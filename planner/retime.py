@@ -20,8 +20,10 @@ from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, replace
 
 import numpy as np
+from numpy.typing import NDArray
 
 from planner.deconflict import Separation, check_separation, separation
+from planner.dubins import Pose
 from planner.errors import ArrivalTimeError, InfeasibleError
 from planner.flightpath import FlightPath
 from planner.plan import Plan, World, build_world, required_arrival_s
@@ -55,6 +57,8 @@ from planner.timing import (
     vehicle_window,
 )
 
+FloatArray = NDArray[np.float64]
+
 SITE_STEP_M = 100.0
 FREE_SITE = "path"
 """The ``buffer_id`` of loiter turns on the path outside any buffer (:func:`free_loiter_site`)."""
@@ -71,6 +75,22 @@ class _Site:
     clockwise: bool
     detour_m: float
     buffer_id: str
+
+
+def _site_s_m(path: FlightPath, s_from_m: float, radius_m: float) -> FloatArray:
+    """The path distances a loiter may start at after ``s_from_m``: every ``SITE_STEP_M``,
+    a lead of 4 radii (at least 1 km) clear of both ends (empty when the path is shorter)."""
+    lead = max(4.0 * radius_m, 1000.0)
+    return np.arange(s_from_m + lead, path.length_m - lead, SITE_STEP_M)
+
+
+def _tangent_centre(pose: Pose, radius_m: float, clockwise: bool) -> tuple[float, float]:
+    """The centre of the circle tangent to the path at ``pose``, turning the given way."""
+    sign = 1.0 if clockwise else -1.0
+    return (
+        pose.east_m + sign * radius_m * math.cos(pose.heading_rad),
+        pose.north_m - sign * radius_m * math.sin(pose.heading_rad),
+    )
 
 
 def find_loiter_site(
@@ -96,11 +116,9 @@ def find_loiter_site(
     ]
     if not buffers:
         return None
-    lead = max(4.0 * radius_m, 1000.0)
-    lo, hi = s_from_m + lead, path.length_m - lead
-    if hi <= lo:
+    s_values = _site_s_m(path, s_from_m, radius_m)
+    if s_values.size == 0:
         return None
-    s_values = np.arange(lo, hi, SITE_STEP_M)
 
     def clear(e: float, n: float) -> bool:
         for t in threats:
@@ -112,9 +130,7 @@ def find_loiter_site(
     poses = [path.pose_at(float(s)) for s in s_values]
     for s, p in zip(s_values, poses, strict=True):
         for clockwise in (True, False):
-            sign = 1.0 if clockwise else -1.0
-            ce = p.east_m + sign * radius_m * math.cos(p.heading_rad)
-            cn = p.north_m - sign * radius_m * math.sin(p.heading_rad)
+            ce, cn = _tangent_centre(p, radius_m, clockwise)
             for bid, be, bn, br in buffers:
                 margin = br - radius_m - math.hypot(ce - be, cn - bn)
                 if margin >= 0.0 and clear(ce, cn):
@@ -152,15 +168,11 @@ def free_loiter_site(
     """Where to loiter on the path after ``s_from_m`` when no buffer serves: the first circle
     tangent to the path (no detour) that keeps a radius clear of every threat zone, forbidden
     or not, and the vehicle's terrain clearance all round at the path's altitude there."""
-    lead = max(4.0 * radius_m, 1000.0)
-    path = vs.path
     angles = np.linspace(0.0, 2.0 * math.pi, 36, endpoint=False)
-    for s in np.arange(s_from_m + lead, path.length_m - lead, SITE_STEP_M):
-        p = path.pose_at(float(s))
+    for s in _site_s_m(vs.path, s_from_m, radius_m):
+        p = vs.path.pose_at(float(s))
         for clockwise in (True, False):
-            sign = 1.0 if clockwise else -1.0
-            ce = p.east_m + sign * radius_m * math.cos(p.heading_rad)
-            cn = p.north_m - sign * radius_m * math.sin(p.heading_rad)
+            ce, cn = _tangent_centre(p, radius_m, clockwise)
             if any(
                 float(t.distance_m(np.array([ce]), np.array([cn]))[0]) < 2.0 * radius_m
                 for t in threats
