@@ -428,9 +428,8 @@ class MissionChanges:
     @staticmethod
     def _reaches_s(m: Member, t: float, s_k: float, gs_m_s: float) -> float:
         """When the vehicle reaches ``s_k`` along its route, at ``gs_m_s``: the path from
-        where it is plus the loiters still to fly short of ``s_k`` (the one it is in less the
-        ground distance flown in it, as its timing in the turns counts it); a loiter at
-        ``s_k`` itself belongs to what is replaced."""
+        where it is plus the loiters still to fly short of ``s_k`` (the one it is in counted
+        from when it entered it); a loiter at ``s_k`` itself belongs to what is replaced."""
         path_m = max(s_k - (m.s_m or 0.0), 0.0)
         done = m.loiters_done()
         loiter_m = 0.0
@@ -438,8 +437,8 @@ class MissionChanges:
             if i < done or lo.s_m >= s_k - 1.0:
                 continue
             length = lo.length_m
-            if i == done and m.in_loiter():
-                length = max(length - m.loiter_flown_m, 0.0)
+            if i == done and m.in_loiter() and m.loiter_entered_s is not None:
+                length = max(length - (t - m.loiter_entered_s) * gs_m_s, 0.0)
             loiter_m += length
         return t + (path_m + loiter_m) / gs_m_s
 
