@@ -373,25 +373,27 @@ class MissionChanges:
                     continue
             gs = max(m.groundspeed_m_s, 10.0)
             keep = self._keep_seq(m, gs * lead) if m.phase == "route" else None
+            s_k = m.track.length_m if keep is None else m.mission.item_s_m[keep]
+            assert s_k is not None
+            s_short = self.hold_short_s_m(m, zone, s_k) if m.phase == "route" else None
+            keep_short = None if s_short is None else self._keep_behind(m, s_short)
+            if s_short is not None and keep_short is not None and keep_short >= (m.last_seq or 0):
+                # It reaches the zone before that waypoint (or, with no waypoint that far
+                # ahead, at all): its new route starts where it will hold short of the zone
+                # (held there by the guard until it is on board).
+                t_hold = max(self._reaches_s(m, t, s_short, gs), at_s)
+                anchors[m.vehicle_id] = Anchor(s_short, self._speed_now(m), t_hold)
+                keeps[m.vehicle_id] = keep_short
+                continue
             if keep is None:
                 out.append(
                     act.Report(
                         EventKind.POPUP,
                         f"{zone.id}: no waypoint far enough ahead to re-plan from",
                         m.vehicle_id,
+                        t_s=t,
                     )
                 )
-                continue
-            s_k = m.mission.item_s_m[keep]
-            assert s_k is not None
-            s_short = self.hold_short_s_m(m, zone, s_k)
-            keep_short = None if s_short is None else self._keep_behind(m, s_short)
-            if s_short is not None and keep_short is not None and keep_short >= (m.last_seq or 0):
-                # It reaches the zone before that waypoint: its new route starts where it
-                # will hold short of the zone (held there by the guard until it is on board).
-                t_hold = max(self._reaches_s(m, t, s_short, gs), at_s)
-                anchors[m.vehicle_id] = Anchor(s_short, self._speed_now(m), t_hold)
-                keeps[m.vehicle_id] = keep_short
                 continue
             # The vehicle reaches the splice waypoint at its own time, not at t + lead: the
             # waypoint is the first one at least that far ahead and may be much farther, with

@@ -188,7 +188,10 @@ async def test_spaced_rehearsal_meets_each_60_s_slot_with_an_operator_threat(
     )
     assert_flight_kept(pg_url, record)
     errors = _errors(record)
-    assert all(e is not None and abs(e) <= 1.0 for e in errors.values()), errors
+    assert all(e is not None and abs(e) <= 1.0 for e in errors.values()), (
+        errors,
+        story(record["events"]),
+    )
     assert record["min_separation_m"] >= record["separation_m"]
     # The slots are the scenario's order, 60 s apart, and the true crossings keep them.
     by_id = {v["id"]: v for v in record["vehicles"]}
@@ -206,9 +209,12 @@ async def test_spaced_rehearsal_meets_each_60_s_slot_with_an_operator_threat(
     assert 2500.0 <= t_op1 <= 2510.0
     after = [e for e in record["events"] if e["t_s"] >= t_op1 - 0.5]
     replans = [e for e in after if e["kind"] == "replan" and "OP1" in e["reason"]]
-    assert [e["reason"] for e in replans] == ["re-planning UAV3 around OP1"]
-    moves = [e for e in after if e["kind"] == "arrival" and e["t_s"] < t_op1 + 1.0]
-    assert moves and all("feasible for every vehicle" in e["reason"] for e in moves), moves
+    told = story(record["events"])
+    assert [e["reason"] for e in replans] == ["re-planning UAV3 around OP1"], told
+    # The team time that re-plan gave (said with it, at its decision time) is the same one.
+    moves = [e for e in after if e["kind"] == "arrival" and e["t_s"] == replans[0]["t_s"]]
+    assert moves and all("feasible for every vehicle" in e["reason"] for e in moves), told
+    assert replans[0]["t_s"] < t_op1 + 1.0, told
     assert [p["label"] for p in by_id["UAV3"]["planned_paths"]][-1] == "after OP1"
     # The flown track keeps out of the box (the truth log, every 2 s).
     for row in by_id["UAV3"]["track"]:

@@ -850,17 +850,20 @@ def test_windows_a_late_vehicle_moves_its_own_slot_within_its_window_or_alarms(
     assert not reports(out, EventKind.ALARM)
 
 
+@pytest.mark.parametrize("lead_s", [3_000.0, 20_000.0])
 def test_a_popup_whose_zone_lies_short_of_the_splice_waypoint_re_plans_from_the_hold_point(
-    team: TeamController,
+    team: TeamController, lead_s: float
 ) -> None:
-    """A lead so long that the waypoint it asks for lies past the zone: the vehicles whose
-    routes enter the zone before it are re-planned from where they will hold short of it."""
+    """A lead so long that the waypoint it asks for lies past the zone (20,000 s: past every
+    waypoint, as on a rehearsal at 200x on a loaded machine): the vehicles whose routes enter
+    the zone before it are re-planned from where they will hold short of it."""
     zones = build_threats(team.scenario, {vid: m.takeoff_s for vid, m in team.members.items()})
     (zone,) = popup_zones(zones)
     t_p = float(zone.appears_at_s or 0.0)
     _on_schedule(team, t_p - 1.0)
-    team.handle(act.PlanningLead(3_000.0, 90.0), t_p - 0.5)
+    team.handle(act.PlanningLead(lead_s, 90.0), t_p - 0.5)
     out = team.handle(act.Tick(), t_p)
+    dropped = [r.vehicle for r in reports(out, EventKind.POPUP) if "no waypoint" in r.reason]
     (job,) = [a.job for a in of(out, act.Compute)]
     assert isinstance(job, act.PopupJob)
     cx, cy, r = zone.east_m, zone.north_m, zone.radius_m
@@ -871,15 +874,16 @@ def test_a_popup_whose_zone_lies_short_of_the_splice_waypoint_re_plans_from_the_
         poses = [(float(s), path.pose_at(float(s))) for s in np.arange(s_now, path.length_m, 50.0)]
         inside = [s for s, q in poses if math.hypot(q.east_m - cx, q.north_m - cy) < r]
         entry = inside[0] if inside else None
-        if entry is None or entry > s_now + 3_000.0 * m.groundspeed_m_s:
+        if entry is None or entry > s_now + lead_s * m.groundspeed_m_s:
             continue
         short.add(vid)
+        assert vid not in dropped, vid
         anchor = job.anchors[vid]
         p = path.pose_at(anchor.s_m)
         assert s_now < anchor.s_m < entry, (vid, s_now, anchor.s_m, entry)
         clearance = max(FlightConfig().hold_radius_m, team.scenario.vehicle(vid).min_turn_radius_m)
         assert math.hypot(p.east_m - cx, p.north_m - cy) - r >= clearance, vid
-        assert anchor.t_s is not None and anchor.t_s >= t_p + 3_000.0 - 1e-6
+        assert anchor.t_s is not None and anchor.t_s >= t_p + lead_s - 1e-6
         assert job.keeps[vid] is not None
         assert m.mission.item_s_m[job.keeps[vid]] <= anchor.s_m + 1e-6
     assert short >= {"UAV1"}, short

@@ -111,8 +111,11 @@ async def test_an_operator_flies_the_paper_scenario_from_the_console(console: Co
     assert f"flight={fid}" in page.url
     await page.click("#upload")
     await c.confirm()
-    await c.until("() => tcgcs.state.flightState === 'ready'")
-    assert "UAV1 ok, UAV2 ok, UAV3 ok" in await c.text("#flight-note")
+    # The state comes with the telemetry; the uploads' note with the snapshot it calls for.
+    await c.until(
+        "() => tcgcs.state.flightState === 'ready' && document.querySelector('#flight-note')"
+        ".textContent.includes('UAV1 ok, UAV2 ok, UAV3 ok')"
+    )
     await page.click("#launch")
     await c.confirm()
 

@@ -338,6 +338,9 @@ function onMessage(type, data, received) {
     applySnapshot(data);
   } else if (type === "telemetry") {
     state.telemetry = data;
+    // A new state (planned, ready, flying) comes with new uploads and launches: the snapshot
+    // says them, so the notes do not lag behind the state they explain.
+    if (state.flightState !== data.state) refreshSnapshot();
     state.flightState = data.state;
     state.teamTimeS = data.team_time_s;
     if (data.team_time_version !== undefined) state.teamTimeVersion = data.team_time_version;
