@@ -608,7 +608,10 @@ class Autopilot:
         if st.lat_deg == prev.lat_deg and st.lon_deg == prev.lon_deg:
             return
         ground = self._terrain.elevation_m(st.lat_deg, st.lon_deg) + self._ground_offset_m
-        self._state = replace(st, alt_m=ground, climb_rate_m_s=(ground - prev.alt_m) / dt_s)
+        # Down a slope the wheels are held on the ground until the wing lifts: a lift-off
+        # starts level there, not sinking with the slope it rolled down.
+        climb = max((ground - prev.alt_m) / dt_s, 0.0)
+        self._state = replace(st, alt_m=ground, climb_rate_m_s=climb)
 
     def _crash(self, ground_m: float) -> None:
         """Flown into the ground: wrecked where it hit, on the ground and still."""
@@ -981,7 +984,11 @@ class Autopilot:
                 return True
             if speed_m_s == -1.0:
                 return True
-            if p.airspeed_min_m_s <= speed_m_s <= p.airspeed_max_m_s:
+            # ArduPlane compares in float (ArduPlane/commands_logic.cpp do_change_speed:
+            # ``speed_target_ms >= aparm.airspeed_min.get() && <= aparm.airspeed_max.get()``)
+            # and its AIRSPEED_* are REAL32 parameters: a limit such as 29.2 is met by the
+            # command that asks for it, which arrives as the same float32.
+            if _f32(p.airspeed_min_m_s) <= _f32(speed_m_s) <= _f32(p.airspeed_max_m_s):
                 self._new_airspeed_m_s = speed_m_s
                 events.append(Text(SEVERITY_INFO, f"Set airspeed {int(speed_m_s)} m/s"))
                 return True
@@ -1188,3 +1195,8 @@ def _distance(a: Point, b: Point) -> float:
 def _bearing(a: Point, b: Point) -> float:
     n, e = model.offset_ne_m(a[0], a[1], 0.0, b[0], b[1])
     return math.atan2(e, n)
+
+
+def _f32(x: float) -> float:
+    """``x`` as the float32 a MAVLink field or a REAL32 parameter holds."""
+    return float(np.float32(x))

@@ -56,3 +56,94 @@ def arc_team(n: int, radius_m: float = 20_000.0) -> dict[str, Any]:
         vehicles.append(v)
     base["vehicles"] = vehicles
     return base
+
+
+ARRIVAL_KINDS = ("simultaneous", "spaced", "waves", "windows")
+
+
+def generated_scenario(seed: int, kind: str) -> tuple[dict[str, Any], tuple[float, float]]:
+    """A scenario drawn from ``seed`` with the arrival ``kind``, and a wind (m/s, from deg).
+
+    3-8 vehicles on a ring 14-20 km around a target over synthetic hills (or flat ground),
+    each starting 0-1,500 m above its launch point, with speed limits, turn radii and takeoff
+    windows of their own; goals 1.5-2.5 km short of the target on each vehicle's bearing, so
+    the routes do not cross. The wind is 0-10 m/s from any direction.
+    """
+    rng = np.random.default_rng(seed)
+    n = int(rng.integers(3, 9))
+    tx, ty = 30_000.0, 30_000.0
+    if rng.random() < 0.75:
+        terrain: dict[str, Any] = {
+            "kind": "synthetic",
+            "seed": int(rng.integers(0, 1000)),
+            "base_m": round(float(rng.uniform(100.0, 600.0))),
+            "peak_m": round(float(rng.uniform(400.0, 1400.0))),
+            "hills": int(rng.integers(5, 30)),
+        }
+    else:
+        terrain = {"kind": "flat", "elevation_m": round(float(rng.uniform(0.0, 800.0)))}
+    doc: dict[str, Any] = {
+        "name": f"generated {seed} ({kind}, {n} vehicles)",
+        "area": {
+            "origin": {"lat_deg": 45.0 + float(rng.uniform(-5, 5)), "lon_deg": 8.0},
+            "min_east_m": 0, "min_north_m": 0, "width_m": 60_000, "height_m": 60_000,
+        },
+        "terrain": terrain,
+        "separation_m": 300,
+        "weights": {"threat": 4.0, "terrain": 0.0},
+    }  # fmt: skip
+    probe = {**doc, "arrival": {"kind": "simultaneous"}}
+    ground = build_terrain(parse_scenario({**probe, "vehicles": [_vehicle(0, (0, 0), (1, 1), 0)]}))
+    first = float(rng.uniform(0.0, 360.0))
+    vehicles = []
+    for k in range(n):
+        bearing = math.radians(first + 360.0 * k / n + float(rng.uniform(-8.0, 8.0)))
+        r0, r1 = float(rng.uniform(14_000.0, 20_000.0)), float(rng.uniform(1_500.0, 2_500.0))
+        start = (tx + r0 * math.sin(bearing), ty + r0 * math.cos(bearing))
+        goal = (tx + r1 * math.sin(bearing), ty + r1 * math.cos(bearing))
+        z0 = float(ground.elevation_m(np.array([start[0]]), np.array([start[1]]))[0])
+        v = _vehicle(k, start, goal, z0 + float(rng.uniform(0.0, 1_500.0)))
+        v["goal"]["alt_m"] = round(z0 + 600.0)
+        v["speed_min_m_s"] = round(float(rng.uniform(14.0, 18.0)), 1)
+        v["speed_max_m_s"] = round(float(rng.uniform(26.0, 32.0)), 1)
+        v["min_turn_radius_m"] = round(float(rng.uniform(150.0, 260.0)))
+        v["takeoff_window_s"] = [0, int(rng.integers(900, 2400))]
+        vehicles.append(v)
+    doc["vehicles"] = vehicles
+    ids = [v["id"] for v in vehicles]
+    if kind == "simultaneous":
+        doc["arrival"] = {"kind": "simultaneous"}
+    elif kind == "spaced":
+        doc["arrival"] = {"kind": "spaced", "interval_s": int(rng.integers(30, 91))}
+    elif kind == "waves":
+        first_wave = int(rng.integers(1, n))
+        doc["arrival"] = {
+            "kind": "waves",
+            "gap_s": int(rng.integers(60, 181)),
+            "sizes": [first_wave, n - first_wave],
+        }
+    elif kind == "windows":
+        t0 = 1_000.0  # after every earliest arrival, before every latest (no buffers)
+        doc["arrival"] = {
+            "kind": "windows",
+            "windows": [
+                {"vehicle": vid, "earliest_s": t0 + 60.0 * k, "latest_s": t0 + 60.0 * k + 40.0}
+                for k, vid in enumerate(rng.permutation(ids).tolist())
+            ],
+        }
+    else:
+        raise ValueError(f"unknown arrival kind {kind!r}")
+    wind = (round(float(rng.uniform(0.0, 10.0)), 1), round(float(rng.uniform(0.0, 360.0))))
+    return doc, wind
+
+
+def _vehicle(
+    k: int, start: tuple[float, float], goal: tuple[float, float], alt_m: float
+) -> dict[str, Any]:
+    return {
+        "id": f"G{k}",
+        "start": {"east_m": round(start[0]), "north_m": round(start[1]), "alt_m": round(alt_m)},
+        "goal": {"east_m": round(goal[0]), "north_m": round(goal[1]), "alt_m": round(alt_m)},
+        "speed_min_m_s": 16, "speed_max_m_s": 28, "min_turn_radius_m": 200,
+        "max_range_m": 200_000, "alt_max_m": 4_000, "takeoff_window_s": [0, 1200],
+    }  # fmt: skip

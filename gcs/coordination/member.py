@@ -103,6 +103,8 @@ class Member:
     late_said: bool = False
     """A lateness the team time cannot follow (others had arrived, or past its window) was
     said (an alarm, once)."""
+    speed_refusals: int = 0
+    """Speed commands the vehicle refused in a row (an alarm at ``SPEED_REFUSALS_ALARM``)."""
     link_silent: bool = False
     last_seq: int | None = None
     next_decision_s: float = -math.inf

@@ -92,7 +92,21 @@ class MissionChanges:
     ) -> None:
         gs = max(m.groundspeed_m_s, 10.0)
         keep = self._keep_seq(m, gs * self.loiter_lead_s)
+        if keep is None and self.loiter_lead_s > self.config.min_lead_s:
+            # Nothing that far ahead (a short route, or a long lead on a fast rehearsal):
+            # the nearest waypoint the shortest lead allows, rather than no turns at all.
+            keep = self._keep_seq(m, gs * self.config.min_lead_s)
         if keep is None:
+            out.append(
+                act.Report(
+                    EventKind.LOITER,
+                    f"early by {m.target_s - d.eta_max_s:.1f} s at its minimum speed, and no "
+                    f"waypoint at least {self.config.min_lead_s:.0f} s ahead to splice loiter "
+                    "turns after",
+                    m.vehicle_id,
+                    t_s=t,
+                )
+            )
             return
         s_k = m.mission.item_s_m[keep]
         assert s_k is not None

@@ -51,9 +51,11 @@ from planner.threats import ThreatZone
 __all__ = ["PROGRESS_M", "TeamController", "TeamTimeRefused", "is_crash_text"]
 
 PROGRESS_M = 1.0
+"""Along-route distance (m) a fix must gain on the farthest one yet to count as progress."""
 STOPPED_FIXES = 8
 """Fixes in a row, over ``stopped_bound_s``, that find a vehicle where it was."""
-"""Along-route distance (m) a fix must gain on the farthest one yet to count as progress."""
+SPEED_REFUSALS_ALARM = 3
+"""Speed commands refused in a row that make an alarm: the speed is not under control."""
 
 
 def is_crash_text(text: str) -> bool:
@@ -621,13 +623,29 @@ class TeamController(ZoneGuard, TeamTime):
         m = self.members[r.vehicle_id]
         m.busy_command = False
         if r.error is not None:
+            m.speed_refusals += 1
             out.append(
                 act.Report(
                     EventKind.SPEED, f"speed command failed ({r.error}); will retry", m.vehicle_id
                 )
             )
+            if m.speed_refusals == SPEED_REFUSALS_ALARM:
+                lim = m.limits
+                out.append(
+                    act.Report(
+                        EventKind.ALARM,
+                        f"{m.vehicle_id} refused {r.airspeed_m_s:g} m/s {m.speed_refusals} times "
+                        f"in a row ({r.error}): its speed is not under control; check its "
+                        f"AIRSPEED_MIN and AIRSPEED_MAX against [{lim.airspeed_min_m_s:g}, "
+                        f"{lim.airspeed_max_m_s:g}] m/s",
+                        m.vehicle_id,
+                        t_s=r.decided_s,
+                        payload={"action": "none", "why": "speed command refused"},
+                    )
+                )
             m.next_decision_s = -math.inf
             return
+        m.speed_refusals = 0
         m.level_m_s = r.airspeed_m_s
         assert self.start_utc_s is not None
         m.commanded.append([round(self.start_utc_s + r.decided_s, 3), r.airspeed_m_s, "command"])

@@ -190,6 +190,28 @@ def test_a_failed_speed_command_is_reported_and_decided_again(team: TeamControll
     assert len(of(out, act.CommandSpeed)) == 1  # at once, not at the next period
 
 
+def test_a_speed_the_vehicle_keeps_refusing_is_an_alarm_once_and_a_success_resets_it(
+    team: TeamController,
+) -> None:
+    vid = "UAV1"
+    m, t = flying(team, vid, 600.0)
+    s = m.schedule.state_at(t)[1] - 3_000.0
+    alarms: list[act.Report] = []
+    for k in range(5):
+        (cmd,) = of(team.handle(fix(team, vid, s, t, 25.0), t), act.CommandSpeed)
+        refused = "vehicle 1: MAV_CMD_DO_CHANGE_SPEED rejected with MAV_RESULT_FAILED"
+        out = team.handle(act.SpeedCommanded(vid, cmd.airspeed_m_s, cmd.reason, t, refused), t)
+        alarms += reports(out, EventKind.ALARM)
+        assert len(alarms) == (1 if k >= 2 else 0), k
+        t, s = t + 1.0, s + 25.0
+    (alarm,) = alarms
+    assert alarm.vehicle == vid and f"refused {cmd.airspeed_m_s:g} m/s 3 times" in alarm.reason
+    assert "AIRSPEED_MAX" in alarm.reason
+    (cmd,) = of(team.handle(fix(team, vid, s, t, 25.0), t), act.CommandSpeed)
+    team.handle(act.SpeedCommanded(vid, cmd.airspeed_m_s, cmd.reason, t), t)
+    assert m.speed_refusals == 0 and m.level_m_s == cmd.airspeed_m_s
+
+
 # -- loiter turns -------------------------------------------------------------------------------
 
 

@@ -435,6 +435,22 @@ def test_change_speed_in_auto() -> None:
     assert not ap.change_speed(2, 3.0)  # climb speed: not supported
 
 
+@pytest.mark.parametrize(("lo_m_s", "hi_m_s", "ask_m_s"), [(12, 29.2, 29.2), (15.7, 30, 15.7)])
+def test_change_speed_to_a_limit_that_is_no_float32_is_accepted(
+    lo_m_s: float, hi_m_s: float, ask_m_s: float
+) -> None:
+    """ArduPlane/commands_logic.cpp ``do_change_speed`` compares the command's float with the
+    REAL32 AIRSPEED_MIN/MAX: asking for the limit itself is met, as the command arrives over
+    MAVLink as that same float32 (29.2 is held as 29.2000008, 15.7 as 15.6999998)."""
+    ap = make(params=replace(AirframeParams(), airspeed_min_m_s=lo_m_s, airspeed_max_m_s=hi_m_s))
+    airborne_in_auto(ap, FULL_MISSION, 2)
+    sent = float(np.float32(ask_m_s))  # what COMMAND_LONG's param2 decodes to
+    assert sent != ask_m_s
+    assert ap.change_speed(0, sent)
+    assert not ap.change_speed(0, float(np.float32(hi_m_s + 0.1)))
+    assert not ap.change_speed(0, float(np.float32(lo_m_s - 0.1)))
+
+
 def test_mode_change_resets_the_commanded_airspeed() -> None:
     ap = make()
     airborne_in_auto(ap, FULL_MISSION, 2)

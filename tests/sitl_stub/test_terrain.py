@@ -108,6 +108,30 @@ def test_a_takeoff_up_a_slope_rolls_up_it_and_climbs_out(slope: float) -> None:
     assert end.alt_m - HOME[2] >= 200.0  # the takeoff altitude is above home
 
 
+@pytest.mark.parametrize("slope", [0.01, 0.05, 0.15])
+def test_a_takeoff_down_a_slope_that_levels_out_lifts_off_level_and_climbs_out(
+    slope: float,
+) -> None:
+    """Rolling down a slope that levels out where the aircraft lifts off: the wheels hold it
+    on the ground until the wing lifts, so it leaves level, not sinking with the slope into
+    the flat beyond (which was a crash 4 s after lift-off)."""
+
+    def falling(lat_deg: np.ndarray, lon_deg: np.ndarray) -> np.ndarray:
+        north = (np.asarray(lat_deg) - HOME[0]) * math.radians(1.0) * 6_367_000.0
+        return HOME[2] - slope * np.clip(north, 0.0, 40.0)
+
+    ap = make_over(GridTerrain(falling))
+    ap.replace_mission([home_item(), takeoff(1, 200.0), item(2, WP, 9000.0, 0.0, 1500.0)])
+    assert ap.set_mode(ap.mode.AUTO) and ap.arm() == (True, "")
+    trace = run(ap, 120.0, until=lambda a: a.current_seq == 2)
+    assert ap.crash_time_s is None and ap.current_seq == 2
+    rolled = [s for s in trace.states if s.on_ground and s.groundspeed_m_s > 1.0]
+    assert rolled and min(s.alt_m for s in rolled) < HOME[2] - 0.5 * slope * 40.0  # down it
+    assert all(s.climb_rate_m_s >= 0.0 for s in trace.states if s.on_ground)
+    end = trace.states[-1]
+    assert not end.on_ground and end.alt_m > ap.ground_alt_m + 50.0
+
+
 def test_flown_into_a_ridge_it_crashes_stops_and_says_so_as_arduplane() -> None:
     """ArduPlane/is_flying.cpp crash_detection_update: armed and no longer flying, after the
     is_flying() probability decays and CRASH_DETECTION_DELAY_MS of debounce it sends
