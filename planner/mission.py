@@ -9,9 +9,11 @@ seq     command                content
 ======  =====================  ==============================================================
 0       NAV_WAYPOINT (home)    frame GLOBAL, z = home AMSL (ArduPilot keeps home at item 0)
 1       NAV_TAKEOFF            param1 = minimum pitch (deg), z = climb-out altitude above home
+                               (none for a vehicle taken over in the air: the route is item 1)
 ...     DO_CHANGE_SPEED        before a waypoint: param1 0 (airspeed), param2 m/s, param3 -1
 ...     NAV_WAYPOINT           one per waypoint; the last one is the goal
 ...     NAV_LOITER_TURNS       after a waypoint: param1 turns, param3 +-radius, param4 1
+...     DO_LAND_START          (optional) at the last waypoint: where the landing begins
 last    NAV_LAND (optional)    at home, or at a given touchdown point
 ======  =====================  ==============================================================
 
@@ -44,6 +46,7 @@ __all__ = [
     "GLOBAL_FRAMES",
     "INT32_UNSET",
     "MAV_CMD_DO_CHANGE_SPEED",
+    "MAV_CMD_DO_LAND_START",
     "MAV_CMD_NAV_LAND",
     "MAV_CMD_NAV_LOITER_TIME",
     "MAV_CMD_NAV_LOITER_TURNS",
@@ -86,6 +89,7 @@ MAV_CMD_NAV_RETURN_TO_LAUNCH = 20
 MAV_CMD_NAV_LAND = 21
 MAV_CMD_NAV_TAKEOFF = 22
 MAV_CMD_DO_CHANGE_SPEED = 178
+MAV_CMD_DO_LAND_START = 189
 
 MAV_FRAME_GLOBAL = 0
 MAV_FRAME_MISSION = 2
@@ -129,6 +133,7 @@ _COMMAND_NAMES = {
     MAV_CMD_NAV_LAND: "NAV_LAND",
     MAV_CMD_NAV_TAKEOFF: "NAV_TAKEOFF",
     MAV_CMD_DO_CHANGE_SPEED: "DO_CHANGE_SPEED",
+    MAV_CMD_DO_LAND_START: "DO_LAND_START",
 }
 _FRAME_NAMES = {
     MAV_FRAME_GLOBAL: "GLOBAL",
@@ -311,13 +316,14 @@ def compile_mission(
     *,
     home: Waypoint,
     waypoints: Sequence[Waypoint],
-    takeoff_alt_m: float,
+    takeoff_alt_m: float | None,
     speeds: Sequence[SpeedChange] = (),
     loiters: Sequence[Loiter] = (),
     frame: int = MAV_FRAME_GLOBAL_RELATIVE_ALT_INT,
     takeoff_pitch_deg: float = 15.0,
     airspeed_limits_m_s: tuple[float, float] | None = None,
     land: bool | Waypoint = False,
+    land_start: bool = False,
     terrain_alt_m: Callable[[float, float], float] | None = None,
 ) -> list[MissionItem]:
     """Compile a route into ArduPlane mission items, item 0 being home.
@@ -329,7 +335,9 @@ def compile_mission(
     waypoints
         The route in order, AMSL (m); the last one is the goal. At least one.
     takeoff_alt_m
-        Altitude above home (m) at which NAV_TAKEOFF completes; > 0.
+        Altitude above home (m) at which NAV_TAKEOFF completes; > 0. None for a vehicle
+        already flying: no NAV_TAKEOFF, the first waypoint is item 1 (ArduPlane starts a
+        mission at item 1 and flies there from where it is).
     speeds
         Airspeed changes, at most one per waypoint: DO_CHANGE_SPEED right before that
         waypoint's NAV_WAYPOINT (so it governs the leg ending there).
@@ -351,6 +359,9 @@ def compile_mission(
     land
         False: no landing (ArduPlane flies RTL when the mission ends). True: NAV_LAND at home.
         A :class:`Waypoint`: NAV_LAND there, ``alt_m`` being the touchdown ground AMSL (m).
+    land_start
+        With a landing: DO_LAND_START right before NAV_LAND, at the last waypoint (ArduPlane
+        runs it as a marker; a DO_LAND_START command or RTL_AUTOLAND jumps to it).
     terrain_alt_m
         Terrain elevation AMSL (m) at (lat_deg, lon_deg); required for the terrain frames.
 
@@ -377,7 +388,9 @@ def compile_mission(
         raise MissionError("waypoints: at least one waypoint (the goal) is required")
     for i, wp in enumerate(waypoints):
         _check_point(f"waypoint {i}", wp.lat_deg, wp.lon_deg, wp.alt_m)
-    if not math.isfinite(takeoff_alt_m) or not 0.0 < takeoff_alt_m <= _ALT_MAX_M:
+    if takeoff_alt_m is not None and (
+        not math.isfinite(takeoff_alt_m) or not 0.0 < takeoff_alt_m <= _ALT_MAX_M
+    ):
         raise MissionError(f"takeoff_alt_m {_num(takeoff_alt_m)} is outside (0, {_ALT_MAX_M:g}]")
     if not math.isfinite(takeoff_pitch_deg) or not (
         0.0 < takeoff_pitch_deg <= _TAKEOFF_PITCH_MAX_DEG
@@ -398,6 +411,8 @@ def compile_mission(
         landing = land
     elif land:
         landing = home
+    if land_start and landing is None:
+        raise MissionError("land_start: DO_LAND_START needs a landing (land)")
     speed_at = _check_speeds(speeds, len(waypoints), airspeed_limits_m_s)
     loiter_at = _check_loiters(loiters, len(waypoints))
 
@@ -448,7 +463,9 @@ def compile_mission(
     takeoff_frame = (
         MAV_FRAME_GLOBAL_RELATIVE_ALT_INT if frame in _INT_FRAMES else MAV_FRAME_GLOBAL_RELATIVE_ALT
     )
-    add(takeoff_frame, MAV_CMD_NAV_TAKEOFF, (takeoff_pitch_deg, 0, 0, 0), hx, hy, takeoff_alt_m)
+    if takeoff_alt_m is not None:
+        pitch = (takeoff_pitch_deg, 0.0, 0.0, 0.0)
+        add(takeoff_frame, MAV_CMD_NAV_TAKEOFF, pitch, hx, hy, takeoff_alt_m)
     for i, wp in enumerate(waypoints):
         s = speed_at.get(i)
         if s is not None:
@@ -461,6 +478,10 @@ def compile_mission(
             z = z_of(f"loiter after waypoint {i}", lt.lat_deg, lt.lon_deg, lt.alt_m)
             params = (float(lt.turns), 0.0, radius, 1.0)
             add(frame, MAV_CMD_NAV_LOITER_TURNS, params, _e7(lt.lat_deg), _e7(lt.lon_deg), z)
+    if landing is not None and land_start:
+        last = waypoints[-1]
+        z = z_of("land start", last.lat_deg, last.lon_deg, last.alt_m)
+        add(frame, MAV_CMD_DO_LAND_START, (0, 0, 0, 0), _e7(last.lat_deg), _e7(last.lon_deg), z)
     if landing is not None:
         z = z_of("land", landing.lat_deg, landing.lon_deg, landing.alt_m)
         add(frame, MAV_CMD_NAV_LAND, (0, 0, 0, 0), _e7(landing.lat_deg), _e7(landing.lon_deg), z)

@@ -26,6 +26,7 @@ from planner.errors import InfeasibleError
 from planner.flightpath import FlightPath, Violation, check_polyline, smooth_polyline
 from planner.geo import LocalFrame
 from planner.grid import CostMap, Grid, VehicleClass, build_cost_map
+from planner.landing import check_glide, final_m
 from planner.problem import Problem, SolveResult, Status, VehicleTask
 from planner.scenario import (
     FlatTerrain,
@@ -208,8 +209,22 @@ def build_problem(
             se, sn = v.start.local(frame)
             start = (se, sn, v.start.alt_m)
         ge, gn = v.goal.local(frame)
+        tail: tuple[tuple[float, float], ...] = ()
+        goal_name = "goal"
+        if scenario.landing is not None:
+            # The search ends where the slot's straight final begins; the final is the tail.
+            (ge, gn), fix = final_m(scenario.landing, v, frame)
+            tail, goal_name = (fix,), "start of its final"
+            check_glide(scenario.landing, v, frame, world.terrain, threats)
+            if not scenario.area.contains(ge, gn):
+                raise InfeasibleError(
+                    f"vehicle {v.id}: the start of its final ({ge:.0f}, {gn:.0f}) m, "
+                    f"landing.approach_m {scenario.landing.approach_m:g} before its slot fix, "
+                    "is outside the area",
+                    vehicle=v.id,
+                )
         nodes = []
-        for name, (e, n, alt) in (("start", start), ("goal", (ge, gn, v.goal.alt_m))):
+        for name, (e, n, alt) in (("start", start), (goal_name, (ge, gn, v.goal.alt_m))):
             zone = forbidden_at(threats, e, n, alt)
             if zone is not None:
                 raise InfeasibleError(
@@ -227,7 +242,14 @@ def build_problem(
             nodes.append(node)
         tasks.append(
             VehicleTask(
-                v.id, nodes[0], nodes[1], (start[0], start[1]), (ge, gn), cmap, limits[v.id]
+                v.id,
+                nodes[0],
+                nodes[1],
+                (start[0], start[1]),
+                (ge, gn),
+                cmap,
+                limits[v.id],
+                tail,
             )
         )
     return Problem(tuple(tasks), required_arrival_s(scenario), scenario.separation_m)
@@ -415,7 +437,13 @@ def _leg_breakpoints(
 
 
 def altitude_profile(
-    path: FlightPath, terrain: Terrain, v: Vehicle, start_alt_m: float, buffer_m: float = 30.0
+    path: FlightPath,
+    terrain: Terrain,
+    v: Vehicle,
+    start_alt_m: float,
+    buffer_m: float = 30.0,
+    *,
+    level_final_m: float = 0.0,
 ) -> AltitudeProfile:
     """Waypoints and altitudes that keep ``clearance_m`` within ``climb_gradient``.
 
@@ -424,6 +452,9 @@ def altitude_profile(
     below by the start and goal altitudes. The autopilot flies straight lines between
     waypoints, so the waypoints are the path's own (segment ends, arc points) plus breakpoints
     of the envelope's upper hull where a straight climb or descent would cut below it.
+
+    ``level_final_m`` > 0 holds the last stretch no lower than the goal altitude (a landing
+    slot's final, flown level at the slot fix's altitude rather than climbing up to it).
     """
     g = v.climb_gradient
     length = path.length_m
@@ -431,8 +462,9 @@ def altitude_profile(
     ground = terrain.elevation_m(ps[:, 0], ps[:, 1])
     ends = np.maximum(start_alt_m - g * s, v.goal.alt_m - g * (length - s))
     req = np.maximum(ground + v.clearance_m, v.alt_min_m)
-    floor = np.maximum(_envelope(req, s, g), ends)
-    lifted = np.maximum(_envelope(req + buffer_m, s, g), ends)
+    final = np.where(s >= length - level_final_m, v.goal.alt_m, -np.inf)
+    floor = np.maximum(_envelope(np.maximum(req, final), s, g), ends)
+    lifted = np.maximum(_envelope(np.maximum(req + buffer_m, final), s, g), ends)
     lifted = np.maximum(np.minimum(lifted, max(v.alt_max_m, 0.0)), floor)
     base = path.waypoints()
     base_s = np.array([path.project(float(e), float(n)) for e, n in base])
@@ -598,11 +630,19 @@ def finish_route(
     margin = max(v.min_turn_radius_m, 0.5 * world.grid.resolution_m)
     start_alt = v.start.alt_m if start_alt_m is None else start_alt_m
     from_home = start_alt_m is None and not v.airborne
+    landing = world.scenario.landing
+    final_m = 0.0 if landing is None else landing.approach_m
     route: PlannedRoute | None = None
     failure = ""
+    # A tail (a landing slot's final) is flown as it is: only the route to it is shortened.
+    head, tail = (
+        (pts[: -len(task.tail_m)], pts[-len(task.tail_m) :]) if task.tail_m else (pts, pts[:0])
+    )
     for candidate in (
-        simplify_route(pts, task.cost_map, threats, world.terrain, margin),
-        simplify_route(pts, task.cost_map, threats, world.terrain, 3.0 * margin),
+        np.concatenate([simplify_route(head, task.cost_map, threats, world.terrain, margin), tail]),
+        np.concatenate(
+            [simplify_route(head, task.cost_map, threats, world.terrain, 3.0 * margin), tail]
+        ),
         pts,
     ):
         path = smooth_polyline(
@@ -610,7 +650,7 @@ def finish_route(
             v.min_turn_radius_m,
             start_heading_rad=start_heading_rad,
         )
-        profile = altitude_profile(path, world.terrain, v, start_alt)
+        profile = altitude_profile(path, world.terrain, v, start_alt, level_final_m=final_m)
         wps = profile.waypoints_m
         samp_s, samples = sample_by_distance(path, PROFILE_STEP_M)
         samp_alt = np.interp(samp_s, profile.s_m, profile.alt_m)

@@ -40,6 +40,9 @@ class VehicleTask:
     goal_m: tuple[float, float]
     cost_map: CostMap
     timing: TimingLimits
+    tail_m: tuple[tuple[float, float], ...] = ()
+    """Points flown straight after ``goal_m`` (a landing slot's final: ``goal_m`` is where
+    the final begins, the last point the slot fix)."""
 
 
 @dataclass(frozen=True, eq=False)
@@ -72,7 +75,8 @@ class Problem:
         return self._cost_to_go[index]
 
     def route_points(self, index: int, nodes: Sequence[int] | IntArray) -> FloatArray:
-        """Polyline (K, 2) in metres: the exact start, the grid nodes, the exact goal."""
+        """Polyline (K, 2) in metres: the exact start, the grid nodes, the exact goal (and the
+        task's tail after it)."""
         task = self.tasks[index]
         pts = task.cost_map.grid.node_coords(nodes)
         start = np.array([task.start_m])
@@ -81,7 +85,8 @@ class Problem:
             start = start[:0]
         if np.allclose(pts[-1], goal[0]):
             goal = goal[:0]
-        return np.concatenate([start, pts, goal])
+        tail = np.array(task.tail_m, dtype=np.float64).reshape(-1, 2)
+        return np.concatenate([start, pts, goal, tail])
 
 
 @dataclass(frozen=True)

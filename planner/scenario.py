@@ -323,6 +323,25 @@ class Waves(_Model):
 ArrivalConstraint = Annotated[Simultaneous | Spaced | Windows | Waves, Field(discriminator="kind")]
 
 
+class Landing(_Model):
+    """The runway the slots lead to: each vehicle's goal is its slot fix on the extended
+    centreline, crossed on the approach course (the runway heading) after a straight final of
+    ``approach_m``; after the fix the aircraft glides to ``touchdown`` and lands (ArduPlane's
+    DO_LAND_START then NAV_LAND)."""
+
+    touchdown: Point3 = Field(description="touchdown point; alt_m is the runway's elevation")
+    heading_deg: Annotated[float, Field(ge=0.0, lt=360.0)] = Field(
+        description="landing direction, degrees clockwise from north (the approach course)"
+    )
+    approach_m: Annotated[float, Field(gt=0.0, le=50_000.0)] = Field(
+        default=2000.0, description="straight final flown on the course before the slot fix"
+    )
+
+
+LANDING_CENTRELINE_TOL_M = 30.0
+"""How far a slot fix may lie off the runway's extended centreline."""
+
+
 class CostWeights(_Model):
     """Weights of the planning cost: length x (1 + threat x exposure + terrain x penalty)."""
 
@@ -340,6 +359,9 @@ class Scenario(_Model):
     threats: list[Threat] = Field(default_factory=list)
     buffers: list[Buffer] = Field(default_factory=list)
     weights: CostWeights = Field(default_factory=CostWeights)
+    landing: Landing | None = Field(
+        default=None, description="landing slots: the runway every goal (slot fix) leads to"
+    )
 
     @field_validator("vehicles")
     @classmethod
@@ -407,7 +429,38 @@ class Scenario(_Model):
             _names_every_vehicle(
                 "arrival.windows", named, ids, rule="each vehicle needs exactly one window"
             )
+        if self.landing is not None:
+            self._check_landing(self.landing)
         return self
+
+    def _check_landing(self, landing: Landing) -> None:
+        """Each goal is a slot fix on the extended centreline short of the touchdown, high
+        enough above it to glide down no steeper than the vehicle climbs."""
+        frame = self.frame()
+        te, tn = landing.touchdown.local(frame)
+        if not self.area.contains(te, tn):
+            raise ValueError(f"landing.touchdown at ({te:.0f}, {tn:.0f}) m is outside the area")
+        course = math.radians(landing.heading_deg)
+        ue, un = math.sin(course), math.cos(course)
+        for i, v in enumerate(self.vehicles):
+            ge, gn = v.goal.local(frame)
+            along = (te - ge) * ue + (tn - gn) * un
+            across = -(te - ge) * un + (tn - gn) * ue
+            where = f"vehicles[{i}] ({v.id}).goal"
+            if along <= 0.0 or abs(across) > LANDING_CENTRELINE_TOL_M:
+                raise ValueError(
+                    f"{where} is not a slot fix: it lies {along:.0f} m short of the touchdown "
+                    f"and {across:+.0f} m off the centreline on heading "
+                    f"{landing.heading_deg:g} deg (it must be short of it and within "
+                    f"{LANDING_CENTRELINE_TOL_M:g} m of the centreline)"
+                )
+            height = v.goal.alt_m - landing.touchdown.alt_m
+            if height <= 0.0 or height / along > v.climb_gradient:
+                raise ValueError(
+                    f"{where}: alt_m {v.goal.alt_m:g} is {height:.0f} m above the touchdown "
+                    f"{along:.0f} m away: the glide must descend, no steeper than "
+                    f"climb_gradient {v.climb_gradient:g}"
+                )
 
     def arrival_offsets_s(self) -> dict[str, float]:
         """Each vehicle's arrival after the team's reference time (s): 0 for simultaneous

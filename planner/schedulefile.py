@@ -11,7 +11,7 @@ back for ``python -m planner export``.
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, replace
 from typing import Any
 
@@ -21,6 +21,7 @@ from planner.deconflict import Separation
 from planner.errors import PlannerError
 from planner.mission import (
     MAV_CMD_DO_CHANGE_SPEED,
+    MAV_CMD_NAV_TAKEOFF,
     MAV_CMD_NAV_WAYPOINT,
     Loiter,
     MissionItem,
@@ -50,6 +51,16 @@ class PathMission:
 
     items: tuple[MissionItem, ...]
     item_s_m: tuple[float | None, ...]
+
+    @property
+    def first_route_seq(self) -> int:
+        """The first item of the route: 2 after home and the takeoff, 1 with no takeoff."""
+        return first_route_seq(self.items)
+
+
+def first_route_seq(items: Sequence[MissionItem]) -> int:
+    """Item 0 is home; item 1 the takeoff when there is one; the route starts after them."""
+    return 2 if len(items) > 1 and items[1].command == MAV_CMD_NAV_TAKEOFF else 1
 
 
 def vehicle_mission(schedule: Schedule, vs: VehicleSchedule, terrain: Terrain) -> list[MissionItem]:
@@ -113,7 +124,8 @@ def path_mission(
         p = path.pose_at(s)
         lat, lon = frame.to_geodetic(p.east_m, p.north_m)
         waypoints.append(Waypoint(float(lat), float(lon), vs.alt_at(s)))
-    if runout_m > 0.0:
+    landing = schedule.scenario.landing
+    if runout_m > 0.0 and landing is None:
         end = path.end
         e = end.east_m + runout_m * math.sin(end.heading_rad)
         n = end.north_m + runout_m * math.cos(end.heading_rad)
@@ -143,20 +155,28 @@ def path_mission(
     ground = float(terrain.elevation_m(np.array([se]), np.array([sn]))[0])
     home_lat, home_lon = frame.to_geodetic(se, sn)
     home = Waypoint(float(home_lat), float(home_lon), ground)
+    touchdown: Waypoint | bool = False
+    if landing is not None:
+        t_lat, t_lon = frame.to_geodetic(*landing.touchdown.local(frame))
+        touchdown = Waypoint(float(t_lat), float(t_lon), landing.touchdown.alt_m)
     items = compile_mission(
         home=home,
         waypoints=waypoints,
         # The climb-out ends where the altitude profile starts (not lower: a start altitude
         # below the terrain there would leave the first leg below it, and the profile, which
         # starts no lower than the start altitude, is what the clearance was checked on).
-        takeoff_alt_m=max(vs.alt_at(0.0) - ground, 1.0),
+        # A vehicle taken over in the air has no takeoff.
+        takeoff_alt_m=None if v.airborne else max(vs.alt_at(0.0) - ground, 1.0),
         speeds=speeds,
         loiters=loiters,
         airspeed_limits_m_s=(v.speed_min_m_s, v.speed_max_m_s),
+        land=touchdown,
+        land_start=landing is not None,
     )
-    item_s: list[float | None] = [None, None]
+    first = first_route_seq(items)
+    item_s: list[float | None] = [None] * first
     k = -1
-    for it in items[2:]:
+    for it in items[first:]:
         if it.command == MAV_CMD_NAV_WAYPOINT:
             k += 1
             item_s.append(s_sorted[k])
@@ -180,9 +200,11 @@ def splice_mission(old: PathMission, keep_through_seq: int, new: PathMission) ->
     PlannerError
         ``keep_through_seq`` is not a waypoint of the old mission.
     """
-    if not 2 <= keep_through_seq < len(old.items):
+    first = old.first_route_seq
+    if not first <= keep_through_seq < len(old.items):
         raise PlannerError(
-            f"splice: item {keep_through_seq} is outside the old mission (2..{len(old.items) - 1})"
+            f"splice: item {keep_through_seq} is outside the old mission's route "
+            f"({first}..{len(old.items) - 1})"
         )
     kept = old.items[keep_through_seq]
     s_k = old.item_s_m[keep_through_seq]

@@ -1,4 +1,11 @@
-"""CLI: ``python -m sitl_stub --vehicles N --tcp-base PORT --speedup S --home LAT,LON,ALT[,HDG]``.
+"""CLI: ``python -m sitl_stub --vehicles N --tcp-base PORT --speedup S --home ...``.
+
+``--home LAT,LON,ALT[,HDG[,AIR_ALT]]`` is where a vehicle starts: on the ground at ALT (m AMSL),
+nose to HDG (degrees, default 0). With AIR_ALT (m AMSL, at least 10 m above ALT) it starts
+flying instead: armed, at AIR_ALT over LAT,LON on HDG at its cruise airspeed, in LOITER
+circling that point until a ground station takes it over; home stays LAT,LON,ALT on the
+ground. With ``--scenario`` and no ``--home``, a scenario vehicle with ``airborne: true``
+starts so at its start's ``alt_m``.
 
 Runs until SIGINT/SIGTERM, then closes every socket (and the truth file), writes the final
 counters file and exits 0.
@@ -69,16 +76,19 @@ def parse_args(argv: Sequence[str] | None = None) -> argparse.Namespace:
     ap.add_argument(
         "--home",
         action="append",
-        metavar="LAT,LON,ALT_M[,HDG_DEG]",
-        help="start on the ground (ALT_M AMSL); once: shared by all vehicles (spaced 30 m "
-        "across the heading); repeated once per vehicle: vehicle i at the i-th --home",
+        metavar="LAT,LON,ALT_M[,HDG_DEG[,AIR_ALT_M]]",
+        help="start on the ground (ALT_M AMSL), or with AIR_ALT_M (AMSL, >= ALT_M + 10) in "
+        "the air: armed, at AIR_ALT_M over LAT,LON in LOITER circling it (home stays on the "
+        "ground at ALT_M); once: shared by all vehicles (spaced 30 m across the heading); "
+        "repeated once per vehicle: vehicle i at the i-th --home",
     )
     ap.add_argument(
         "--scenario",
         metavar="FILE",
         help="scenario file: the vehicles fly over its terrain (the ground under each one, "
-        "every physics step; flown into it, one crashes) and, without --home, start on the "
-        "ground at its vehicles' starts",
+        "every physics step; flown into it, one crashes) and, without --home, start at its "
+        "vehicles' starts: on the ground, or an 'airborne: true' vehicle in the air at its "
+        "start's alt_m",
     )
     ap.add_argument(
         "--hill",
@@ -241,6 +251,7 @@ def homes_from_args(args: argparse.Namespace) -> list[Home]:
         return [_home(text) for text in texts]
     first = _home(texts[0])
     lat, lon, alt, hdg = first.lat_deg, first.lon_deg, first.alt_m, first.heading_deg
+    air = first.airborne_alt_m
     # Vehicles share the home point but are spaced 30 m apart across the heading, as
     # aircraft lined up on an apron, so their true positions never coincide.
     from sitl_stub.model import displace_deg
@@ -250,14 +261,17 @@ def homes_from_args(args: argparse.Namespace) -> list[Home]:
         off = 30.0 * i
         right = math.radians(hdg + 90.0)
         la, lo = displace_deg(lat, lon, alt, off * math.cos(right), off * math.sin(right))
-        homes.append(Home(la, lo, alt, hdg))
+        homes.append(Home(la, lo, alt, hdg, air))
     return homes
 
 
 def _home(text: str) -> Home:
-    lat, lon, alt, *rest = _floats(text, "--home", 3, 4)
+    """LAT,LON,ALT[,HDG[,AIR_ALT]]: on the ground, or with AIR_ALT flying (see Home)."""
+    lat, lon, alt, *rest = _floats(text, "--home", 3, 5)
+    hdg = rest[0] if rest else 0.0
+    air = rest[1] if len(rest) > 1 else None
     try:
-        return Home(lat, lon, alt, rest[0] if rest else 0.0)
+        return Home(lat, lon, alt, hdg, air)
     except ValueError as err:
         raise UsageError(f"--home {text!r}: {err}") from None
 
@@ -414,10 +428,12 @@ def _hill(text: str) -> Hill:
 
 
 def homes_from_scenario(path: str, n: int) -> list[Home]:
-    """Vehicle i on the ground at scenario vehicle i's start, nose toward its goal.
+    """Vehicle i at scenario vehicle i's start, nose toward its goal.
 
     The home altitude is the scenario terrain's elevation there (not the start's ``alt_m``,
-    which is a flight altitude): the vehicle starts on the ground.
+    which is a flight altitude): the vehicle starts on the ground, or, if the scenario
+    vehicle is ``airborne``, flying at its start's ``alt_m`` (AMSL) above that ground, in
+    LOITER circling its start.
     """
     import numpy as np
 
@@ -436,7 +452,11 @@ def homes_from_scenario(path: str, n: int) -> list[Home]:
         ground = terrain.elevation_m(np.array([east]), np.array([north]))
         goal_lat, goal_lon = frame.to_geodetic(*v.goal.local(frame))
         hdg = initial_bearing_deg(lat, lon, goal_lat, goal_lon)
-        homes.append(Home(float(lat), float(lon), float(ground[0]), hdg))
+        air = float(v.start.alt_m) if v.airborne else None
+        try:
+            homes.append(Home(float(lat), float(lon), float(ground[0]), hdg, air))
+        except ValueError as err:
+            raise UsageError(f"{path}: vehicle {v.id}: {err}") from None
     return homes
 
 

@@ -41,15 +41,33 @@ from sitl_stub.wind_estimate import WindEstimateError
 DEFAULT_TCP_BASE = 5760
 PORT_STRIDE = 10
 
+HomeTuple = (
+    tuple[float, float, float]
+    | tuple[float, float, float, float]
+    | tuple[float, float, float, float, float | None]
+)
+"""``Home``'s fields in order: (lat, lon, alt[, heading[, airborne_alt]])."""
+
+
+AIRBORNE_MIN_HEIGHT_M = 10.0
+"""An airborne start is at least this far above its home (the ground there)."""
+
 
 @dataclass(frozen=True, slots=True)
 class Home:
-    """Where a vehicle starts: on the ground at home, nose to ``heading_deg``."""
+    """Where a vehicle starts: on the ground at home, nose to ``heading_deg``.
+
+    With ``airborne_alt_m`` (m AMSL, at least :data:`AIRBORNE_MIN_HEIGHT_M` above ``alt_m``)
+    it starts flying instead: armed, over home at that altitude on ``heading_deg`` at its
+    cruise airspeed, in LOITER circling home's position. Home itself stays on the ground
+    (``alt_m``: RTL and relative altitudes are from there).
+    """
 
     lat_deg: float
     lon_deg: float
     alt_m: float
     heading_deg: float = 0.0
+    airborne_alt_m: float | None = None
 
     def __post_init__(self) -> None:
         if not (math.isfinite(self.lat_deg) and -90.0 <= self.lat_deg <= 90.0):
@@ -58,6 +76,14 @@ class Home:
             raise ValueError(f"home longitude {self.lon_deg!r} is outside [-180, 180]")
         if not math.isfinite(self.alt_m):
             raise ValueError(f"home altitude {self.alt_m!r} is not a number")
+        air = self.airborne_alt_m
+        if air is not None and not (
+            math.isfinite(air) and air >= self.alt_m + AIRBORNE_MIN_HEIGHT_M
+        ):
+            raise ValueError(
+                f"airborne altitude {air!r} must be a number at least "
+                f"{AIRBORNE_MIN_HEIGHT_M:g} m above the home altitude {self.alt_m:g} m"
+            )
 
 
 def _check_indices(name: str, indices: Mapping[int, object] | Sequence[int], n: int) -> None:
@@ -82,7 +108,7 @@ class SimTeam:
     async def start(
         cls,
         *,
-        homes: Sequence[Home | tuple[float, float, float] | tuple[float, float, float, float]],
+        homes: Sequence[Home | HomeTuple],
         tcp_base: int = DEFAULT_TCP_BASE,
         speedup: float = 1.0,
         wind: Wind | None = None,
@@ -182,7 +208,7 @@ class SimTeam:
     def create(
         cls,
         *,
-        homes: Sequence[Home | tuple[float, float, float] | tuple[float, float, float, float]],
+        homes: Sequence[Home | HomeTuple],
         speedup: float = 1.0,
         wind: Wind | None = None,
         seed: int = 0,
@@ -231,6 +257,7 @@ class SimTeam:
                 home_lon_deg=home.lon_deg,
                 home_alt_m=home.alt_m,
                 heading_deg=home.heading_deg,
+                airborne_alt_m=home.airborne_alt_m,
                 wind=wind or Wind(),
                 rng=np.random.default_rng(seeds[2 * i]),
                 time_s=0.0,

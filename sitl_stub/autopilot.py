@@ -24,10 +24,17 @@ Behaviour modelled on ArduPlane 4.x (``commands_logic.cpp``, ``AP_Mission``, ``A
 - Airspeeds (AIRSPEED_*, DO_CHANGE_SPEED, TECS_LAND_ARSPD) are equivalent airspeed; the model
   flies true airspeed EAS x EAS2TAS(altitude) x (1 + ``speed_bias``) (``sitl_stub.atmosphere``).
 
-- Mission: item 0 is home and never flown. DO commands between two NAV commands run when the
-  mission advances past them (i.e. when the previous NAV item is reached); unsupported DO
-  commands are no-ops (DO_JUMP is not followed); unsupported NAV commands are skipped.
-- NAV_WAYPOINT: L1 navigation (:mod:`sitl_stub.l1`) along prev -> next; reached within
+- Start: on the ground at home, disarmed in MANUAL; or, with ``airborne_alt_m``, already
+  flying: armed, over home at that altitude at the cruise airspeed, in LOITER circling there.
+- Mission: item 0 is home and never flown. AUTO starts at item 1 (or resumes at the
+  interrupted item) with the leg from where the aircraft is (ArduPlane/mode_auto.cpp
+  ``_enter``, AP_Mission ``start_or_resume``). DO commands between two NAV commands run when
+  the mission advances past them (i.e. when the previous NAV item is reached); DO_LAND_START
+  is a marker (no-op) and unsupported DO commands are no-ops (DO_JUMP is not followed);
+  unsupported NAV commands are skipped.
+- NAV_WAYPOINT: L1 navigation (:mod:`sitl_stub.l1`) along prev -> next (the first leg of a
+  mission, and the leg after a takeoff, straight at the waypoint from where the aircraft is,
+  as ArduPlane does without cross-tracking); reached within
   ``turn_distance(wp_radius, next_turn_angle)`` (param2 > 0 overrides; param3 pass-by > 0 sets
   it to 0) or when past the finish line. Pass-by offsetting of the point is not modelled.
 - NAV_TAKEOFF (ArduPlane/takeoff.cpp, commands_logic.cpp verify_takeoff): ground roll on the
@@ -96,6 +103,7 @@ _CMD_LAND = int(mav.MAV_CMD_NAV_LAND)
 _CMD_TAKEOFF = int(mav.MAV_CMD_NAV_TAKEOFF)
 _CMD_CHANGE_SPEED = int(mav.MAV_CMD_DO_CHANGE_SPEED)
 _CMD_JUMP = int(mav.MAV_CMD_DO_JUMP)
+_CMD_LAND_START = int(mav.MAV_CMD_DO_LAND_START)
 _CMD_NAV_LAST = int(mav.MAV_CMD_NAV_LAST)
 _AMSL_FRAMES = frozenset({int(mav.MAV_FRAME_GLOBAL), int(mav.MAV_FRAME_GLOBAL_INT)})
 
@@ -114,6 +122,7 @@ _CMD_NAMES = {
     _CMD_TAKEOFF: "Takeoff",
     _CMD_CHANGE_SPEED: "ChangeSpeed",
     _CMD_JUMP: "Jump",
+    _CMD_LAND_START: "LandStart",
 }
 
 
@@ -224,11 +233,14 @@ class Autopilot:
         home_lon_deg: float,
         home_alt_m: float,
         heading_deg: float = 0.0,
+        airborne_alt_m: float | None = None,
         wind: Wind = Wind(0.0, 0.0, 0.0),  # noqa: B008 - frozen value
         rng: np.random.Generator,
         time_s: float = 0.0,
         terrain: Ground | None = None,
     ) -> None:
+        """On the ground at home, disarmed in MANUAL; with ``airborne_alt_m`` (AMSL) flying
+        over home at that altitude instead (see :meth:`_start_airborne`)."""
         self._params = params
         self._wind = wind
         self._home: Point = (home_lat_deg, home_lon_deg, home_alt_m)
@@ -306,6 +318,26 @@ class Autopilot:
         self._xtrack = 0.0
         # Arms from disarmed; changes into AUTO from another mode.
         self.counters: dict[str, int] = {"arms": 0, "auto_mode_changes": 0}
+        if airborne_alt_m is not None:
+            self._start_airborne(airborne_alt_m)
+
+    def _start_airborne(self, alt_m: float) -> None:
+        """Already flying when the ground station takes over: armed, over home at ``alt_m``
+        AMSL on the start heading, wings level at the cruise airspeed (true airspeed from
+        the EAS), in LOITER circling that point at WP_LOITER_RAD, as an ArduPlane switched
+        to LOITER in flight (ArduPlane/mode_loiter.cpp: ``do_loiter_at_location`` here)."""
+        st = self._state
+        self._state = replace(st, alt_m=alt_m, on_ground=False)
+        self._update_tas_scale()
+        tas = self._params.airspeed_cruise_m_s * self._tas_scale
+        self._state = replace(
+            self._state,
+            airspeed_m_s=tas,
+            vel_north_m_s=tas * math.cos(st.heading_rad) + st.wind_north_m_s,
+            vel_east_m_s=tas * math.sin(st.heading_rad) + st.wind_east_m_s,
+        )
+        self._armed = True  # not counted in "arms": no one armed it
+        self._enter_mode(Mode.LOITER, self._pending)
 
     # ------------------------------------------------------------------ properties
     @property
@@ -693,14 +725,21 @@ class Autopilot:
                 self._nav_bearing = leg
             else:
                 tn, te = bn, be
+                fn, fe = an, ae  # where the tracked line starts
                 if nav == _NAV_LAND:
                     # Track the approach line beyond the touchdown point.
                     d = math.hypot(bn - an, be - ae)
                     if d > 1.0:
                         tn = bn + (bn - an) / d * 5000.0
                         te = be + (be - ae) / d * 5000.0
+                elif not self._crosstrack:
+                    # The first leg of a mission (or after a takeoff) is flown straight at
+                    # the waypoint from where the aircraft is, not along the line from where
+                    # the leg began: ArduPlane/commands_logic.cpp verify_nav_wp,
+                    # update_waypoint(current_loc, next_WP_loc) unless auto_state.crosstrack.
+                    fn = fe = 0.0
                 lat_acc, self._nav_bearing, self._xtrack = l1_waypoint(
-                    an, ae, tn, te, vn, ve, st.heading_rad, p.l1_period_s, p.l1_damping
+                    fn, fe, tn, te, vn, ve, st.heading_rad, p.l1_period_s, p.l1_damping
                 )
             bank = math.atan(lat_acc / GRAVITY_M_S2)
             # Altitude: linear slew along the leg, with the slope as feed-forward.
@@ -1005,7 +1044,7 @@ class Autopilot:
 
     def _start_nav(self, seq: int, item: MissionItem, events: list[Event], keep_prev: bool) -> bool:
         cmd = item.command
-        if cmd not in _CMD_NAMES or cmd in (_CMD_CHANGE_SPEED, _CMD_JUMP):
+        if cmd not in _CMD_NAMES or cmd in (_CMD_CHANGE_SPEED, _CMD_JUMP, _CMD_LAND_START):
             events.append(Text(SEVERITY_WARNING, f"Skipping unsupported nav command #{cmd}"))
             return False
         events.append(Text(SEVERITY_INFO, f"Mission: {seq} {_CMD_NAMES[cmd]}"))
@@ -1067,6 +1106,8 @@ class Autopilot:
                 rel = st.alt_m - self._home[2]
                 events.append(Text(SEVERITY_INFO, f"Takeoff complete at {rel:.2f}m"))
                 self._prev_wp = self._next_wp = self._here()
+                # verify_takeoff: "don't cross-track on completion of takeoff".
+                self._next_wp_crosstrack = False
                 done = True
         elif nav == _NAV_WAYPOINT:
             dist = self._dist_to(self._next_wp)

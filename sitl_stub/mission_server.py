@@ -62,10 +62,17 @@ NAV_COMMANDS_WITH_LOCATION = frozenset(
         mavlink2.MAV_CMD_NAV_TAKEOFF,
     }
 )
-MISSION_COMMANDS = NAV_COMMANDS_WITH_LOCATION | {
-    mavlink2.MAV_CMD_NAV_RETURN_TO_LAUNCH,
-    mavlink2.MAV_CMD_DO_CHANGE_SPEED,
-}
+# DO_LAND_START marks where a landing sequence begins; flown as a no-op. ArduPilot keeps its
+# location (AP_Mission.cpp stored_in_location) and accepts MAV_FRAME_MISSION for it.
+DO_COMMANDS_WITH_LOCATION = frozenset({mavlink2.MAV_CMD_DO_LAND_START})
+MISSION_COMMANDS = (
+    NAV_COMMANDS_WITH_LOCATION
+    | DO_COMMANDS_WITH_LOCATION
+    | {
+        mavlink2.MAV_CMD_NAV_RETURN_TO_LAUNCH,
+        mavlink2.MAV_CMD_DO_CHANGE_SPEED,
+    }
+)
 FENCE_COMMANDS = frozenset(
     {
         mavlink2.MAV_CMD_NAV_FENCE_RETURN_POINT,
@@ -201,7 +208,11 @@ def validate_item(item: MissionItem) -> int:
         return int(mavlink2.MAV_MISSION_INVALID_PARAM1)
     if not _finite(item.param2):
         return int(mavlink2.MAV_MISSION_INVALID_PARAM2)
-    has_location = cmd in NAV_COMMANDS_WITH_LOCATION or mt != MAV_MISSION_TYPE_MISSION
+    has_location = (
+        cmd in NAV_COMMANDS_WITH_LOCATION
+        or cmd in DO_COMMANDS_WITH_LOCATION
+        or mt != MAV_MISSION_TYPE_MISSION
+    )
     if has_location:
         if not -900_000_000 <= item.x <= 900_000_000:
             return int(mavlink2.MAV_MISSION_INVALID_PARAM5_X)
@@ -209,7 +220,10 @@ def validate_item(item: MissionItem) -> int:
             return int(mavlink2.MAV_MISSION_INVALID_PARAM6_Y)
         if not _finite(item.z) or abs(item.z) >= ALT_MAX_M:
             return int(mavlink2.MAV_MISSION_INVALID_PARAM7)
-        if item.frame not in GLOBAL_FRAMES:
+        frames = GLOBAL_FRAMES
+        if cmd in DO_COMMANDS_WITH_LOCATION and mt == MAV_MISSION_TYPE_MISSION:
+            frames = GLOBAL_FRAMES | {mavlink2.MAV_FRAME_MISSION}
+        if item.frame not in frames:
             return int(mavlink2.MAV_MISSION_UNSUPPORTED_FRAME)
     if cmd == mavlink2.MAV_CMD_NAV_LOITER_TURNS and not 0 <= item.param1 <= 255:
         return int(mavlink2.MAV_MISSION_INVALID_PARAM1)

@@ -7,10 +7,11 @@ with ``AP_Mission::mission_cmd_to_mavlink_int``. :func:`stored_item` is that rou
 from libraries/AP_Mission/AP_Mission.cpp (ArduPlane build) with the arithmetic in float32 as the
 C++ does it:
 
-- Location commands (NAV_WAYPOINT, NAV_LOITER_*, NAV_LAND, NAV_TAKEOFF): the frame reads back
-  as MAV_FRAME_GLOBAL (0), GLOBAL_RELATIVE_ALT (3) or GLOBAL_TERRAIN_ALT (10), whichever variant
-  (``_INT`` or not, or MAV_FRAME_MISSION) was sent; the altitude is ``int32(float32(z) * 100f)``
-  centimetres (truncated toward zero) and reads back as ``float32(alt_cm) * 0.01f``.
+- Location commands (NAV_WAYPOINT, NAV_LOITER_*, NAV_LAND, NAV_TAKEOFF, DO_LAND_START): the
+  frame reads back as MAV_FRAME_GLOBAL (0), GLOBAL_RELATIVE_ALT (3) or GLOBAL_TERRAIN_ALT (10),
+  whichever variant (``_INT`` or not, or MAV_FRAME_MISSION) was sent; the altitude is
+  ``int32(float32(z) * 100f)`` centimetres (truncated toward zero) and reads back as
+  ``float32(alt_cm) * 0.01f``.
 - Every other command (DO_CHANGE_SPEED, NAV_RETURN_TO_LAUNCH): frame 0, x = y = z = 0.
 - Parameters, per command: see the table in :func:`stored_item`.
 - ``autocontinue`` reads back as 1 and ``current`` as 0 (the mission server sets ``current``
@@ -45,10 +46,11 @@ _LOITER_TIME = int(mav.MAV_CMD_NAV_LOITER_TIME)
 _LAND = int(mav.MAV_CMD_NAV_LAND)
 _TAKEOFF = int(mav.MAV_CMD_NAV_TAKEOFF)
 _CHANGE_SPEED = int(mav.MAV_CMD_DO_CHANGE_SPEED)
+_LAND_START = int(mav.MAV_CMD_DO_LAND_START)
 
 # AP_Mission::stored_in_location, restricted to the commands the stub accepts.
 LOCATION_COMMANDS = frozenset(
-    {_WAYPOINT, _LOITER_UNLIM, _LOITER_TURNS, _LOITER_TIME, _LAND, _TAKEOFF}
+    {_WAYPOINT, _LOITER_UNLIM, _LOITER_TURNS, _LOITER_TIME, _LAND, _TAKEOFF, _LAND_START}
 )
 
 _ABSOLUTE_FRAMES = frozenset(
@@ -153,7 +155,7 @@ def stored_item(item: MissionItem) -> MissionItem:
     NAV_LAND          param1: uint16 (abort altitude); param4: -1 if it was negative, else 1
     NAV_TAKEOFF       param1: uint16 (minimum pitch)
     DO_CHANGE_SPEED   param1: uint8 (speed type); param2, param3 float32; param4 0
-    others            all parameters 0
+    others            all parameters 0 (DO_LAND_START keeps only its location)
     ================  ======================================================================
     """
     cmd = item.command

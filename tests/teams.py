@@ -7,6 +7,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+import yaml
 
 from planner.plan import build_terrain
 from planner.scenario import load_scenario, parse_scenario
@@ -147,3 +148,70 @@ def _vehicle(
         "speed_min_m_s": 16, "speed_max_m_s": 28, "min_turn_radius_m": 200,
         "max_range_m": 200_000, "alt_max_m": 4_000, "takeoff_window_s": [0, 1200],
     }  # fmt: skip
+
+
+def landing_scenario(seed: int, n: int = 4) -> tuple[dict[str, Any], tuple[float, float]]:
+    """Landing slots drawn from ``seed``: ``n`` aircraft already flying (``airborne``) on the
+    approach side of a runway, 15-30 km out, 600-1,500 m above it, landing 90 s apart in a
+    given order (the farther out, the later); each goal is the slot fix 6 km short of the
+    touchdown on the extended centreline, 300 m above the runway, crossed after a 2.5 km
+    straight final. Flat ground; a wind (m/s, from deg) of 0-6 m/s.
+    """
+    rng = np.random.default_rng(seed)
+    elevation = round(float(rng.uniform(0.0, 600.0)))
+    heading = round(float(rng.uniform(0.0, 360.0)))
+    tx, ty = 30_000.0, 30_000.0
+    ue, un = math.sin(math.radians(heading)), math.cos(math.radians(heading))
+    fix = (tx - 6_000.0 * ue, ty - 6_000.0 * un)
+    vehicles = []
+    for k in range(n):
+        # Spread across the approach side, the later slots farther out.
+        off = math.radians(float(rng.uniform(-60.0, 60.0)))
+        back = math.atan2(-ue, -un) + off
+        r = 15_000.0 + 2_200.0 * k + float(rng.uniform(0.0, 800.0))
+        start = (fix[0] + r * math.sin(back), fix[1] + r * math.cos(back))
+        v = _vehicle(k, start, fix, elevation + float(rng.uniform(600.0, 1_500.0)))
+        v["goal"]["alt_m"] = elevation + 300
+        v["airborne"] = True
+        v["takeoff_window_s"] = [0, 0]
+        v["min_turn_radius_m"] = round(float(rng.uniform(150.0, 220.0)))
+        vehicles.append(v)
+    doc: dict[str, Any] = {
+        "name": f"landing slots {seed} ({n} vehicles, runway {heading} deg)",
+        "area": {
+            "origin": {"lat_deg": 45.0 + float(rng.uniform(-5, 5)), "lon_deg": 8.0},
+            "min_east_m": 0, "min_north_m": 0, "width_m": 60_000, "height_m": 60_000,
+        },
+        "terrain": {"kind": "flat", "elevation_m": elevation},
+        "separation_m": 300,
+        "weights": {"threat": 4.0, "terrain": 0.0},
+        "arrival": {"kind": "spaced", "interval_s": 90, "order": [v["id"] for v in vehicles]},
+        "landing": {
+            "touchdown": {"east_m": tx, "north_m": ty, "alt_m": elevation},
+            "heading_deg": heading,
+            "approach_m": 2_500,
+        },
+        "vehicles": vehicles,
+    }  # fmt: skip
+    wind = (round(float(rng.uniform(0.0, 6.0)), 1), round(float(rng.uniform(0.0, 360.0))))
+    return doc, wind
+
+
+async def rehearse_doc(
+    doc: dict[str, Any], wind: tuple[float, float], seed: int, directory: Path
+) -> dict[str, Any]:
+    """Rehearse a generated scenario at 200x with 5 % packet loss in ``wind``; the record."""
+    from gcs.rehearsal.rehearse import RehearsalOptions, rehearse
+
+    path = directory / "generated.yaml"
+    path.write_text(yaml.safe_dump(doc), encoding="utf-8")
+    options = RehearsalOptions(
+        scenario_path=path,
+        scenario=load_scenario(path),
+        speedup=200.0,
+        wind=wind,
+        loss=0.05,
+        seed=seed,
+        quiet=True,
+    )
+    return await rehearse(options)

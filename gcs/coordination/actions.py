@@ -172,9 +172,10 @@ class Report:
 
 @dataclass(frozen=True)
 class Launch:
-    """Arm the vehicle and put it in AUTO."""
+    """Arm the vehicle and put it in AUTO (only AUTO when ``airborne``: it is flying)."""
 
     vehicle_id: str
+    airborne: bool = False
 
 
 @dataclass(frozen=True)

@@ -39,6 +39,10 @@ class EventKind(enum.StrEnum):
     """The team arrival time moved, or a vehicle is late while joining its route."""
     ARRIVED = "arrived"
     """A vehicle passed its goal."""
+    LANDED = "landed"
+    """A vehicle touched down and disarmed after its slot fix (``payload``: ``order``,
+    ``along_m`` and ``across_m`` from the touchdown point on the runway heading), or did not
+    land in time (an alarm says so)."""
     POPUP = "popup"
     """A threat appeared, and what it touches."""
     REPLAN = "replan"

@@ -23,7 +23,6 @@ from planner.schedule import VehicleSchedule
 from planner.schedulefile import PathMission
 
 __all__ = [
-    "FIRST_ROUTE_SEQ",
     "Lost",
     "Member",
     "Phase",
@@ -36,8 +35,6 @@ Phase = Literal["ground", "takeoff", "route", "arrived", "aborted", "lost"]
 """Where a vehicle is in its mission (the flight record's per-vehicle ``state``)."""
 DONE: frozenset[str] = frozenset({"arrived", "aborted", "lost"})
 LostCause = Literal["crash", "stall"]
-FIRST_ROUTE_SEQ = 2
-"""Item 0 is home, item 1 the takeoff; the route starts at item 2."""
 
 
 class VehicleState(enum.StrEnum):
@@ -55,6 +52,10 @@ class VehicleState(enum.StrEnum):
     LINK_SILENT = "link_silent"
     """In the air with no position report for longer than the silence threshold."""
     ARRIVED = "arrived"
+    LANDING = "landing"
+    """Past its slot fix, gliding to the runway (landing slots)."""
+    LANDED = "landed"
+    """Down on the runway and disarmed after its slot."""
     ABORTED = "aborted"
     CRASHED = "crashed"
     """It reported a crash (STATUSTEXT "Crash ...", MAV_STATE_EMERGENCY, disarmed on its route)."""
@@ -118,6 +119,11 @@ class Member:
     before, link gaps included: the aircraft flew on)."""
     arrival_s: float | None = None
     """Mission time it passed its goal (from its own telemetry)."""
+    landing_due: bool = False
+    """Arrived at its slot fix and not yet down (landing slots): still watched."""
+    landed_s: float | None = None
+    """Mission time it was down and disarmed after its slot."""
+    landed_en_m: tuple[float, float] | None = None
     near_goal: list[TruthSample] = field(default_factory=list)
     goal_en_m: tuple[float, float] = (0.0, 0.0)
     last_fix_s: float | None = None
@@ -157,7 +163,13 @@ class Member:
 
     @property
     def done(self) -> bool:
+        """No longer timed (arrived, aborted or lost)."""
         return self.phase in DONE
+
+    @property
+    def over(self) -> bool:
+        """Neither timed nor watched: done, and down if it lands after its slot."""
+        return self.phase in DONE and not (self.phase == "arrived" and self.landing_due)
 
     def in_loiter(self) -> bool:
         seq = self.last_seq
@@ -187,7 +199,9 @@ class Member:
 
     def current_state(self, off_route_m: float) -> VehicleState:
         if self.phase == "arrived":
-            return VehicleState.ARRIVED
+            if self.landed_s is not None:
+                return VehicleState.LANDED
+            return VehicleState.LANDING if self.landing_due else VehicleState.ARRIVED
         if self.phase == "aborted":
             return VehicleState.ABORTED
         if self.lost is not None:

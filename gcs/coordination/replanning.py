@@ -18,7 +18,7 @@ from gcs.coordination import actions as act
 from gcs.coordination.arrival import Decision
 from gcs.coordination.config import FlightConfig
 from gcs.coordination.events import EventKind
-from gcs.coordination.member import FIRST_ROUTE_SEQ, Member, path_en, route_track
+from gcs.coordination.member import Member, path_en, route_track
 from gcs.coordination.routetrack import Wind
 from planner.errors import InfeasibleError
 from planner.mission import MAV_CMD_NAV_WAYPOINT
@@ -74,7 +74,7 @@ class MissionChanges:
     def _keep_seq(self, m: Member, lead_m: float) -> int | None:
         """The first route waypoint at least ``lead_m`` ahead of the vehicle."""
         s_now = m.s_m or 0.0
-        seq = max(m.last_seq or FIRST_ROUTE_SEQ, FIRST_ROUTE_SEQ)
+        seq = max(m.last_seq or m.mission.first_route_seq, m.mission.first_route_seq)
         for k in range(seq, len(m.mission.items)):
             it = m.mission.items[k]
             s = m.mission.item_s_m[k]
@@ -461,7 +461,7 @@ class MissionChanges:
     def _keep_behind(self, m: Member, s_m: float) -> int | None:
         """The last route waypoint at or short of ``s_m`` along the vehicle's mission."""
         found = None
-        for k in range(FIRST_ROUTE_SEQ, len(m.mission.items)):
+        for k in range(m.mission.first_route_seq, len(m.mission.items)):
             s_k = m.mission.item_s_m[k]
             if s_k is None or s_k > s_m:
                 break

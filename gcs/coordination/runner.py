@@ -459,8 +459,13 @@ class FlightRunner:
         await v.arm(timeout_s=timeout, retries=retries)
         await v.set_mode("AUTO", timeout_s=timeout, retries=retries)
 
+    async def _auto(self, v: Vehicle) -> None:
+        timeout, retries = self._wall_timeout_s(v), self.config.command_retries
+        await v.set_mode("AUTO", timeout_s=timeout, retries=retries)
+
     async def _launch(self, a: act.Launch) -> None:
-        err = await self._outcome(self._arm_auto(self.vehicles[a.vehicle_id]))
+        v = self.vehicles[a.vehicle_id]
+        err = await self._outcome(self._auto(v) if a.airborne else self._arm_auto(v))
         self._feed(act.Launched(a.vehicle_id, err))
 
     async def _command_speed(self, a: act.CommandSpeed) -> None:
@@ -707,7 +712,7 @@ class FlightRunner:
         )
         try:
             silent = False
-            while not m.done and not self._over():
+            while not m.over and not self._over():
                 # Look for silence often enough to see the shortest one reported.
                 poll_s = self._silence_s() / max(self.clock.rate, 1.0) / 2.0
                 msg = await sub.get(timeout_s=min(0.05, max(0.005, poll_s)))

@@ -35,7 +35,7 @@ from gcs.coordination import actions as act
 from gcs.coordination.arrival import ArrivalController, Decision, SpeedLimits
 from gcs.coordination.config import FlightConfig
 from gcs.coordination.events import EventKind
-from gcs.coordination.member import FIRST_ROUTE_SEQ, Lost, LostCause, Member, path_en, route_track
+from gcs.coordination.member import Lost, LostCause, Member, path_en, route_track
 from gcs.coordination.routetrack import Wind
 from gcs.coordination.separation import Position, SeparationWatch
 from gcs.coordination.teamtime import TeamTime, TeamTimeRefused
@@ -56,6 +56,10 @@ STOPPED_FIXES = 8
 """Fixes in a row, over ``stopped_bound_s``, that find a vehicle where it was."""
 SPEED_REFUSALS_ALARM = 3
 """Speed commands refused in a row that make an alarm: the speed is not under control."""
+
+
+LANDING_MARGIN_S = 120.0
+"""Flare, roll-out and the disarm delay, on top of the glide (see ``landing_bound_s``)."""
 
 
 def is_crash_text(text: str) -> bool:
@@ -176,7 +180,7 @@ class TeamController(ZoneGuard, TeamTime):
 
     @property
     def finished(self) -> bool:
-        return self.stopped is not None or all(m.done for m in self.members.values())
+        return self.stopped is not None or all(m.over for m in self.members.values())
 
     def _t(self, utc_s: float) -> float:
         assert self.start_utc_s is not None, "the mission has not started"
@@ -266,7 +270,10 @@ class TeamController(ZoneGuard, TeamTime):
         for m in self.members.values():
             if m.phase == "ground" and now >= m.takeoff_s:
                 m.phase = "takeoff"
-                out.append(act.Launch(m.vehicle_id))
+                out.append(act.Launch(m.vehicle_id, m.schedule.airborne_start))
+        self._watch_landings(now, out)
+        if self.stopped is not None:
+            return
         for zone in self._due_popups(now):
             self.popups_done.add(zone.id)
             self.threats_appeared.append({"id": zone.id, "t_s": now})
@@ -289,10 +296,15 @@ class TeamController(ZoneGuard, TeamTime):
             )
             return
         m.launched_s = now
+        what = (
+            f"AUTO at {now:.1f} s (taken over in the air)"
+            if m.schedule.airborne_start
+            else f"armed and AUTO at {now:.1f} s (scheduled takeoff {m.takeoff_s:.1f} s)"
+        )
         out.append(
             act.Report(
                 EventKind.LAUNCH,
-                f"armed and AUTO at {now:.1f} s (scheduled takeoff {m.takeoff_s:.1f} s)",
+                what,
                 m.vehicle_id,
                 payload={"ok": True},
             )
@@ -302,7 +314,7 @@ class TeamController(ZoneGuard, TeamTime):
 
     def _fix(self, fix: act.Fix, out: list[act.Action]) -> None:
         m = self.members.get(fix.vehicle_id)
-        if m is None or self.start_utc_s is None or m.done:
+        if m is None or self.start_utc_s is None or m.over:
             return
         t = self._t(fix.utc_s)
         if m.last_fix_s is not None and t <= m.last_fix_s:
@@ -326,9 +338,11 @@ class TeamController(ZoneGuard, TeamTime):
                 ]
             )
         self._watch_separation(m, t, fix, out)
+        if m.landing_due:
+            return  # past its slot fix: watched until it is down, no longer timed
         seq = fix.mission_seq
         if m.phase == "takeoff":
-            if m.launched_s is not None and seq is not None and seq >= FIRST_ROUTE_SEQ:
+            if m.launched_s is not None and seq is not None and seq >= m.mission.first_route_seq:
                 m.phase = "route"
                 out.append(
                     act.Report(
@@ -385,7 +399,7 @@ class TeamController(ZoneGuard, TeamTime):
         watch = self.separation
         pos = Position(t, m.east_m, m.north_m, fix.alt_amsl_m, fix.ve_m_s or 0.0, fix.vn_m_s or 0.0)
         flying = [
-            x.vehicle_id for x in self.members.values() if x.launched_s is not None and not x.done
+            x.vehicle_id for x in self.members.values() if x.launched_s is not None and not x.over
         ]
         for sf in watch.update(m.vehicle_id, pos, flying):
             out.append(
@@ -452,6 +466,9 @@ class TeamController(ZoneGuard, TeamTime):
         one); on its route, disarmed is one too (its climb-out ended armed and in AUTO, so
         an old heartbeat from before the launch cannot be taken for it)."""
         m = self.members.get(hb.vehicle_id)
+        if m is not None and m.landing_due:
+            self._landing_heartbeat(m, hb, now, out)
+            return
         if m is None or m.phase not in ("takeoff", "route"):
             return
         if hb.emergency:
@@ -473,7 +490,8 @@ class TeamController(ZoneGuard, TeamTime):
                 payload={"severity": alarm.severity, "text": alarm.text},
             )
         )
-        if m.phase in ("takeoff", "route") and is_crash_text(alarm.text):
+        if (m.phase in ("takeoff", "route") or m.landing_due) and is_crash_text(alarm.text):
+            m.landing_due = False
             self._lose(m, "crash", f"it says {alarm.text!r}", now, out)
 
     def _lose(
@@ -505,7 +523,7 @@ class TeamController(ZoneGuard, TeamTime):
 
     def _passed_items(self, m: Member, old: int | None, new: int) -> None:
         """DO_CHANGE_SPEED items the vehicle ran set the airspeed it flies."""
-        lo = FIRST_ROUTE_SEQ if old is None else old
+        lo = m.mission.first_route_seq if old is None else old
         for k in range(lo, min(new, len(m.mission.items))):
             it = m.mission.items[k]
             if it.command == MAV_CMD_DO_CHANGE_SPEED and it.param2 > 0:
@@ -690,6 +708,7 @@ class TeamController(ZoneGuard, TeamTime):
         t = self._t(utc)
         m.arrival_s = t
         m.phase = "arrived"
+        m.landing_due = self.scenario.landing is not None
         out.append(
             act.Report(
                 EventKind.ARRIVED,
@@ -700,6 +719,77 @@ class TeamController(ZoneGuard, TeamTime):
                 t_s=t,
             )
         )
+
+    # -- landing slots ------------------------------------------------------------------------
+
+    def landing_bound_s(self, m: Member) -> float:
+        """How long after its slot fix a vehicle may take to be down and disarmed: the glide
+        at its slowest airspeed twice over, plus the flare, roll-out and disarm delay."""
+        landing = self.scenario.landing
+        assert landing is not None
+        te, tn = landing.touchdown.local(self.frame)
+        glide_m = math.hypot(te - m.goal_en_m[0], tn - m.goal_en_m[1])
+        return 2.0 * glide_m / m.limits.airspeed_min_m_s + LANDING_MARGIN_S
+
+    def _landing_heartbeat(
+        self, m: Member, hb: act.Heartbeat, now: float, out: list[act.Action]
+    ) -> None:
+        """Gliding after its slot: MAV_STATE_EMERGENCY is a crash; disarmed is down (ArduPlane
+        disarms LAND_DISARMDELAY after the touchdown)."""
+        if hb.emergency:
+            m.landing_due = False
+            self._lose(m, "crash", "HEARTBEAT MAV_STATE_EMERGENCY while landing", now, out)
+            return
+        if hb.armed:
+            return
+        m.landing_due = False
+        m.landed_s = now
+        landing = self.scenario.landing
+        assert landing is not None
+        order = sum(1 for x in self.members.values() if x.landed_s is not None)
+        te, tn = landing.touchdown.local(self.frame)
+        c = math.radians(landing.heading_deg)
+        de, dn = (m.east_m or te) - te, (m.north_m or tn) - tn
+        along, across = de * math.sin(c) + dn * math.cos(c), -de * math.cos(c) + dn * math.sin(c)
+        m.landed_en_m = (m.east_m or te, m.north_m or tn)
+        out.append(
+            act.Report(
+                EventKind.LANDED,
+                f"down and disarmed at {now:.1f} s, {order} to land, {along:+.0f} m along and "
+                f"{across:+.0f} m across the runway from the touchdown point",
+                m.vehicle_id,
+                value=order,
+                t_s=now,
+                payload={"order": order, "along_m": round(along, 1), "across_m": round(across, 1)},
+            )
+        )
+
+    def _watch_landings(self, now: float, out: list[act.Action]) -> None:
+        """A vehicle not down within :meth:`landing_bound_s` of its slot fix is an alarm and
+        ends the flight as failed (it is still in the air, off its plan)."""
+        late = [
+            m
+            for m in self.members.values()
+            if m.landing_due
+            and m.arrival_s is not None
+            and now > m.arrival_s + self.landing_bound_s(m)
+        ]
+        if not late:
+            return
+        for m in late:
+            m.landing_due = False
+            out.append(
+                act.Report(
+                    EventKind.ALARM,
+                    f"not down {now - (m.arrival_s or 0.0):.0f} s after its slot fix "
+                    f"(bound {self.landing_bound_s(m):.0f} s): it has not landed",
+                    m.vehicle_id,
+                    t_s=now,
+                )
+            )
+        self.stopped = f"not landed: {', '.join(m.vehicle_id for m in late)}"
+        out.append(act.Report(EventKind.ABORT, f"{self.stopped}; stopping the loop", t_s=now))
+        out.append(act.Stop(self.stopped))
 
     # -- abort ----------------------------------------------------------------------------------
 

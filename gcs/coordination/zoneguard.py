@@ -24,7 +24,7 @@ import numpy as np
 
 from gcs.coordination import actions as act
 from gcs.coordination.events import EventKind
-from gcs.coordination.member import FIRST_ROUTE_SEQ, Member
+from gcs.coordination.member import Member
 from gcs.coordination.replanning import MissionChanges
 from gcs.coordination.routetrack import RouteTrack
 from planner.geo import LocalFrame
@@ -323,9 +323,9 @@ class ZoneGuard(MissionChanges):
         e0, n0 = exp.hold_en_m
         s_new, cross_m = m.track.locate(e0, n0, exp.hold_s_m)
         if cross_m <= self.config.hold_radius_m:
-            start, after_s = FIRST_ROUTE_SEQ, s_new + RESUME_AHEAD_M
+            start, after_s = m.mission.first_route_seq, s_new + RESUME_AHEAD_M
         else:
-            start, after_s = max(FIRST_ROUTE_SEQ, (m.splice_seq or 0) + 1), -math.inf
+            start, after_s = max(m.mission.first_route_seq, (m.splice_seq or 0) + 1), -math.inf
         seq = len(items) - 1
         for k in range(start, len(items)):
             it, s_k = items[k], item_s[k]

@@ -6,6 +6,7 @@
 
 Fields the report can do without are optional: ``arrival_utc_s``/``error_s`` (``null`` or
 missing: not arrived; ``error_s`` defaults to arrival minus target), ``takeoff_utc_s``,
+``landed_utc_s`` (landing slots: down and disarmed),
 ``system_id``, the speed limits, ``planned_paths``, ``loiters``, ``commanded``,
 ``planned_speeds``, ``events``, ``adjustments``, ``threats_appeared`` and the team summary
 fields (separation, wall time, wind, loss, arrival source).
@@ -79,6 +80,7 @@ class RecordedVehicle:
     track: FloatArray  # (n, 6): utc_s, east_m, north_m, alt_m, airspeed, groundspeed; by time
     commanded: tuple[tuple[float, float, str], ...]
     planned_speeds: tuple[tuple[float, float, float, str], ...]
+    landed_utc_s: float | None = None
 
 
 @dataclass(frozen=True)
@@ -272,6 +274,7 @@ def _vehicle(raw: Any, where: str) -> RecordedVehicle:
         arrival_utc_s=arrival,
         error_s=error,
         takeoff_utc_s=_opt_number(v, "takeoff_utc_s", where),
+        landed_utc_s=_opt_number(v, "landed_utc_s", where),
         planned_paths=tuple(
             _planned_path(p, f"{where}.planned_paths[{i}]") for i, p in enumerate(paths)
         ),

@@ -133,9 +133,13 @@ def stub_homes(coord: FlightRunner) -> list[str]:
         start = vs.path.start
         ground = float(terrain.elevation_m(np.array([start.east_m]), np.array([start.north_m]))[0])
         lat, lon = frame.to_geodetic(start.east_m, start.north_m)
-        out.append(
+        home = (
             f"{float(lat):.8f},{float(lon):.8f},{ground:.1f},{math.degrees(start.heading_rad):.2f}"
         )
+        if vs.airborne_start:
+            # Flying at its start (circling it) when the simulator starts.
+            home += f",{scenario.vehicle(vs.vehicle_id).start.alt_m:.1f}"
+        out.append(home)
     return out
 
 
@@ -572,6 +576,9 @@ def flight_record(
             tracks[sysid] = [_sample(frame, row) for row in m.track_log]
         if arrival is not None:
             until[sysid] = arrival
+        landed = None if m.landed_s is None else start + m.landed_s
+        if landed is not None:
+            until[sysid] = landed  # the glide counts too
         vs = m.schedule
         vehicles.append(
             {
@@ -588,6 +595,7 @@ def flight_record(
                 if telemetry_arrival is None
                 else round(telemetry_arrival, 3),
                 "takeoff_utc_s": None if launched is None else round(launched, 3),
+                "landed_utc_s": None if landed is None else round(landed, 3),
                 "lost": None
                 if m.lost is None
                 else {

@@ -16,13 +16,10 @@ from pathlib import Path
 from typing import Any
 
 import pytest
-import yaml
 
-from gcs.rehearsal.rehearse import RehearsalOptions, rehearse
 from planner.errors import PlannerError
-from planner.scenario import load_scenario
 from tests.flightstory import story
-from tests.teams import ARRIVAL_KINDS, generated_scenario
+from tests.teams import ARRIVAL_KINDS, generated_scenario, rehearse_doc
 
 pytestmark = pytest.mark.slow
 
@@ -66,20 +63,8 @@ async def test_a_generated_scenario_flies_each_vehicle_to_its_slot_or_is_refused
     tmp_path: Path, seed: int, kind: str
 ) -> None:
     doc, wind = generated_scenario(seed, kind)
-    path = tmp_path / "generated.yaml"
-    path.write_text(yaml.safe_dump(doc), encoding="utf-8")
     try:
-        record = await rehearse(
-            RehearsalOptions(
-                scenario_path=path,
-                scenario=load_scenario(path),
-                speedup=200.0,
-                wind=wind,
-                loss=0.05,
-                seed=seed,
-                quiet=True,
-            )
-        )
+        record = await rehearse_doc(doc, wind, seed, tmp_path)
     except PlannerError as err:
         # Refused before launch: the reason names a vehicle or the arrival.
         said = str(err)

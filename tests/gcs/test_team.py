@@ -19,7 +19,7 @@ from pydantic import TypeAdapter
 from gcs.coordination import actions as act
 from gcs.coordination.config import FlightConfig
 from gcs.coordination.events import EventKind
-from gcs.coordination.member import FIRST_ROUTE_SEQ, Member, VehicleState
+from gcs.coordination.member import Member, VehicleState
 from gcs.coordination.separation import Position, SeparationWatch
 from gcs.coordination.team import TeamController, TeamTimeRefused
 from gcs.errors import GcsError
@@ -55,7 +55,7 @@ def seq_ahead(team: TeamController, vid: str, s_m: float) -> int:
     pm = team.members[vid].mission
     for k, it in enumerate(pm.items):
         s_k = pm.item_s_m[k]
-        is_waypoint = k >= FIRST_ROUTE_SEQ and it.command == MAV_CMD_NAV_WAYPOINT
+        is_waypoint = k >= pm.first_route_seq and it.command == MAV_CMD_NAV_WAYPOINT
         if is_waypoint and s_k is not None and s_k > s_m:
             return k
     return len(pm.items) - 1
