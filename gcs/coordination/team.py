@@ -417,7 +417,8 @@ class TeamController(ZoneGuard, TeamTime):
     def _watch_progress(self, m: Member, t: float, s: float, out: list[act.Action]) -> None:
         """Lose a vehicle that stops (moves less than ``stopped_m`` in ``stopped_bound_s``), or
         whose progress along its route stalls (or goes backwards) for longer than
-        ``stall_bound_s``: watched once it has joined its route, not in a loiter."""
+        ``stall_bound_s``: watched once it has joined its route, not in a loiter, nor while a
+        mission upload to it is unanswered."""
         if m.rejoin_seq is not None and (m.last_seq or 0) > m.rejoin_seq:
             m.rejoin_seq = None
         cfg = self.config
@@ -447,6 +448,9 @@ class TeamController(ZoneGuard, TeamTime):
             or m.in_loiter()
             or m.hold_zone is not None
             or m.rejoin_seq is not None
+            # An upload not yet answered: the vehicle may fly the new mission already (its
+            # loiter turns, say) while its progress is measured on the old one's track.
+            or m.vehicle_id in self.pending
         ):
             m.progress = (m.track, s, t)
             return

@@ -654,6 +654,34 @@ def test_a_loiter_is_no_stall(team: TeamController) -> None:
     assert m.state is VehicleState.LOITERING
 
 
+def test_circling_while_an_upload_is_unanswered_is_no_stall_and_the_watch_resumes_after(
+    team: TeamController,
+) -> None:
+    """A loaded link answers an upload late: the vehicle may already fly the new mission (its
+    loiter turns) while the controller measures it on the old track. Not a stall until the
+    answer; after it, circling on the old track is one again after the bound."""
+    vid = "UAV2"
+    m, t0 = flying(team, vid, 600.0)
+    team.config = dataclasses.replace(team.config, stall_bound_s=10.0)
+    up = act.Upload(vid, m.mission, m.schedule, None, "loiter inserted", True)
+    team.pending[vid] = up
+    t = t0
+    for k in range(1, 80):  # 40 s circling, 4 x the bound
+        t = t0 + 0.5 * k
+        f = fix_at(team, vid, 20_000.0 + 250.0 * math.sin(k * math.pi / 16), t)
+        assert not reports(team.handle(f, t), EventKind.VEHICLE_LOST)
+    del team.pending[vid]  # answered (as Installed does)
+    lost: list[act.Report] = []
+    k = 80
+    while not lost and k < 200:
+        t = t0 + 0.5 * k
+        f = fix_at(team, vid, 20_000.0 + 250.0 * math.sin(k * math.pi / 16), t)
+        lost = reports(team.handle(f, t), EventKind.VEHICLE_LOST)
+        k += 1
+    assert lost and "no progress along its route" in lost[0].reason
+    assert t - (t0 + 40.0) >= team.config.stall_bound_s
+
+
 def test_a_crash_text_loses_the_vehicle_and_retime_moves_the_team_to_the_earliest_of_the_rest(
     paper: tuple[Scenario, World, Schedule],
 ) -> None:
