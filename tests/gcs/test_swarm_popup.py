@@ -24,16 +24,6 @@ pytestmark = pytest.mark.slow  # about 90 s of wall time
 POP = {"east_m": 150_000.0, "north_m": 150_000.0, "radius_m": 10_000.0, "at_s": 1_500.0}
 
 
-@pytest.mark.xfail(
-    strict=False,
-    reason=(
-        "open fault: with a 30-vehicle plan taking about 20 s of wall time here the re-plan "
-        "lead is 3,100 s at 100x; the team re-plan then fails, loiter uploads to U008 time out, "
-        "and U008 is seen circling at 96 km for 300 s while the coordinator believes its old "
-        "mission, so it is declared lost (stall) and the flight fails. The zone-entry checks "
-        "below still hold when it runs."
-    ),
-)
 async def test_thirty_aircraft_keep_out_of_a_pop_up_zone_whatever_the_re_plan_latency(
     tmp_path: Path,
 ) -> None:
