@@ -455,9 +455,8 @@ class FlightRunner:
         return None
 
     async def _arm_auto(self, v: Vehicle) -> None:
-        timeout, retries = self._wall_timeout_s(v), self.config.command_retries
-        await v.arm(timeout_s=timeout, retries=retries)
-        await v.set_mode("AUTO", timeout_s=timeout, retries=retries)
+        await v.arm(timeout_s=self._wall_timeout_s(v), retries=self.config.command_retries)
+        await self._auto(v)
 
     async def _auto(self, v: Vehicle) -> None:
         timeout, retries = self._wall_timeout_s(v), self.config.command_retries

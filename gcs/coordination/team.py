@@ -753,9 +753,11 @@ class TeamController(ZoneGuard, TeamTime):
         order = sum(1 for x in self.members.values() if x.landed_s is not None)
         te, tn = landing.touchdown.local(self.frame)
         c = math.radians(landing.heading_deg)
-        de, dn = (m.east_m or te) - te, (m.north_m or tn) - tn
+        e = te if m.east_m is None else m.east_m
+        n = tn if m.north_m is None else m.north_m
+        de, dn = e - te, n - tn
         along, across = de * math.sin(c) + dn * math.cos(c), -de * math.cos(c) + dn * math.sin(c)
-        m.landed_en_m = (m.east_m or te, m.north_m or tn)
+        m.landed_en_m = (e, n)
         out.append(
             act.Report(
                 EventKind.LANDED,
