@@ -722,17 +722,26 @@ class FlightRunner:
                     continue
                 if silent:
                     silent = False
-                    gap = self.now_s() - (m.last_fix_s or 0.0)
-                    wall_ms = (time.monotonic() - self._fix_wall_s.get(vid, 0.0)) * 1000.0
-                    self._say(
-                        EventKind.LINK,
-                        f"telemetry back after {gap:.1f} s ({wall_ms:.0f} ms wall); re-deciding",
-                        vid,
-                    )
-                    self._feed(act.LinkBack(vid))
+                    self._link_back(m, vehicle)
                 self._on_fix(vid, vehicle)
         finally:
             sub.close()
+
+    def _link_back(self, m: Member, vehicle: Vehicle) -> None:
+        """Say how long a silent vehicle's fixes stopped: the gap between the fixes' own times
+        (what the vehicle did not report, whatever this process was doing meanwhile)."""
+        vid = m.vehicle_id
+        boot_s = vehicle.state.position_time_boot_s
+        utc = None if boot_s is None else self.clock.utc_of_boot(vehicle.system_id, boot_s)
+        fix_s = self.now_s() if utc is None or self.start_utc_s is None else utc - self.start_utc_s
+        gap = fix_s - (m.last_fix_s or 0.0)
+        wall_ms = (time.monotonic() - self._fix_wall_s.get(vid, 0.0)) * 1000.0
+        self._say(
+            EventKind.LINK,
+            f"telemetry back after {gap:.1f} s ({wall_ms:.0f} ms wall); re-deciding",
+            vid,
+        )
+        self._feed(act.LinkBack(vid))
 
     def _went_silent(self, m: Member) -> bool:
         """Say when a flying vehicle's position reports stop (the mission carries on)."""

@@ -247,14 +247,15 @@ async def test_the_console_resumes_a_dropped_stream_and_sends_vehicles_home(
     await c.until_mission(1200.0)
     await page.click('#vehicles tr[data-vehicle="UAV1"] button.abort')
     await c.confirm()
-    async with c.service.client() as client:
-        snap = _ok(await client.get(f"/v1/flights/{fid}"))
-    uav1 = next(v for v in snap["vehicles"] if v["id"] == "UAV1")
-    assert uav1["state"] == "aborted" and uav1["link"]["mode"] == "RTL", uav1
+    # The page's request is on its way once confirmed: its row says when the flight has it.
     row = await c.until(
         """() => { const r = tcgcs.table.text().UAV1;
                    return r.state === "aborted" && r.mode === "RTL" && r; }"""
     )
+    async with c.service.client() as client:
+        snap = _ok(await client.get(f"/v1/flights/{fid}"))
+    uav1 = next(v for v in snap["vehicles"] if v["id"] == "UAV1")
+    assert uav1["state"] == "aborted" and uav1["link"]["mode"] == "RTL", uav1
     assert await page.is_disabled('#vehicles tr[data-vehicle="UAV1"] button.abort'), row
     await c.until_mission(1500.0)
     await c.screenshot("console-abort.png")
