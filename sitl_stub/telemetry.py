@@ -253,7 +253,9 @@ class TelemetryMessages:
             _i16(n.target_bearing_deg),
             max(0, min(65535, round(n.wp_dist_m))),
             n.alt_error_m,
-            n.aspd_error_m_s,
+            # ArduPlane sends airspeed_error * 100 (cm/s where MAVLink says m/s: "incorrect
+            # units; see PR#7933", ArduPlane/GCS_Mavlink.cpp send_nav_controller_output).
+            n.aspd_error_m_s * 100.0,
             n.xtrack_error_m,
         )
 

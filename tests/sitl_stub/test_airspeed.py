@@ -85,3 +85,15 @@ def test_speed_bias_flies_faster_or_slower_than_it_reports(bias: float) -> None:
     assert s.airspeed_m_s / plain.airspeed_m_s == pytest.approx(1.0 + bias, abs=0.01)
     assert v.message("VFR_HUD").airspeed == pytest.approx(22.0, abs=0.2)
     assert v.autopilot.eas_m_s == pytest.approx(22.0 * (1.0 + bias), abs=0.3)
+
+
+def test_nav_controller_output_gives_the_airspeed_error_in_centimetres_per_second() -> None:
+    """ArduPlane/GCS_Mavlink.cpp send_nav_controller_output sends ``airspeed_error * 100``
+    (cm/s, though MAVLink's field says m/s: "incorrect units; see PR#7933"), the demanded
+    minus the measured equivalent airspeed."""
+    v = cruising(AirframeParams(), seconds=20.0)
+    ap = v.autopilot
+    msg = v.message("NAV_CONTROLLER_OUTPUT")
+    error_m_s = ap.target_airspeed_m_s - ap.eas_m_s
+    assert abs(error_m_s) > 0.05  # still accelerating to the cruise airspeed: an error to see
+    assert msg.aspd_error == pytest.approx(100.0 * error_m_s, rel=1e-3, abs=1e-3)
