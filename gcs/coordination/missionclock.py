@@ -15,8 +15,11 @@ different moments do not, nor does an autopilot whose clock was set by hand:
 - the team's UTC is the lower median of the vehicles' clocks; each vehicle's offset from it
   (:meth:`MissionClock.offset_s`) is the median of its recent differences, each taken from
   the least delayed of its last :data:`OFFSET_WINDOW` reports, and a difference far from the
-  offset is set aside unless it persists: a vehicle 7 s ahead is judged, commanded and timed
-  on the team's time, and a burst of delayed reports does not move it;
+  offset is set aside unless it persists (:data:`OFFSET_CONFIRM` reports over at least
+  :data:`OFFSET_CONFIRM_WALL_S` of wall time), and one within what reception jitter makes of
+  a clock at this rate is not applied (:data:`OFFSET_JITTER_WALL_S`): a vehicle 7 s ahead
+  is judged, commanded and timed on the team's time, and a burst of delayed reports does not
+  move it;
 - the rate (UTC seconds per monotonic second: 1.0 live, about 200 at 200x) is the median of
   the vehicles' own rates, each a least-squares slope of its UTC against receive time over its
   last ``window`` reports, fitted again on the least delayed half;
@@ -62,6 +65,18 @@ OFFSET_JUMP_S = 0.25
 OFFSET_CONFIRM = 30
 """How many outlying offset samples in a row move a known offset (a clock step is followed
 within that many reports; a burst of delayed reports shorter than that is not)."""
+OFFSET_JITTER_WALL_S = 0.005
+"""Reception jitter (monotonic s) the offsets cannot see through: an offset smaller than this
+times the rate (5 ms live, 1 s at 200x) is no evidence of a wrong clock and is not applied.
+One simulator's vehicles, on one clock, read as up to a second apart at 200x (each vehicle's
+messages leave and are read at their own moment of the tick), and every such offset moved
+that vehicle's arrival by as much; a clock set wrong by hand is off by seconds."""
+OFFSET_FLOOR_S = 0.05
+"""The smallest offset applied at any rate, s."""
+OFFSET_CONFIRM_WALL_S = 2.0
+"""...and for at least this long (monotonic s): at 200x thirty reports come within 0.15 s of
+wall time, as long as one stall of the event loop, which then moved offsets by up to a second
+though one simulator gave the vehicles one clock (and every arrival with them)."""
 OFFSET_WINDOW = 64
 """Each offset sample compares the least delayed of a vehicle's last this many reports: a
 stretch of delayed reports from one vehicle (its link queued, 70 ms of wall time is 14 s of
@@ -96,6 +111,8 @@ class _VehicleClock:
     """Its UTC seconds per monotonic second, fitted on its own reports."""
     outliers: list[float] = field(default_factory=list)
     """Offset samples in a row too far from its offset to be taken (yet)."""
+    outliers_since_mono_s: float = 0.0
+    """When the first of them came (monotonic)."""
 
 
 class MissionClock:
@@ -213,8 +230,13 @@ class MissionClock:
             if full and abs(sample - vc.offset_s) > OFFSET_JUMP_S:
                 # An outlier (a burst of delayed reports, the rate re-fitting after a stall),
                 # unless the samples keep saying so: then the clock really moved.
+                if not vc.outliers:
+                    vc.outliers_since_mono_s = mono_s
                 vc.outliers.append(sample)
-                if len(vc.outliers) < OFFSET_CONFIRM:
+                if (
+                    len(vc.outliers) < OFFSET_CONFIRM
+                    or mono_s - vc.outliers_since_mono_s < OFFSET_CONFIRM_WALL_S
+                ):
                     continue
                 vc.offset_samples.clear()
                 vc.offset_samples.extend(vc.outliers[-OFFSET_SAMPLES:])
@@ -239,11 +261,17 @@ class MissionClock:
     def _team_at(self, mono_s: float) -> float:
         """Team UTC at ``mono_s``: the lower median of the vehicles' UTC less their offsets."""
         estimates = sorted(
-            self._vehicle_at(vc, mono_s) - vc.offset_s
+            self._vehicle_at(vc, mono_s) - self._applied(vc)
             for vc in self._vehicles.values()
             if vc.has_utc and vc.recent
         )
         return estimates[(len(estimates) - 1) // 2]
+
+    def _applied(self, vc: _VehicleClock) -> float:
+        """The offset a vehicle's times are mapped by: none while it is within what reception
+        jitter makes of a clock at this rate (:data:`OFFSET_JITTER_WALL_S`)."""
+        floor = max(OFFSET_FLOOR_S, OFFSET_JITTER_WALL_S * self._rate)
+        return vc.offset_s if abs(vc.offset_s) > floor else 0.0
 
     def _fit(self, vc: _VehicleClock) -> None:
         """The team's rate: the median of the vehicles' own rates, each the slope of its UTC
@@ -305,12 +333,13 @@ class MissionClock:
         first SYSTEM_TIME.
         """
         vc = self._vehicles.get(system_id)
-        return None if vc is None else vc.boot_offset_s + time_boot_s - vc.offset_s
+        return None if vc is None else vc.boot_offset_s + time_boot_s - self._applied(vc)
 
     def offset_s(self, system_id: int) -> float | None:
-        """How far a vehicle's UTC is ahead of the team's, s (None: unknown or no UTC)."""
+        """How far a vehicle's UTC is ahead of the team's, s, as its times are mapped (None:
+        unknown or no UTC; 0 within the reception jitter, :data:`OFFSET_JITTER_WALL_S`)."""
         vc = self._vehicles.get(system_id)
-        return None if vc is None or not vc.has_utc else vc.offset_s
+        return None if vc is None or not vc.has_utc else self._applied(vc)
 
     @property
     def without_utc(self) -> frozenset[int]:

@@ -10,7 +10,11 @@ import time
 import numpy as np
 import pytest
 
-from gcs.coordination.missionclock import ANCHOR_OBSERVATIONS, MissionClock
+from gcs.coordination.missionclock import (
+    ANCHOR_OBSERVATIONS,
+    OFFSET_CONFIRM_WALL_S,
+    MissionClock,
+)
 from gcs.errors import GcsError
 
 UTC0 = 1_704_067_200.0
@@ -358,14 +362,37 @@ def test_a_clock_that_really_steps_forward_is_followed() -> None:
     _feed_offsets(clock, mono, rate=200.0, n=100, offsets_s={1: 0.0, 2: 0.0, 3: 0.0},
                   delays_s=delays)  # fmt: skip
     assert clock.offset_s(3) == pytest.approx(0.0, abs=0.05)
-    # Vehicle 3's clock is set 3 s ahead (forward: not a reset); the others run on.
-    for j in range(100, 200):
+    # Vehicle 3's clock is set 3 s ahead (forward: not a reset); the others run on. It is
+    # followed once it has lasted OFFSET_CONFIRM_WALL_S (and its reports), not before.
+    moved_at = None
+    for j in range(100, 1100):
         utc = UTC0 + j
         sent = 1000.0 + j / 200.0
         for sid in (1, 2, 3):
             mono.t = max(mono.t, sent + 0.0005)
             clock.observe(sid, utc + (3.0 if sid == 3 else 0.0), float(j), sent + 0.0005)
-    assert clock.offset_s(3) == pytest.approx(3.0, abs=0.05)
+        if moved_at is None and abs((clock.offset_s(3) or 0.0) - 3.0) <= 0.05:
+            moved_at = sent
+    assert moved_at is not None, clock.offset_s(3)
+    step_at = 1000.0 + 100 / 200.0
+    assert OFFSET_CONFIRM_WALL_S <= moved_at - step_at <= OFFSET_CONFIRM_WALL_S + 0.5
+
+
+def test_a_burst_of_delayed_reports_from_one_vehicle_does_not_move_its_offset() -> None:
+    """At 200x one vehicle's reports come 5 ms late (1 s of its UTC) for 0.5 s of wall time,
+    a stalled reader's: its offset stays, though the burst is far longer than OFFSET_CONFIRM
+    reports (one simulator gave the three vehicles one clock)."""
+    mono = FakeMono()
+    clock = MissionClock(mono)
+    for j in range(0, 600):
+        utc = UTC0 + j
+        sent = 1000.0 + j / 200.0
+        for sid in (1, 2, 3):
+            late = 0.005 if sid == 3 and 300 <= j < 400 else 0.0005
+            mono.t = max(mono.t, sent + late)
+            clock.observe(sid, utc, float(j), sent + late)
+        if j >= 100:
+            assert clock.offset_s(3) == pytest.approx(0.0, abs=0.05), j
 
 
 def test_a_backlog_read_after_a_stalled_loop_dates_no_clock() -> None:
@@ -401,3 +428,22 @@ def test_a_backlog_read_after_a_stalled_loop_dates_no_clock() -> None:
     assert clock.backlogged > 200
     for sid in offsets:
         assert clock.utc_of_boot(sid, 590.0) == pytest.approx(UTC0 + 590.0, abs=0.1)
+
+
+@pytest.mark.parametrize(("rate", "applied"), [(200.0, False), (1.0, True)])
+def test_an_offset_within_the_reception_jitter_at_the_rate_is_not_applied(
+    rate: float, applied: bool
+) -> None:
+    """Vehicle 3 reads 0.6 s ahead. At 200x that is 3 ms of reception: within what jitter
+    makes of one simulator's clock (OFFSET_JITTER_WALL_S x rate = 1 s), so its stamps are not
+    moved; live, 0.6 s is a wrong clock, mapped. A 3 s offset is applied at either rate."""
+    for off, expect in ((0.6, applied), (3.0, True)):
+        mono = FakeMono()
+        clock = MissionClock(mono)
+        offsets = {1: 0.0, 2: 0.0, 3: off}
+        _feed_offsets(clock, mono, rate=rate, n=100, offsets_s=offsets,
+                      delays_s=np.full(300, 0.0005))  # fmt: skip
+        want = off if expect else 0.0
+        assert clock.offset_s(3) == pytest.approx(want, abs=0.05), (rate, off)
+        utc = clock.utc_of_boot(3, 50.0)
+        assert utc == pytest.approx(UTC0 + 50.0 + off - want, abs=0.05)
