@@ -6,6 +6,7 @@
     python -m gcs status CONN [CONN ...] [--period S] [--count N] [--stream-rate HZ]
     python -m gcs command CONN arm|disarm|start|mode NAME|speed M_S
     python -m gcs rehearse SCENARIO [--speedup S] [--wind SPEED_M_S,FROM_DEG] [--loss P]
+        [--forecast-wind SPEED_M_S,FROM_DEG]
         [--seed N] [--connect CONN ...] [--json OUT] [--report DIR] [--arrival-s T]
         [--blackout VEHICLE,START_S,DURATION_S] [--threats-from FILE]
         [--speed-bias VEHICLE,FRACTION] [--utc-offset VEHICLE,SECONDS] [--db URL]
@@ -341,6 +342,12 @@ def parser() -> argparse.ArgumentParser:
     rh.add_argument("scenario", help="scenario file (.yaml or .json)")
     rh.add_argument("--speedup", type=float, default=200.0, help="stub time / wall time")
     rh.add_argument("--wind", help="SPEED_M_S,FROM_DEG mean wind for the stub")
+    rh.add_argument(
+        "--forecast-wind",
+        metavar="SPEED_M_S,FROM_DEG",
+        help="forecast wind the schedule is timed in (instead of the scenario's wind; the "
+        "vehicles' measured wind takes over in flight)",
+    )
     rh.add_argument("--loss", type=float, default=0.0, help="stub packet loss probability")
     rh.add_argument("--seed", type=int, default=0, help="planner and stub seed")
     rh.add_argument("--connect", nargs="+", default=[], help="fly these vehicles instead")
@@ -464,10 +471,17 @@ def _rehearsal_options(args: argparse.Namespace) -> object:
 
     from gcs.coordination.config import FlightConfig
     from gcs.rehearsal.rehearse import Blackout, Hill, RehearsalOptions
-    from planner.scenario import load_scenario
+    from planner.errors import ScenarioError
+    from planner.scenario import load_scenario, parse_wind
 
     path = Path(args.scenario)
     scenario = load_scenario(path)
+    if args.forecast_wind is not None:
+        try:
+            forecast = parse_wind(args.forecast_wind, "--forecast-wind")
+        except ScenarioError as err:
+            raise UsageError(str(err)) from None
+        scenario = scenario.with_forecast_wind(forecast)
     if not (args.speedup > 0 and args.speedup < 10_000):
         raise UsageError(f"--speedup must be in (0, 10000), got {args.speedup}")
     if not 0.0 <= args.loss < 1.0:

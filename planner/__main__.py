@@ -62,11 +62,13 @@ def _cmd_schedule(args: argparse.Namespace) -> int:
     from planner.plan import build_world, plan
     from planner.popup import replay_popups
     from planner.retime import build_schedule, check_feasible
-    from planner.scenario import load_scenario
+    from planner.scenario import load_scenario, parse_wind
     from planner.schedulefile import schedule_json
 
     t0 = time.perf_counter()
     scenario = load_scenario(args.scenario)
+    if args.wind is not None:
+        scenario = scenario.with_forecast_wind(parse_wind(args.wind, "--wind"))
     rng = np.random.default_rng(args.seed)
     world = build_world(scenario)
     planned = plan(scenario, args.method, rng=rng, world=world)
@@ -178,6 +180,11 @@ def main(argv: list[str] | None = None) -> int:
     sc.add_argument("--seed", type=int, default=0, help="seed of the ACO's random generator")
     sc.add_argument("--out", required=True, help="schedule.json to write")
     sc.add_argument("--plot", help="PNG of the speed profiles to write")
+    sc.add_argument(
+        "--wind",
+        metavar="SPEED_M_S,FROM_DEG",
+        help="forecast wind to time the schedule in (instead of the scenario's wind)",
+    )
     sc.add_argument(
         "--allow-conflicts",
         action="store_true",

@@ -24,6 +24,7 @@ from planner.retime import (
     retime_on_path,
     speed_spans,
     speed_stage,
+    with_climb,
 )
 from planner.scenario import Scenario
 from planner.schedule import (
@@ -96,6 +97,8 @@ def _replan(
         phase, s0, _ = anchored_state(vs, now_s, anchors.get(vid))
         if phase == "ground":
             continue
+        if phase == "climb":
+            s0 = vs.climb_s_m  # the climb-out flies on to its end whatever the route
         p = vs.path.pose_at(s0)
         alt = vs.alt_at(s0)
         starts[vid] = (p.east_m, p.north_m, alt)
@@ -114,13 +117,15 @@ def _replan(
         keep = vs.wp_s_m < s0 - 1e-6
         wp_s = np.concatenate([vs.wp_s_m[keep], np.asarray(route.profile.s_m) + s0])
         wp_alt = np.concatenate([vs.wp_alt_m[keep], np.asarray(route.profile.alt_m)])
-        out[vid] = replace(
+        new = replace(
             vs,
             path=path,
             wp_s_m=wp_s,
             wp_alt_m=wp_alt,
             replanned_at_s=(*vs.replanned_at_s, now_s),
         )
+        # Still on the ground: its takeoff climbs out along the new path's start.
+        out[vid] = new if vid in poses else with_climb(scenario.vehicle(vid), new, world.terrain)
     return out
 
 

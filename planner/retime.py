@@ -22,6 +22,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 from numpy.typing import NDArray
 
+from planner.climbout import climb_out
 from planner.deconflict import Separation, check_separation, separation
 from planner.dubins import Pose
 from planner.errors import ArrivalTimeError, InfeasibleError
@@ -202,16 +203,18 @@ def _timeline(
     site: _Site | None,
     radius_m: float,
     turns: int,
+    ground_per_eas: float,
     tas_per_eas: float,
 ) -> tuple[list[Leg], list[LoiterPlan], float]:
-    """Legs and loiters from timing pieces whose lengths are in metres / ``tas_per_eas``."""
+    """Legs and loiters from timing pieces whose lengths are in metres / ``ground_per_eas``
+    (legs) and / ``tas_per_eas`` (loiters)."""
     legs: list[Leg] = []
     loiters: list[LoiterPlan] = []
     s, t = s0_m, t0_s
     for p in pieces:
         dt = p.duration_s
         if p.kind == "leg":
-            length = p.length_m * tas_per_eas
+            length = p.length_m * ground_per_eas
             legs.append(Leg(s, s + length, p.speed_m_s, t, t + dt, tas_per_eas))
             s += length
         else:
@@ -285,17 +288,23 @@ def retime_on_path(
         cur = [leg for leg in vs.legs if leg.t_start_s < now_s < leg.t_end_s]
         if cur:
             kept_legs.append(replace(cur[0], s_end_m=s0, t_end_s=now_s))
+    elif phase in ("ground", "climb"):
+        # Timed from where the climb-out ends: the takeoff flies the path's start by itself.
+        s0 = vs.climb_s_m
+        start_t = max(vs.climb_end_s, now_s)
     adjustments: list[Adjustment] = []
     radius = flyable_loiter_radius_m(v.min_turn_radius_m)
     length = vs.path.length_m
-    # The timing arithmetic runs in metres / tas_per_eas, at equivalent airspeeds.
-    ratio = vs.tas_per_eas(s0)
+    remaining = length - s0
+    # The timing arithmetic runs in metres / ground_per_eas, at equivalent airspeeds; the
+    # loiters' in metres / tas_per_eas.
+    tas_ratio = vs.tas_per_eas(s0)
     on_ground = phase == "ground"
     takeoff = vs.takeoff_s
     if on_ground:
         window = (max(v.takeoff_window_s[0], now_s), max(v.takeoff_window_s[1], now_s))
-        takeoff = takeoff_time_s(length, target_s, limits, window, ratio)
-        start_t = takeoff
+        takeoff = takeoff_for(v, vs, target_s, window)
+        start_t = takeoff + vs.climb_end_s - vs.takeoff_s
         if abs(takeoff - vs.takeoff_s) > TIME_TOL_S or now_s == 0.0:
             adjustments.append(
                 Adjustment(
@@ -308,8 +317,17 @@ def retime_on_path(
                     f"window [{window[0]:g}, {window[1]:g}] s)",
                 )
             )
-    remaining = length - s0
     site = find_loiter_site(scenario, v, vs.path, s0, radius, threats)
+    # In a wind the ground covered per metre of airspeed depends on the airspeed: timed at
+    # the mean speed the time asks for, then again at the mean speed that timing flies.
+    budget_s = max(target_s - start_t, 1e-9)
+    ref_m_s = v.cruise_m_s
+    ratio = vs.ground_per_eas(s0, ref_m_s)
+    for _ in range(0 if vs.wind.calm else 4):
+        # The speed that time asks for, in this ratio, within the range: at a limit exactly
+        # the ratio the arrival window was worked out with.
+        ref_m_s = min(max(remaining / ratio / budget_s, v.speed_min_m_s), v.speed_max_m_s)
+        ratio = vs.ground_per_eas(s0, ref_m_s)
 
     def timed(at_site: _Site | None) -> Timing:
         return time_path(
@@ -323,17 +341,30 @@ def retime_on_path(
             current_m_s=speed_now if phase in ("leg", "loiter") and speed_now > 0.0 else None,
             loiter_margin_m_s=loiter_margin_m_s,
             tas_per_eas=ratio,
+            loiter_tas_per_eas=tas_ratio,
         )
 
-    try:
-        timing = timed(site)
-    except InfeasibleError:
-        free = None
-        if terrain is not None and (site is None or site.detour_m > 0.0):
-            free = free_loiter_site(v, vs, s0, radius, threats, terrain)
-        if free is None or target_s - start_t < remaining / ratio / v.speed_max_m_s:
-            raise
-        site, timing = free, timed(free)
+    def timed_here(at_site: _Site | None) -> tuple[_Site | None, Timing]:
+        try:
+            return at_site, timed(at_site)
+        except InfeasibleError:
+            free = None
+            if terrain is not None and (at_site is None or at_site.detour_m > 0.0):
+                free = free_loiter_site(v, vs, s0, radius, threats, terrain)
+            if free is None or target_s - start_t < remaining / ratio / v.speed_max_m_s:
+                raise
+            return free, timed(free)
+
+    chosen, timing = timed_here(site)
+    if not vs.wind.calm:
+        flown = [p for p in timing.pieces if p.kind == "leg"]
+        if flown:
+            mean_m_s = math.fsum(p.length_m for p in flown) / math.fsum(p.duration_s for p in flown)
+            again = vs.ground_per_eas(s0, mean_m_s)
+            if abs(again - ratio) > 1e-4 * ratio:
+                ratio = again
+                chosen, timing = timed_here(site)
+    site = chosen
     legs, loiters, arrival = _timeline(
         timing.pieces,
         s0_m=s0,
@@ -341,7 +372,8 @@ def retime_on_path(
         site=site,
         radius_m=radius,
         turns=timing.turns,
-        tas_per_eas=ratio,
+        ground_per_eas=ratio,
+        tas_per_eas=tas_ratio,
     )
     speeds = sorted({leg.speed_m_s for leg in legs})
     held = sum(lo.t_end_s - lo.t_start_s for lo in loiters)
@@ -359,7 +391,9 @@ def retime_on_path(
                     for leg in legs
                 )
                 + f" to arrive at {target_s:.1f} s (mean {mean:.2f} m/s on the path, "
-                f"true airspeed x{ratio:.3f})",
+                f"true airspeed x{tas_ratio:.3f}"
+                + ("" if vs.wind.calm else f", x{ratio:.3f} over the ground in the wind")
+                + ")",
             )
         )
     for lo in loiters:
@@ -422,8 +456,13 @@ def arrival_window(
     airspace and the terrain allow, as :func:`retime_on_path` would)."""
     phase, s0, _ = anchored_state(vs, now_s, anchor)
     start = now_s
+    climb_s = 0.0
     if phase == "loiter":
         start = next(lo.t_end_s for lo in vs.loiters if lo.t_start_s <= now_s < lo.t_end_s)
+    elif phase == "ground":
+        s0, climb_s = vs.climb_s_m, vs.climb_end_s - vs.takeoff_s
+    elif phase == "climb":
+        s0, start = vs.climb_s_m, max(vs.climb_end_s, now_s)
     radius = flyable_loiter_radius_m(v.min_turn_radius_m)
     site = find_loiter_site(scenario, v, vs.path, s0, radius, threats)
     can_loiter = site is not None or (
@@ -438,7 +477,8 @@ def arrival_window(
         limits=_limits(v, step_m_s),
         takeoff_window_s=v.takeoff_window_s if phase == "ground" else None,
         can_loiter=can_loiter,
-        tas_per_eas=vs.tas_per_eas(s0),
+        tas_per_eas=lambda eas_m_s: vs.ground_per_eas(s0, eas_m_s),
+        climb_s=climb_s,
     )
 
 
@@ -486,6 +526,51 @@ def speed_stage(name: str, time_s: float, vehicles: Sequence[VehicleSchedule]) -
 # --- the schedule ----------------------------------------------------------------------
 
 
+def takeoff_for(
+    v: Vehicle, vs: VehicleSchedule, target_s: float, window_s: tuple[float, float]
+) -> float:
+    """Takeoff time (s) of a vehicle on the ground to arrive at ``target_s`` at its cruise
+    speed (eq. 5), its climb-out and the wind counted, within ``window_s``."""
+    s0 = vs.climb_s_m
+    return takeoff_time_s(
+        vs.path.length_m - s0,
+        target_s,
+        SpeedLimits(v.speed_min_m_s, v.speed_max_m_s, v.cruise_m_s),
+        window_s,
+        vs.ground_per_eas(s0, v.cruise_m_s),
+        vs.climb_end_s - vs.takeoff_s,
+    )
+
+
+def earliest_from_ground_s(v: Vehicle, vs: VehicleSchedule, takeoff_s: float) -> float:
+    """When a vehicle that takes off at ``takeoff_s`` arrives at the earliest: its climb-out,
+    then the rest of its path at top speed in its wind, mission s."""
+    s0 = vs.climb_s_m
+    ratio = vs.ground_per_eas(s0, v.speed_max_m_s)
+    flying_s = (vs.path.length_m - s0) / (v.speed_max_m_s * ratio) if ratio > 0.0 else math.inf
+    return takeoff_s + vs.climb_end_s - vs.takeoff_s + flying_s
+
+
+def with_climb(v: Vehicle, vs: VehicleSchedule, terrain: Terrain) -> VehicleSchedule:
+    """``vs`` with the climb-out of its takeoff from the start of its path, in its wind (an
+    airborne vehicle has none)."""
+    if v.airborne:
+        return replace(vs, climb=None)
+    start = vs.path.start
+    home = float(terrain.elevation_m(np.array([start.east_m]), np.array([start.north_m]))[0])
+    climb = climb_out(
+        vs.path,
+        home_alt_m=home,
+        start_alt_m=vs.alt_at(0.0),
+        cruise_m_s=v.cruise_m_s,
+        rotate_m_s=v.speed_min_m_s,
+        climb_rate_m_s=v.takeoff_climb_m_s,
+        turn_radius_m=v.min_turn_radius_m,
+        wind=vs.wind,
+    )
+    return replace(vs, climb=climb)
+
+
 def build_schedule(
     scenario: Scenario,
     plan: Plan,
@@ -516,31 +601,33 @@ def build_schedule(
     """
     world = world or build_world(scenario)
     threats = active(world.threats, None)
+    wind = scenario.forecast_wind()
     base: list[VehicleSchedule] = []
     for v, route in zip(scenario.vehicles, plan.routes, strict=True):
-        base.append(
-            VehicleSchedule(
-                v.id,
-                route.path,
-                np.asarray(route.profile.s_m, dtype=np.float64),
-                np.asarray(route.profile.alt_m, dtype=np.float64),
-                0.0 if v.airborne else v.takeoff_window_s[0],
-                math.nan,
-                (),
-                (),
-                v.speed_min_m_s,
-                v.speed_max_m_s,
-                v.airborne,
-            )
+        vs = VehicleSchedule(
+            v.id,
+            route.path,
+            np.asarray(route.profile.s_m, dtype=np.float64),
+            np.asarray(route.profile.alt_m, dtype=np.float64),
+            0.0 if v.airborne else v.takeoff_window_s[0],
+            math.nan,
+            (),
+            (),
+            v.speed_min_m_s,
+            v.speed_max_m_s,
+            v.airborne,
+            wind=wind,
         )
+        base.append(with_climb(v, vs, world.terrain))
     requested = required_arrival_s(scenario)
     windows = [
         arrival_window(scenario, v, vs, 0.0, step_m_s, threats)
         for v, vs in zip(scenario.vehicles, base, strict=True)
     ]
     natural = {
-        v.id: (0.0 if v.airborne else v.takeoff_window_s[0])
-        + vs.path.length_m / (v.cruise_m_s * vs.tas_per_eas())
+        v.id: vs.climb_end_s
+        + (vs.path.length_m - vs.climb_s_m)
+        / (v.cruise_m_s * vs.ground_per_eas(vs.climb_s_m, v.cruise_m_s))
         for v, vs in zip(scenario.vehicles, base, strict=True)
     }
     targets, ref, reason = arrival_targets(scenario, windows, requested, natural)

@@ -32,6 +32,7 @@ from pydantic import (
 
 from planner.errors import ScenarioError
 from planner.geo import LocalFrame
+from planner.wind import CALM, Wind
 
 PositiveM = Annotated[float, Field(gt=0.0)]
 PositiveSpeed = Annotated[float, Field(gt=0.0, le=400.0)]
@@ -219,6 +220,11 @@ class Vehicle(_Model):
         default=None, description="shortest straight leg; 2 x min_turn_radius_m when absent"
     )
     takeoff_window_s: tuple[MissionTimeS, MissionTimeS] = (0.0, 0.0)
+    takeoff_climb_m_s: Annotated[float, Field(gt=0.0, le=50.0)] = Field(
+        default=9.0,
+        description="full-throttle climb rate of the takeoff climb-out, m/s (ArduPlane climbs "
+        "to the NAV_TAKEOFF altitude on the takeoff heading at TKOFF_THR_MAX)",
+    )
     airborne: bool = Field(default=False, description="already flying at start (no takeoff)")
 
     @model_validator(mode="after")
@@ -349,6 +355,36 @@ class CostWeights(_Model):
     terrain: Annotated[float, Field(ge=0.0)] = 1.0
 
 
+class ForecastWind(_Model):
+    """The wind forecast for the flight: what the schedule is timed in before the vehicles
+    measure it."""
+
+    speed_m_s: Annotated[float, Field(ge=0.0, le=60.0)]
+    from_deg: Annotated[float, Field(ge=0.0, lt=360.0)] = Field(
+        description="compass direction the wind blows from, degrees (270: a westerly)"
+    )
+
+
+def parse_wind(text: str, option: str) -> ForecastWind:
+    """``SPEED_M_S,FROM_DEG`` (a command line's wind) as a :class:`ForecastWind`.
+
+    Raises
+    ------
+    ScenarioError
+        Not two numbers, or a speed outside [0, 60] m/s; the message names ``option``.
+    """
+    parts = text.split(",")
+    try:
+        speed, from_deg = (float(x) for x in parts)
+    except ValueError:
+        raise ScenarioError(f"{option}: expected SPEED_M_S,FROM_DEG, got {text!r}") from None
+    if not (math.isfinite(speed) and math.isfinite(from_deg)):
+        raise ScenarioError(f"{option}: {text!r} is not a number")
+    if not 0.0 <= speed <= 60.0:
+        raise ScenarioError(f"{option}: speed {speed:g} m/s is outside [0, 60]")
+    return ForecastWind(speed_m_s=speed, from_deg=from_deg % 360.0)
+
+
 class Scenario(_Model):
     name: str = "scenario"
     area: Area
@@ -362,6 +398,15 @@ class Scenario(_Model):
     landing: Landing | None = Field(
         default=None, description="landing slots: the runway every goal (slot fix) leads to"
     )
+    wind: ForecastWind | None = Field(
+        default=None, description="forecast wind the schedule is timed in; still air if absent"
+    )
+
+    def forecast_wind(self) -> Wind:
+        """The forecast wind as the air mass's velocity (still air without one)."""
+        if self.wind is None:
+            return CALM
+        return Wind.from_speed_from(self.wind.speed_m_s, self.wind.from_deg)
 
     @field_validator("vehicles")
     @classmethod
@@ -502,6 +547,10 @@ class Scenario(_Model):
         else:
             return None
         return self.model_copy(update={"arrival": arrival})
+
+    def with_forecast_wind(self, wind: ForecastWind | None) -> Scenario:
+        """The scenario with ``wind`` as its forecast (None: still air)."""
+        return self.model_copy(update={"wind": wind})
 
     def vehicle(self, vehicle_id: str) -> Vehicle:
         for v in self.vehicles:

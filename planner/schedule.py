@@ -5,15 +5,20 @@ airborne vehicle really is (:class:`Anchor`).
 :mod:`planner.retime` builds and re-times a schedule (section 4); :mod:`planner.popup` re-plans
 it around pop-up threats (section 5).
 
-Model: a vehicle is at the start of its path at takeoff and flies its leg speeds from there
-(climb-out is not modelled). Speeds are equivalent airspeeds, as ArduPlane commands them (the
-scenario's limits, every DO_CHANGE_SPEED); they carry the aircraft at the true airspeed of the
-air density along the route (:mod:`planner.atmosphere`): a vehicle's remaining path is timed
-at ``speed x tas_per_eas``, the route's harmonic-mean ratio from where it is, and each leg and
-loiter keeps the ratio it was timed with. A loiter is ``n`` turns on a circle tangent to the
-path at a path point (so it adds exactly ``2 n pi r``), or, when no tangent circle fits in a
-buffer, on a circle in the buffer reached by a straight out-and-back detour counted in the
-length.
+Model: a vehicle on the ground takes off at its takeoff time and climbs out along the start of
+its path (:mod:`planner.climbout`: the climb's time and where it ends, as ArduPlane flies
+NAV_TAKEOFF); from there, or from its start when it is already flying, it flies its leg
+speeds. Speeds are equivalent airspeeds, as ArduPlane commands them (the scenario's limits,
+every DO_CHANGE_SPEED); they carry the aircraft at the true airspeed of the air density along
+the route (:mod:`planner.atmosphere`), and over the ground with the wind the schedule counts on
+(:attr:`VehicleSchedule.wind`: the forecast, then what the vehicles measure in flight). A
+vehicle's remaining path is timed at ``speed x ground_per_eas``, the route's ground metres per
+metre of equivalent airspeed from where it is (the harmonic mean of the true airspeed ratio,
+with the wind triangle on each piece of the track). Each leg keeps the span it was timed
+with; a loiter is timed at its true airspeed (the wind averages out over whole turns). A
+loiter is ``n`` turns on a circle tangent to the path at a path point (so it adds exactly
+``2 n pi r``), or, when no tangent circle fits in a buffer, on a circle in the buffer reached
+by a straight out-and-back detour counted in the length.
 """
 
 from __future__ import annotations
@@ -21,17 +26,21 @@ from __future__ import annotations
 import math
 from collections.abc import Mapping
 from dataclasses import dataclass, field
+from functools import cached_property
 from typing import Literal, NamedTuple
 
 import numpy as np
 from numpy.typing import NDArray
 
-from planner.atmosphere import mean_eas2tas
+from planner.atmosphere import ISA_SEA_LEVEL_DENSITY_KG_M3, density_kg_m3, mean_eas2tas
+from planner.climbout import ClimbOut
 from planner.flightpath import FlightPath
 from planner.scenario import Scenario
 from planner.timing import SPEED_STEP_M_S, TeamWindow
+from planner.wind import CALM, Wind, groundspeed_m_s
 
 FloatArray = NDArray[np.float64]
+_TRACK_STEP_M = 2_000.0
 Strategy = Literal["takeoff_delay", "speed", "loiter"]
 
 
@@ -46,11 +55,21 @@ class Leg:
     t_start_s: float
     t_end_s: float
     tas_per_eas: float = 1.0
-    """True airspeed per unit of ``speed_m_s`` it was timed with (still air: metres per s)."""
+    """True airspeed per unit of ``speed_m_s`` it was timed with."""
 
     @property
     def true_airspeed_m_s(self) -> float:
         return self.speed_m_s * self.tas_per_eas
+
+    @property
+    def groundspeed_m_s(self) -> float:
+        """Mean speed over the ground it was timed with (the wind included), m/s."""
+        span = self.t_end_s - self.t_start_s
+        return (self.s_end_m - self.s_start_m) / span if span > 0.0 else self.true_airspeed_m_s
+
+    def s_at(self, t_s: float) -> float:
+        """Along-path distance at a time of the leg (its mean ground speed), m."""
+        return self.s_start_m + (t_s - self.t_start_s) * self.groundspeed_m_s
 
 
 @dataclass(frozen=True, slots=True)
@@ -129,6 +148,10 @@ class VehicleSchedule:
     speed_max_m_s: float
     airborne_start: bool
     replanned_at_s: tuple[float, ...] = ()
+    climb: ClimbOut | None = None
+    """The takeoff's climb-out (None: flying at its start, or not worked out)."""
+    wind: Wind = CALM
+    """The wind its timing counts on: the forecast, then the one measured in flight."""
 
     def alt_at(self, s_m: float) -> float:
         return float(np.interp(s_m, self.wp_s_m, self.wp_alt_m))
@@ -137,20 +160,66 @@ class VehicleSchedule:
         """True per equivalent airspeed that times the path from ``s_from_m`` (ISA)."""
         return mean_eas2tas(self.wp_s_m, self.wp_alt_m, s_from_m=s_from_m)
 
+    @cached_property
+    def _track(self) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
+        """The path as constant-track pieces (straights whole, arcs every 5 deg): start s
+        (m), length (m), track (rad) and true per equivalent airspeed at its middle."""
+        pts = self.path.sample(_TRACK_STEP_M)
+        d = np.hypot(np.diff(pts[:, 0]), np.diff(pts[:, 1]))
+        keep = d > 1e-9
+        # Each piece's chord, scaled to the path's length (arcs are a little longer).
+        length = d[keep] * (self.path.length_m / max(float(d.sum()), 1e-9))
+        start = np.concatenate([[0.0], np.cumsum(length)[:-1]])
+        track = np.arctan2(np.diff(pts[:, 0]), np.diff(pts[:, 1]))[keep]
+        alt = np.interp(start + 0.5 * length, self.wp_s_m, self.wp_alt_m)
+        ratio = np.sqrt(ISA_SEA_LEVEL_DENSITY_KG_M3 / density_kg_m3(alt))
+        return start, length, track, ratio
+
+    def ground_per_eas(self, s_from_m: float, eas_m_s: float) -> float:
+        """Ground metres per metre of equivalent airspeed flying the path from ``s_from_m``
+        at ``eas_m_s`` in :attr:`wind`: the rest of the path takes ``remaining / (eas_m_s x
+        this)`` seconds. Without wind it is :meth:`tas_per_eas`; inf where the wind stops
+        the aircraft on some piece."""
+        if self.wind.calm:
+            return self.tas_per_eas(s_from_m)
+        start, length, track, ratio = self._track
+        end = start + length
+        part = np.clip(end - np.maximum(start, s_from_m), 0.0, None)
+        if not (part > 0.0).any():
+            return self.tas_per_eas(s_from_m)
+        gs = groundspeed_m_s(eas_m_s * ratio, track, self.wind)
+        if (gs[part > 0.0] <= 0.0).any():
+            return 0.0
+        seconds = float(np.sum(part[part > 0.0] / gs[part > 0.0]))
+        return float(part.sum()) / (eas_m_s * seconds)
+
+    @property
+    def climb_end_s(self) -> float:
+        """When its climb-out ends (its takeoff when none is modelled), mission s."""
+        return self.takeoff_s + (0.0 if self.climb is None else self.climb.duration_s)
+
+    @property
+    def climb_s_m(self) -> float:
+        """Along-path distance where its climb-out ends (0 when none is modelled), m."""
+        return 0.0 if self.climb is None else self.climb.s_m
+
     def state_at(self, t_s: float) -> tuple[str, float, float]:
-        """``(phase, s_m, speed_m_s)`` at time t: phase ground, leg, loiter or arrived."""
+        """``(phase, s_m, speed_m_s)`` at time t: phase ground, climb, leg, loiter or
+        arrived (in the climb: where it is along the path, at no commanded speed)."""
         if not self.airborne_start and (not self.legs or t_s < self.takeoff_s):
             return "ground", 0.0, 0.0
+        if not self.airborne_start and t_s < self.climb_end_s:
+            span = max(self.climb_end_s - self.takeoff_s, 1e-9)
+            return "climb", self.climb_s_m * (t_s - self.takeoff_s) / span, 0.0
         for lo in self.loiters:
             if lo.t_start_s <= t_s < lo.t_end_s:
                 return "loiter", lo.s_m, lo.speed_m_s
         for leg in self.legs:
             if leg.t_start_s <= t_s < leg.t_end_s:
-                s_m = leg.s_start_m + (t_s - leg.t_start_s) * leg.true_airspeed_m_s
-                return "leg", s_m, leg.speed_m_s
+                return "leg", leg.s_at(t_s), leg.speed_m_s
         if t_s >= self.arrival_s:
             return "arrived", self.path.length_m, 0.0
-        return "leg", 0.0, self.legs[0].speed_m_s if self.legs else 0.0
+        return "leg", self.climb_s_m, self.legs[0].speed_m_s if self.legs else 0.0
 
     def position_at(self, t_s: float) -> tuple[float, float] | None:
         """Horizontal position (m) at time t; None while on the ground or after arrival."""
@@ -160,12 +229,13 @@ class VehicleSchedule:
             if lo.t_start_s <= t_s < lo.t_end_s:
                 u_m = (t_s - lo.t_start_s) * lo.speed_m_s * lo.tas_per_eas
                 return _loiter_position(lo, u_m)
+        s: float | None = None
+        if not self.airborne_start and t_s < self.climb_end_s:
+            s = self.state_at(t_s)[1]
         for leg in self.legs:
-            if leg.t_start_s <= t_s <= leg.t_end_s:
-                s = leg.s_start_m + (t_s - leg.t_start_s) * leg.true_airspeed_m_s
-                p = self.path.pose_at(min(max(s, 0.0), self.path.length_m))
-                return p.east_m, p.north_m
-        p = self.path.end
+            if s is None and leg.t_start_s <= t_s <= leg.t_end_s:
+                s = leg.s_at(t_s)
+        p = self.path.end if s is None else self.path.pose_at(min(max(s, 0.0), self.path.length_m))
         return p.east_m, p.north_m
 
 

@@ -106,9 +106,12 @@ def path_mission(
     marks = {float(s) for s in vs.wp_s_m}
     marks.update(leg.s_end_m for leg in vs.legs)
     marks.update(lo.s_m for lo in vs.loiters)
+    # After its takeoff the aircraft turns straight at the first waypoint: none lies inside
+    # the climb-out, where it would turn back to it.
+    first_m = _MERGE_M if vs.climb is None else max(vs.climb.first_waypoint_m, _MERGE_M)
     s_sorted: list[float] = []
     for s in sorted(marks):
-        if s <= _MERGE_M:
+        if s <= first_m:
             continue
         if s_sorted and s - s_sorted[-1] < _MERGE_M:
             continue
@@ -134,7 +137,7 @@ def path_mission(
         s_sorted.append(path.length_m + runout_m)
     speeds: list[SpeedChange] = []
     last = math.nan
-    prev_s = 0.0
+    prev_s = vs.climb_s_m  # the first leg's speed is set as the takeoff ends
     for i, s in enumerate(s_sorted):
         mid = 0.5 * (prev_s + s)
         leg = next((x for x in vs.legs if x.s_start_m <= mid <= x.s_end_m), None)
@@ -162,11 +165,14 @@ def path_mission(
     items = compile_mission(
         home=home,
         waypoints=waypoints,
-        # The climb-out ends where the altitude profile starts (not lower: a start altitude
-        # below the terrain there would leave the first leg below it, and the profile, which
-        # starts no lower than the start altitude, is what the clearance was checked on).
-        # A vehicle taken over in the air has no takeoff.
-        takeoff_alt_m=None if v.airborne else max(vs.alt_at(0.0) - ground, 1.0),
+        # The climb-out's altitude (planner.climbout: the profile's start when the path's
+        # first straight stretch holds the climb, else as high as fits, the route climbing
+        # the rest). A vehicle taken over in the air has no takeoff.
+        takeoff_alt_m=None
+        if v.airborne
+        else vs.climb.takeoff_alt_m
+        if vs.climb is not None
+        else max(vs.alt_at(0.0) - ground, 1.0),
         speeds=speeds,
         loiters=loiters,
         airspeed_limits_m_s=(v.speed_min_m_s, v.speed_max_m_s),
@@ -322,12 +328,22 @@ def schedule_json(
             "speed_min_m_s": vs.speed_min_m_s,
             "speed_max_m_s": vs.speed_max_m_s,
             "replanned_at_s": [round(t, 3) for t in vs.replanned_at_s],
+            "climb": None
+            if vs.climb is None
+            else {
+                "takeoff_alt_m": round(vs.climb.takeoff_alt_m, 2),
+                "duration_s": round(vs.climb.duration_s, 3),
+                "s_m": round(vs.climb.s_m, 2),
+                "first_waypoint_m": round(vs.climb.first_waypoint_m, 2),
+                "climb_rate_m_s": vs.climb.climb_rate_m_s,
+            },
             "legs": [
                 {
                     "s_start_m": round(leg.s_start_m, 2),
                     "s_end_m": round(leg.s_end_m, 2),
                     "speed_m_s": leg.speed_m_s,
                     "true_airspeed_m_s": round(leg.true_airspeed_m_s, 3),
+                    "groundspeed_m_s": round(leg.groundspeed_m_s, 3),
                     "t_start_s": round(leg.t_start_s, 3),
                     "t_end_s": round(leg.t_end_s, 3),
                 }
@@ -345,6 +361,9 @@ def schedule_json(
             None if schedule.required_arrival_s is None else round(schedule.required_arrival_s, 3)
         ),
         "arrival_reason": schedule.arrival_reason,
+        "forecast_wind": None
+        if schedule.scenario.wind is None
+        else schedule.scenario.wind.model_dump(mode="json"),
         "speed_step_m_s": schedule.step_m_s,
         "separation_required_m": separation.required_m,
         "min_separation_m": _num(separation.min_separation_m, 1),

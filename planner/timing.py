@@ -18,7 +18,7 @@ always, takeoff freedom only on the ground, ``t_max = inf`` where a loiter is po
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from typing import Literal
 
@@ -83,7 +83,8 @@ def vehicle_window(
     limits: SpeedLimits,
     takeoff_window_s: tuple[float, float] | None = None,
     can_loiter: bool = False,
-    tas_per_eas: float = 1.0,
+    tas_per_eas: float | Callable[[float], float] = 1.0,
+    climb_s: float = 0.0,
 ) -> ArrivalWindow:
     """The arrival window of one vehicle from ``now_s``.
 
@@ -102,12 +103,19 @@ def vehicle_window(
     can_loiter
         A buffer area on the remaining path allows holding turns: no latest arrival.
     tas_per_eas
-        True airspeed per unit of the (equivalent) speed limits along the remaining path.
+        Ground metres per metre of the (equivalent) speed along the remaining path: the true
+        airspeed ratio, or a function of the speed when a wind counts too.
+    climb_s
+        On the ground: the takeoff's climb-out, s, after which ``remaining_m`` is left.
     """
     vmin, vmax = limits.speed_min_m_s, limits.speed_max_m_s
     km = remaining_m / 1000.0
-    remaining_m /= tas_per_eas
-    true = "" if tas_per_eas == 1.0 else f" (x{tas_per_eas:.3f} true)"
+    ratio = tas_per_eas if callable(tas_per_eas) else (lambda _v, r=tas_per_eas: r)
+    r_max, r_min = ratio(vmax), ratio(vmin)
+
+    def true(r: float) -> str:
+        return "" if r == 1.0 else f" (x{r:.3f} over the ground)"
+
     if takeoff_window_s is None:
         depart_lo = depart_hi = now_s
         where = f"airborne at {now_s:.1f} s"
@@ -115,17 +123,19 @@ def vehicle_window(
         depart_lo = max(takeoff_window_s[0], now_s)
         depart_hi = max(takeoff_window_s[1], depart_lo)
         where = f"takeoff in [{depart_lo:.1f}, {depart_hi:.1f}] s"
-    t_min = depart_lo + remaining_m / vmax
+        if climb_s > 0.0:
+            where += f", {climb_s:.0f} s climbing out"
+    t_min = depart_lo + climb_s + (remaining_m / r_max / vmax if r_max > 0.0 else math.inf)
     min_reason = (
         f"{vehicle_id} cannot arrive before {t_min:.1f} s ({where}, {km:.1f} km at "
-        f"{vmax:g} m/s{true})"
+        f"{vmax:g} m/s{true(r_max)})"
     )
     if can_loiter:
         return ArrivalWindow(vehicle_id, t_min, math.inf, min_reason, f"{vehicle_id} can loiter")
-    t_max = depart_hi + remaining_m / vmin
+    t_max = depart_hi + climb_s + (remaining_m / r_min / vmin if r_min > 0.0 else math.inf)
     max_reason = (
         f"{vehicle_id} cannot arrive after {t_max:.1f} s ({where}, {km:.1f} km at {vmin:g} m/s"
-        f"{true}, no buffer area to loiter in)"
+        f"{true(r_min)}, no buffer area to loiter in)"
     )
     return ArrivalWindow(vehicle_id, t_min, t_max, min_reason, max_reason)
 
@@ -362,6 +372,7 @@ def time_path(
     current_m_s: float | None = None,
     loiter_margin_m_s: float = 0.0,
     tas_per_eas: float = 1.0,
+    loiter_tas_per_eas: float | None = None,
 ) -> Timing:
     """Speeds, and loiter turns where needed, to fly ``remaining_m`` in exactly ``duration_s``.
 
@@ -383,13 +394,18 @@ def time_path(
         Turns leave the mean speed at least this far above the minimum when they can
         (see :func:`fewest_turns`).
     tas_per_eas
-        True airspeed per unit of speed along the path (the speeds are equivalent airspeeds):
-        the arithmetic runs on lengths divided by it, and so do the pieces returned.
+        Ground metres per metre of speed along the path (the speeds are equivalent airspeeds:
+        the true airspeed ratio, the wind counted in where there is one): the arithmetic runs
+        on path lengths divided by it, and so do the leg pieces returned.
+    loiter_tas_per_eas
+        The same for the loiter and its detour (flown at the true airspeed: the wind averages
+        out over whole turns); ``tas_per_eas`` when None.
 
     Returns
     -------
     Timing
-        Pieces in flying order, their lengths in metres / ``tas_per_eas``. Without a loiter:
+        Pieces in flying order, their lengths in metres / ``tas_per_eas`` (loiters: /
+        ``loiter_tas_per_eas``). Without a loiter:
         at most two legs at adjacent grid speeds. With one: the fewest turns (eq. 8); the
         loiter flown at the speed of the leg that leads to it (ArduPlane keeps the airspeed
         through NAV_LOITER_TURNS).
@@ -402,11 +418,14 @@ def time_path(
     """
     vmin, vmax = limits.speed_min_m_s, limits.speed_max_m_s
     km = remaining_m / 1000.0
-    if tas_per_eas != 1.0:
+    loiter_ratio = tas_per_eas if loiter_tas_per_eas is None else loiter_tas_per_eas
+    if tas_per_eas != 1.0 or loiter_ratio != 1.0:
         remaining_m /= tas_per_eas
         if site is not None:
             site = LoiterSite(
-                site.at_m / tas_per_eas, site.radius_m / tas_per_eas, site.detour_m / tas_per_eas
+                site.at_m / tas_per_eas,
+                site.radius_m / loiter_ratio,
+                site.detour_m / loiter_ratio,
             )
     fastest = remaining_m / vmax
     slowest = remaining_m / vmin
@@ -432,7 +451,7 @@ def time_path(
     except ValueError:
         raise InfeasibleError(
             f"vehicle {vehicle_id}: loiter turns of "
-            f"{2 * math.pi * site.radius_m * tas_per_eas:.0f} m cannot "
+            f"{2 * math.pi * site.radius_m * loiter_ratio:.0f} m cannot "
             f"be trimmed to {duration_s:.1f} s within [{vmin:g}, {vmax:g}] m/s",
             vehicle=vehicle_id,
         ) from None
@@ -510,8 +529,11 @@ def takeoff_time_s(
     limits: SpeedLimits,
     window_s: tuple[float, float],
     tas_per_eas: float = 1.0,
+    climb_s: float = 0.0,
 ) -> float:
     """Takeoff time (s) by eq. 5: arrive at ``target_s`` at cruise speed (an equivalent
-    airspeed flown at ``tas_per_eas`` times it), within the window."""
+    airspeed carrying the aircraft ``tas_per_eas`` times as fast over the ground), within the
+    window; ``length_m`` is what is left after a climb-out of ``climb_s`` seconds."""
     lo, hi = window_s
-    return min(max(target_s - length_m / (limits.cruise_m_s * tas_per_eas), lo), hi)
+    flying_s = length_m / (limits.cruise_m_s * tas_per_eas) if tas_per_eas > 0.0 else math.inf
+    return min(max(target_s - climb_s - flying_s, lo), hi)

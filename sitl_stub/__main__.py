@@ -107,6 +107,14 @@ def parse_args(argv: Sequence[str] | None = None) -> argparse.Namespace:
         "gets the i-th",
     )
     ap.add_argument(
+        "--takeoff-climb",
+        action="append",
+        metavar="M_S",
+        help="full-throttle climb rate of a takeoff's climb-out, m/s (default: the scenario's "
+        "takeoff_climb_m_s with --scenario, else 9); once: every vehicle; repeated once per "
+        "vehicle: vehicle i gets the i-th",
+    )
+    ap.add_argument(
         "--blackout",
         action="append",
         metavar="I,START_S,DURATION_S",
@@ -219,6 +227,7 @@ _VALUE_OPTIONS = (
     "--hill",
     "--wind",
     "--airspeed",
+    "--takeoff-climb",
     "--blackout",
     "--speed-bias",
     "--utc-offset",
@@ -286,21 +295,37 @@ def _check_count(texts: Sequence[str], name: str, n_vehicles: int) -> None:
 
 
 def params_from_args(args: argparse.Namespace) -> list[AirframeParams] | None:
-    """Per-vehicle airframe parameters from ``--airspeed``; without it, the scenario's
-    airspeed range and cruise speed with ``--scenario`` (None otherwise: the defaults)."""
+    """Per-vehicle airframe parameters from ``--airspeed`` and ``--takeoff-climb``; without
+    them, the scenario's airspeed range, cruise speed and takeoff climb with ``--scenario``
+    (None when neither is given: the defaults)."""
     texts: list[str] | None = args.airspeed
-    if not texts:
-        if args.scenario:
-            return airspeeds_from_scenario(args.scenario, args.vehicles)
+    climbs: list[str] | None = args.takeoff_climb
+    if not texts and not climbs and not args.scenario:
         return None
-    _check_count(texts, "--airspeed", args.vehicles)
-    params = []
-    for text in texts:
-        lo, cruise, hi = _floats(text, "--airspeed", 3, 3)
-        if not 0.0 < lo <= cruise <= hi:
-            raise UsageError(f"--airspeed needs 0 < MIN <= CRUISE <= MAX (m/s), got {text!r}")
-        params.append(_airspeeds(lo, cruise, hi))
-    return params * args.vehicles if len(params) == 1 else params
+    if texts:
+        _check_count(texts, "--airspeed", args.vehicles)
+        params = []
+        for text in texts:
+            lo, cruise, hi = _floats(text, "--airspeed", 3, 3)
+            if not 0.0 < lo <= cruise <= hi:
+                raise UsageError(f"--airspeed needs 0 < MIN <= CRUISE <= MAX (m/s), got {text!r}")
+            params.append(_airspeeds(lo, cruise, hi))
+        params = params * args.vehicles if len(params) == 1 else params
+    elif args.scenario:
+        params = airspeeds_from_scenario(args.scenario, args.vehicles)
+    else:
+        params = [AirframeParams()] * args.vehicles
+    if climbs:
+        _check_count(climbs, "--takeoff-climb", args.vehicles)
+        rates = []
+        for text in climbs:
+            (rate,) = _floats(text, "--takeoff-climb", 1, 1)
+            if not 0.0 < rate <= 50.0:
+                raise UsageError(f"--takeoff-climb needs 0 < M_S <= 50 (m/s), got {text!r}")
+            rates.append(rate)
+        rates = rates * args.vehicles if len(rates) == 1 else rates
+        params = [replace(p, takeoff_climb_rate_m_s=r) for p, r in zip(params, rates, strict=True)]
+    return params
 
 
 def _airspeeds(lo_m_s: float, cruise_m_s: float, hi_m_s: float) -> AirframeParams:
@@ -323,7 +348,13 @@ def _scenario(path: str) -> Scenario:
 def airspeeds_from_scenario(path: str, n: int) -> list[AirframeParams]:
     """Vehicle i flies scenario vehicle i's airspeed range and cruise speed."""
     vehicles = _scenario(path).vehicles[:n]
-    return [_airspeeds(v.speed_min_m_s, v.cruise_m_s, v.speed_max_m_s) for v in vehicles]
+    return [
+        replace(
+            _airspeeds(v.speed_min_m_s, v.cruise_m_s, v.speed_max_m_s),
+            takeoff_climb_rate_m_s=v.takeoff_climb_m_s,
+        )
+        for v in vehicles
+    ]
 
 
 def blackouts_from_args(args: argparse.Namespace) -> list[BlackoutSpec]:

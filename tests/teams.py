@@ -68,7 +68,8 @@ def generated_scenario(seed: int, kind: str) -> tuple[dict[str, Any], tuple[floa
     3-8 vehicles on a ring 14-20 km around a target over synthetic hills (or flat ground),
     each starting 0-1,500 m above its launch point, with speed limits, turn radii and takeoff
     windows of their own; goals 1.5-2.5 km short of the target on each vehicle's bearing, so
-    the routes do not cross. The wind is 0-10 m/s from any direction.
+    the routes do not cross. The wind is 0-10 m/s from any direction; the scenario's forecast
+    is it rounded (1 m/s, 10 deg).
     """
     rng = np.random.default_rng(seed)
     n = int(rng.integers(3, 9))
@@ -135,6 +136,9 @@ def generated_scenario(seed: int, kind: str) -> tuple[dict[str, Any], tuple[floa
     else:
         raise ValueError(f"unknown arrival kind {kind!r}")
     wind = (round(float(rng.uniform(0.0, 10.0)), 1), round(float(rng.uniform(0.0, 360.0))))
+    # The forecast the schedule is timed in: the simulator's wind to the nearest metre per
+    # second and ten degrees (the vehicles measure the rest in flight).
+    doc["wind"] = {"speed_m_s": float(round(wind[0])), "from_deg": float(round(wind[1], -1) % 360)}
     return doc, wind
 
 

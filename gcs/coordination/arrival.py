@@ -28,9 +28,9 @@ from gcs.coordination.routetrack import (
     ArrivalInputError,
     Remaining,
     RouteTrack,
-    Wind,
     require_finite,
 )
+from planner.wind import Wind
 
 __all__ = [
     "ArrivalController",

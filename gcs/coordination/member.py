@@ -21,6 +21,7 @@ from gcs.coordination.tracks import TruthSample
 from planner.mission import MAV_CMD_NAV_LOITER_TURNS
 from planner.schedule import VehicleSchedule
 from planner.schedulefile import PathMission
+from planner.wind import Wind
 
 __all__ = [
     "Lost",
@@ -128,6 +129,9 @@ class Member:
     goal_en_m: tuple[float, float] = (0.0, 0.0)
     last_fix_s: float | None = None
     last_decision: Decision | None = None
+    wind: Wind | None = None
+    """The wind its last decision was timed in (its estimate, corrected): re-plans and
+    re-times in flight count on it instead of the forecast."""
     track_log: list[list[float]] = field(default_factory=list)
     """``[utc_s, east_m, north_m, alt_m, airspeed_m_s, groundspeed_m_s]`` every 2 s."""
     commanded: list[list[Any]] = field(default_factory=list)

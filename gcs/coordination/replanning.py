@@ -19,7 +19,6 @@ from gcs.coordination.arrival import Decision
 from gcs.coordination.config import FlightConfig
 from gcs.coordination.events import EventKind
 from gcs.coordination.member import Member, path_en, route_track
-from gcs.coordination.routetrack import Wind
 from planner.errors import InfeasibleError
 from planner.mission import MAV_CMD_NAV_WAYPOINT
 from planner.plan import World
@@ -28,6 +27,7 @@ from planner.scenario import Appearance, Scenario, Threat
 from planner.schedule import Adjustment, Anchor, Schedule, VehicleSchedule
 from planner.schedulefile import PathMission, path_mission, splice_mission
 from planner.threats import ThreatZone, active, build_threats
+from planner.wind import CALM, Wind
 
 __all__ = ["MissionChanges"]
 
@@ -128,7 +128,7 @@ class MissionChanges:
         m.busy_mission = True
         job = act.LoiterJob(
             m.vehicle_id,
-            self.current_schedule(),
+            self.current_schedule(still_air=True),
             keep,
             t_k,
             s_k,
@@ -272,13 +272,17 @@ class MissionChanges:
             )
         return act.Report(EventKind.PLAN, a.reason, a.vehicle, None, a.value, t_s=t)
 
-    def current_schedule(self) -> Schedule:
-        """The schedule with today's targets as its arrival times."""
+    def current_schedule(self, *, still_air: bool = False) -> Schedule:
+        """The schedule with today's targets as its arrival times and each vehicle's wind the
+        one it measures (the forecast until it has; none with ``still_air``, for a target
+        already worked out in the wind)."""
         vehicles = tuple(
             replace(
-                self.members[vs.vehicle_id].schedule, arrival_s=self.members[vs.vehicle_id].target_s
+                m.schedule,
+                arrival_s=m.target_s,
+                wind=CALM if still_air else m.schedule.wind if m.wind is None else m.wind,
             )
-            for vs in self.schedule.vehicles
+            for m in (self.members[vs.vehicle_id] for vs in self.schedule.vehicles)
         )
         return replace(self.schedule, vehicles=vehicles, required_arrival_s=self.team_ref_s)
 

@@ -4,7 +4,7 @@ takes at an airspeed in a wind.
 :class:`RouteTrack` samples the route once (every ``step_m`` metres for :meth:`RouteTrack.locate`,
 and as constant-track pieces, straights whole and arcs every 5 degrees, for the timing) so that
 the per-fix work is a few vectorised numpy passes; its loiters (:class:`LoiterSpec`) are flown
-circles at points along it. :class:`Wind` and :func:`groundspeed_m_s` are the wind triangle.
+circles at points along it. The wind triangle is :mod:`planner.wind`'s.
 
 Conventions: ``east_m``/``north_m`` in metres, compass angles in radians (0 = north, clockwise
 positive, so a unit direction is ``(sin h, cos h)`` in (east, north)), speeds in m/s, times in
@@ -16,20 +16,19 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import Any, overload
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
 
 from gcs.errors import GcsError
 from planner.flightpath import FlightPath
+from planner.wind import Wind
 
 __all__ = [
     "ArrivalInputError",
     "LoiterSpec",
     "RouteTrack",
-    "Wind",
-    "groundspeed_m_s",
 ]
 
 FloatArray = NDArray[np.float64]
@@ -54,90 +53,6 @@ def require_finite(name: str, value: float) -> float:
     if not math.isfinite(value):
         raise ArrivalInputError(f"{name} must be finite, got {value!r}")
     return float(value)
-
-
-# --- wind and groundspeed -------------------------------------------------------------------
-
-
-@dataclass(frozen=True, slots=True)
-class Wind:
-    """Velocity of the air mass over the ground, m/s: the direction it blows TO."""
-
-    to_east_m_s: float = 0.0
-    to_north_m_s: float = 0.0
-
-    def __post_init__(self) -> None:
-        require_finite("Wind.to_east_m_s", self.to_east_m_s)
-        require_finite("Wind.to_north_m_s", self.to_north_m_s)
-
-    @classmethod
-    def from_speed_from(cls, speed_m_s: float, from_deg: float) -> Wind:
-        """Build a wind from the meteorological convention.
-
-        Parameters
-        ----------
-        speed_m_s : float
-            Wind speed, m/s (>= 0).
-        from_deg : float
-            Compass direction the wind blows FROM, degrees (270 = a westerly, blowing east).
-
-        Returns
-        -------
-        Wind
-            The air-mass velocity (blowing TO ``from_deg + 180``).
-        """
-        if not (math.isfinite(speed_m_s) and speed_m_s >= 0.0):
-            raise ArrivalInputError(f"speed_m_s must be finite and >= 0, got {speed_m_s!r}")
-        from_rad = math.radians(require_finite("from_deg", from_deg))
-        return cls(-speed_m_s * math.sin(from_rad), -speed_m_s * math.cos(from_rad))
-
-    @property
-    def speed_m_s(self) -> float:
-        """Wind speed, m/s."""
-        return math.hypot(self.to_east_m_s, self.to_north_m_s)
-
-
-@overload
-def groundspeed_m_s(airspeed_m_s: float, track_rad: float, wind: Wind) -> float: ...
-
-
-@overload
-def groundspeed_m_s(airspeed_m_s: float, track_rad: AnyFloatArray, wind: Wind) -> FloatArray: ...
-
-
-def groundspeed_m_s(
-    airspeed_m_s: float, track_rad: float | AnyFloatArray, wind: Wind
-) -> float | FloatArray:
-    """Speed made good along a ground track when flying an airspeed crabbed into the wind.
-
-    ``g = w_along + sqrt(a**2 - w_cross**2)``, where ``w_along``/``w_cross`` are the wind's
-    components along and across the track.
-
-    Parameters
-    ----------
-    airspeed_m_s : float
-        True airspeed, m/s (>= 0).
-    track_rad : float or NDArray
-        Compass ground track(s), rad.
-    wind : Wind
-        Air-mass velocity, m/s.
-
-    Returns
-    -------
-    float or NDArray
-        Groundspeed along each track, m/s; 0.0 where the track cannot be made good
-        (``a**2 < w_cross**2`` or ``g <= 0``). A float for a float track.
-    """
-    tracks = np.asarray(track_rad, dtype=np.float64)
-    sin_t, cos_t = np.sin(tracks), np.cos(tracks)
-    along = wind.to_east_m_s * sin_t + wind.to_north_m_s * cos_t
-    cross = wind.to_east_m_s * cos_t - wind.to_north_m_s * sin_t
-    disc = airspeed_m_s * airspeed_m_s - cross * cross
-    speed = along + np.sqrt(np.maximum(disc, 0.0))
-    result: FloatArray = np.where((disc >= 0.0) & (speed > 0.0), speed, 0.0)
-    if isinstance(track_rad, np.ndarray):
-        return result
-    return float(result)
 
 
 # --- the route ------------------------------------------------------------------------------

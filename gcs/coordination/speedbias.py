@@ -28,7 +28,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from gcs.coordination.routetrack import Wind
+from planner.wind import Wind
 
 __all__ = ["BiasConfig", "SpeedBiasEstimator"]
 

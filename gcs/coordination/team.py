@@ -36,7 +36,6 @@ from gcs.coordination.arrival import ArrivalController, Decision, SpeedLimits
 from gcs.coordination.config import FlightConfig
 from gcs.coordination.events import EventKind
 from gcs.coordination.member import Lost, LostCause, Member, path_en, route_track
-from gcs.coordination.routetrack import Wind
 from gcs.coordination.separation import Position, SeparationWatch
 from gcs.coordination.teamtime import TeamTime, TeamTimeRefused
 from gcs.coordination.tracks import TruthSample, closest_approach
@@ -47,6 +46,7 @@ from planner.plan import World
 from planner.scenario import Scenario, Threat
 from planner.schedule import Schedule
 from planner.threats import ThreatZone
+from planner.wind import Wind
 
 __all__ = ["PROGRESS_M", "TeamController", "TeamTimeRefused", "is_crash_text"]
 
@@ -536,7 +536,8 @@ class TeamController(ZoneGuard, TeamTime):
 
     def _wind(self, m: Member, fix: act.Fix) -> Wind:
         """The wind to time with: the vehicle's estimate plus the error learnt in flight."""
-        return m.bias.corrected(reported_wind(fix))
+        m.wind = m.bias.corrected(reported_wind(fix))
+        return m.wind
 
     def _learn_bias(self, m: Member, t: float, fix: act.Fix) -> None:
         """Feed one fix to the airspeed-scale and wind-error estimate: predicted from the

@@ -18,9 +18,8 @@ from gcs.coordination.config import FlightConfig
 from gcs.coordination.events import EventKind
 from gcs.coordination.member import Member
 from gcs.errors import GcsError
+from planner.retime import earliest_from_ground_s, takeoff_for
 from planner.scenario import Scenario, Windows
-from planner.timing import SpeedLimits as PlannerLimits
-from planner.timing import takeoff_time_s
 
 __all__ = ["TeamTime", "TeamTimeRefused"]
 
@@ -176,20 +175,10 @@ class TeamTime:
             if other.phase == "ground":
                 self._retime_takeoff(other, t, out)
 
-    def _planner_limits(self, m: Member) -> PlannerLimits:
-        v = self.scenario.vehicle(m.vehicle_id)
-        return PlannerLimits(v.speed_min_m_s, v.speed_max_m_s, v.cruise_m_s, m.limits.step_m_s)
-
     def _retime_takeoff(self, m: Member, t: float, out: list[act.Action]) -> None:
         v = self.scenario.vehicle(m.vehicle_id)
         window = (max(v.takeoff_window_s[0], t), max(v.takeoff_window_s[1], t))
-        new = takeoff_time_s(
-            m.schedule.path.length_m,
-            m.target_s,
-            self._planner_limits(m),
-            window,
-            m.schedule.tas_per_eas(),
-        )
+        new = takeoff_for(v, m.schedule, m.target_s, window)
         if abs(new - m.takeoff_s) > 0.5:
             m.takeoff_s = new
             out.append(
@@ -213,9 +202,10 @@ class TeamTime:
             if m.phase == "ground":
                 v = self.scenario.vehicle(m.vehicle_id)
                 t0 = max(now_s, v.takeoff_window_s[0])
-                tas = v.speed_max_m_s * m.schedule.tas_per_eas()
-                earliest = t0 + m.schedule.path.length_m / tas
-                why = f"on the ground: taking off at {t0:.0f} s and flying at top speed"
+                earliest = earliest_from_ground_s(v, m.schedule, t0)
+                why = (
+                    f"on the ground: taking off at {t0:.0f} s, climbing out and flying at top speed"
+                )
             elif m.last_decision is not None:
                 # The ETA at top speed from its last decision, moved on to now.
                 earliest = m.last_decision.eta_min_s

@@ -172,6 +172,7 @@ def stub_args(
         cmd += ["--home", home]
     for v in scenario.vehicles:
         cmd += ["--airspeed", f"{v.speed_min_m_s:g},{v.cruise_m_s:g},{v.speed_max_m_s:g}"]
+        cmd += ["--takeoff-climb", f"{v.takeoff_climb_m_s:g}"]
     if opts.wind is not None:
         cmd += ["--wind", f"{opts.wind[0]:g},{opts.wind[1]:g}"]
     ids = [v.id for v in scenario.vehicles]

@@ -14,11 +14,10 @@ from gcs.coordination.routetrack import (
     ArrivalInputError,
     LoiterSpec,
     RouteTrack,
-    Wind,
-    groundspeed_m_s,
 )
 from planner.dubins import Pose
 from planner.flightpath import FlightPath, Segment, smooth_polyline, straight
+from planner.wind import Wind, WindError, groundspeed_m_s
 
 PI = math.pi
 NORTH, EAST, SOUTH, WEST = 0.0, PI / 2, PI, 3 * PI / 2
@@ -57,7 +56,7 @@ def test_wind_from_west_blows_east() -> None:
     north_wind = Wind.from_speed_from(3.0, 0.0)  # from the north: blows south
     assert (north_wind.to_east_m_s, north_wind.to_north_m_s) == pytest.approx((0.0, -3.0))
     assert north_wind.speed_m_s == pytest.approx(3.0)
-    with pytest.raises(ArrivalInputError, match="speed_m_s"):
+    with pytest.raises(WindError, match="speed_m_s"):
         Wind.from_speed_from(-1.0, 0.0)
 
 

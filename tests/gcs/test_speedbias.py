@@ -7,8 +7,8 @@ import math
 import numpy as np
 import pytest
 
-from gcs.coordination.routetrack import Wind, groundspeed_m_s
 from gcs.coordination.speedbias import SpeedBiasEstimator
+from planner.wind import Wind, groundspeed_m_s
 
 
 def _fly(

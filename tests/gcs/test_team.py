@@ -703,15 +703,18 @@ def test_a_crash_text_loses_the_vehicle_and_retime_moves_the_team_to_the_earlies
     (lost,) = reports(out, EventKind.VEHICLE_LOST)
     assert lost.payload["cause"] == "crash" and "'Crash detected'" in lost.reason
     assert m.state is VehicleState.CRASHED
-    # The earliest common arrival of the two still on the ground, taking off now at top speed
-    # (the test's own arithmetic), plus the late margin.
+    # The earliest common arrival of the two still on the ground, taking off now, climbing
+    # out and flying the rest at top speed (the test's own arithmetic), plus the late margin.
     v = {x.vehicle_id: team.scenario.vehicle(x.vehicle_id) for x in ground}
-    earliest = max(
-        max(t, v[x.vehicle_id].takeoff_window_s[0])
-        + x.schedule.path.length_m / (v[x.vehicle_id].speed_max_m_s * x.schedule.tas_per_eas())
-        - x.offset_s
-        for x in ground
-    )
+
+    def earliest_of(x: Member) -> float:
+        climb = x.schedule.climb
+        assert climb is not None
+        rest_m = x.schedule.path.length_m - climb.s_m
+        tas = v[x.vehicle_id].speed_max_m_s * x.schedule.tas_per_eas(climb.s_m)
+        return max(t, v[x.vehicle_id].takeoff_window_s[0]) + climb.duration_s + rest_m / tas
+
+    earliest = max(earliest_of(x) - x.offset_s for x in ground)
     expected = earliest + FlightConfig().late_margin_s
     assert expected < ref - 10.0
     (moved,) = reports(out, EventKind.ARRIVAL)
