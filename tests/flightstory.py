@@ -1,5 +1,6 @@
 """A flight's story for a failed assertion: its events without the routine ones (speed
-commands, link gaps, clock offsets), one line each, so a CI log shows why a flight missed."""
+commands, link gaps and the states they toggle, clock offsets), one line each, so a CI log
+shows why a flight missed."""
 
 from __future__ import annotations
 
@@ -9,20 +10,30 @@ from typing import Any
 ROUTINE = frozenset({"speed", "link", "clock"})
 
 
-def story(events: Iterable[Mapping[str, Any]], *, limit: int = 80) -> str:
+def _routine(e: Mapping[str, Any]) -> bool:
+    """Routine kinds, and a vehicle's state going to or from ``link_silent`` (said by the
+    link events anyway, and dozens of them on a loaded machine)."""
+    return e["kind"] in ROUTINE or (e["kind"] == "state" and "link_silent" in e["reason"])
+
+
+def story(events: Iterable[Mapping[str, Any]], *, limit: int = 120) -> str:
     lines = [
         f"{e.get('t_s') or 0.0:9.1f} s {e.get('vehicle') or 'team':5} {e['kind']:9} {e['reason']}"
         for e in events
-        if e["kind"] not in ROUTINE
+        if not _routine(e)
     ]
     if len(lines) > limit:
         lines = [*lines[: limit // 2], "...", *lines[-limit // 2 :]]
     return "\n".join(lines)
 
 
-def story_of_lines(text: str, *, limit: int = 80) -> str:
+def story_of_lines(text: str, *, limit: int = 120) -> str:
     """The same for ``rehearse``'s printed log (``  t s   VEHICLE kind  reason`` lines)."""
-    kept = [ln for ln in text.splitlines() if not any(f" {k} " in ln[:32] for k in ROUTINE)]
+    kept = [
+        ln
+        for ln in text.splitlines()
+        if not any(f" {k} " in ln[:32] for k in ROUTINE) and "link_silent" not in ln
+    ]
     if len(kept) > limit:
         kept = [*kept[: limit // 2], "...", *kept[-limit // 2 :]]
     return "\n".join(kept)

@@ -59,6 +59,41 @@ def arc_team(n: int, radius_m: float = 20_000.0) -> dict[str, Any]:
     return base
 
 
+def ring_team(n: int) -> dict[str, Any]:
+    """``n`` vehicles evenly on a ring 18 km around a target over flat ground, each flying in
+    to a goal 5 km short of the target on its own bearing (so that no two routes cross and
+    the goals are 2 pi 5 / n km apart), 500 m above the ground; no threats, a simultaneous
+    arrival, takeoff windows wide enough for the team to wait on the ground. About 13 km of
+    route each: a crowd whose flight lasts minutes, not an hour."""
+    tx, ty = 30_000.0, 30_000.0
+    vehicles = []
+    for k in range(n):
+        bearing = 2.0 * math.pi * k / n
+        ue, un = math.sin(bearing), math.cos(bearing)
+        v = _vehicle(
+            k,
+            (tx + 18_000.0 * ue, ty + 18_000.0 * un),
+            (tx + 5_000.0 * ue, ty + 5_000.0 * un),
+            800.0,
+        )
+        v["id"] = f"R{k:02d}"
+        v["takeoff_window_s"] = [0, 900]
+        vehicles.append(v)
+    return {
+        "name": f"ring of {n}",
+        "area": {
+            "origin": {"lat_deg": 46.0, "lon_deg": 8.0},
+            "min_east_m": 0, "min_north_m": 0, "width_m": 60_000, "height_m": 60_000,
+        },
+        "terrain": {"kind": "flat", "elevation_m": 300},
+        "separation_m": 300,
+        "weights": {"threat": 4.0, "terrain": 0.0},
+        "arrival": {"kind": "simultaneous"},
+        "threats": [],
+        "vehicles": vehicles,
+    }  # fmt: skip
+
+
 ARRIVAL_KINDS = ("simultaneous", "spaced", "waves", "windows")
 
 

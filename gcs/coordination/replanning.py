@@ -151,6 +151,21 @@ class MissionChanges:
             )
             return
         vs, adjustments = r.result
+        if job.schedule.vehicle(m.vehicle_id).path is not m.schedule.path:
+            # A re-plan (a pop-up's, a hold's) was adopted while these turns were worked out
+            # on the route before it: spliced in, they would bring that route back, into the
+            # zone it went around. Decided again on the route flown now.
+            m.busy_mission = False
+            m.next_decision_s = -math.inf
+            out.append(
+                act.Report(
+                    EventKind.LOITER,
+                    "loiter turns worked out on a route since replaced: dropped, deciding again",
+                    m.vehicle_id,
+                    t_s=t,
+                )
+            )
+            return
         if m.done or not vs.loiters or all(lo.s_m < job.s_m for lo in vs.loiters):
             m.busy_mission = False
             return
@@ -382,13 +397,12 @@ class MissionChanges:
             s_hold = self.hold_anchor_s_m(m, zone.id)
             if s_hold is not None:
                 # Its new route starts where it holds; the mission is kept up to the last
-                # waypoint short of that point (it flies on from there once resumed).
-                keep_h = self._keep_behind(m, s_hold)
-                if keep_h is not None:
-                    anchors[m.vehicle_id] = Anchor(s_hold, self._speed_now(m), at_s)
-                    keeps[m.vehicle_id] = keep_h
-                    holding.add(m.vehicle_id)
-                    continue
+                # waypoint short of that point (it flies on from there once resumed), or,
+                # with none short of it, replaced whole: holding, it flies no mission item.
+                anchors[m.vehicle_id] = Anchor(s_hold, self._speed_now(m), at_s)
+                keeps[m.vehicle_id] = self._keep_behind(m, s_hold)
+                holding.add(m.vehicle_id)
+                continue
             gs = max(m.groundspeed_m_s, 10.0)
             keep = self._keep_seq(m, gs * lead) if m.phase == "route" else None
             s_k = m.track.length_m if keep is None else m.mission.item_s_m[keep]

@@ -1,8 +1,9 @@
 """Thirty aircraft and a forbidden zone that pops up across some of their routes, with every
-re-plan made 10 s of wall time late (1000 s of mission at 100x): no aircraft is ever inside
-the zone (the simulator's truth log, checked here against the zone's own geometry), those
-that reach it first hold short of it with an alarm, and the flight completes. The team is
-generated (:func:`tests.teams.arc_team`), not a hand-tuned file."""
+re-plan made 10 s of wall time late (1000 s of mission at 100x, longer than the aircraft take
+to reach it): no aircraft is ever inside the zone (the simulator's truth log, checked here
+against the zone's own geometry), those that reach it first hold short of it with an alarm,
+and the flight completes. The team is generated (:func:`tests.teams.ring_team`: thirty routes
+converging on a target), not a hand-tuned file."""
 
 from __future__ import annotations
 
@@ -17,17 +18,18 @@ from gcs.coordination.config import FlightConfig
 from gcs.rehearsal.rehearse import RehearsalOptions, rehearse
 from planner.scenario import load_scenario
 from tests.flightstory import story
-from tests.teams import arc_team
+from tests.teams import ring_team
 
-pytestmark = pytest.mark.slow  # about 90 s of wall time
+pytestmark = pytest.mark.slow  # about 40 s of wall time
 
-POP = {"east_m": 150_000.0, "north_m": 150_000.0, "radius_m": 10_000.0, "at_s": 1_500.0}
+# Across the northernmost route and its two neighbours, 11 km out, when they are 15 km out.
+POP = {"east_m": 30_000.0, "north_m": 41_000.0, "radius_m": 2_500.0, "at_s": 150.0}
 
 
 async def test_thirty_aircraft_keep_out_of_a_pop_up_zone_whatever_the_re_plan_latency(
     tmp_path: Path,
 ) -> None:
-    data = arc_team(30)
+    data = ring_team(30)
     data["threats"].append(
         {
             "kind": "radar", "id": "POP30", "forbidden": True,

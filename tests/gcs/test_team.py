@@ -10,6 +10,7 @@ import math
 import pickle
 import re
 from collections.abc import Sequence
+from dataclasses import replace
 from typing import Any
 
 import numpy as np
@@ -23,6 +24,7 @@ from gcs.coordination.member import Member, VehicleState
 from gcs.coordination.separation import Position, SeparationWatch
 from gcs.coordination.team import TeamController, TeamTimeRefused
 from gcs.errors import GcsError
+from planner.flightpath import FlightPath
 from planner.mission import MAV_CMD_NAV_LOITER_TURNS, MAV_CMD_NAV_WAYPOINT
 from planner.plan import World, build_world, plan
 from planner.popup import popup_zones
@@ -283,6 +285,26 @@ def test_a_loiter_upload_that_fails_keeps_the_old_mission_and_says_so(team: Team
     assert "upload failed (no MISSION_ACK); flying on" in reports(out, EventKind.LOITER)[0].reason
     out = team.handle(act.Installed(up, skipped=True), t0 + 3)
     assert "passed the splice waypoint; not installed" in reports(out, EventKind.UPLOAD)[0].reason
+
+
+def test_loiter_turns_worked_out_on_a_route_since_replaced_are_dropped(
+    team: TeamController,
+) -> None:
+    """A pop-up's re-plan is adopted while the loiter turns are computed on the route before
+    it: spliced in, the turns would bring that route back (into the zone it avoids). They
+    are dropped, said, and the vehicle is decided again on the route it flies."""
+    vid = "UAV3"
+    m = team.members[vid]
+    t0, _, job = _early(team, vid)
+    # The re-plan: a new path from the same point on (as a pop-up's would be), on board.
+    rerouted = replace(m.schedule, path=FlightPath(m.schedule.path.segments))
+    m.schedule = rerouted
+    out = team.handle(act.Computed(job, job.run()), t0 + 5)
+    assert of(out, act.Upload) == []
+    (said,) = reports(out, EventKind.LOITER)
+    assert "since replaced: dropped" in said.reason
+    assert m.schedule is rerouted and not m.busy_mission
+    assert m.next_decision_s == -math.inf
 
 
 # -- lateness ------------------------------------------------------------------------------------
