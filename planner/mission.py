@@ -15,6 +15,7 @@ seq     command                content
 ...     NAV_LOITER_TURNS       after a waypoint: param1 turns, param3 +-radius, param4 1
 ...     DO_LAND_START          (optional) at the last waypoint: where the landing begins
 last    NAV_LAND (optional)    at home, or at a given touchdown point
+last    NAV_LOITER_UNLIM (opt) without a landing: a hold at the last waypoint (no RTL home)
 ======  =====================  ==============================================================
 
 ArduPlane runs the DO commands that follow a NAV command when that NAV command completes, so
@@ -325,6 +326,7 @@ def compile_mission(
     land: bool | Waypoint = False,
     land_start: bool = False,
     terrain_alt_m: Callable[[float, float], float] | None = None,
+    hold_radius_m: float | None = None,
 ) -> list[MissionItem]:
     """Compile a route into ArduPlane mission items, item 0 being home.
 
@@ -362,6 +364,10 @@ def compile_mission(
     land_start
         With a landing: DO_LAND_START right before NAV_LAND, at the last waypoint (ArduPlane
         runs it as a marker; a DO_LAND_START command or RTL_AUTOLAND jumps to it).
+    hold_radius_m
+        Without a landing: NAV_LOITER_UNLIM at the last waypoint, a clockwise circle of this
+        radius (m), so that the aircraft holds there once it has flown its route instead of
+        flying home in RTL at RTL_ALTITUDE, across whatever terrain and zones lie between.
     terrain_alt_m
         Terrain elevation AMSL (m) at (lat_deg, lon_deg); required for the terrain frames.
 
@@ -485,6 +491,13 @@ def compile_mission(
     if landing is not None:
         z = z_of("land", landing.lat_deg, landing.lon_deg, landing.alt_m)
         add(frame, MAV_CMD_NAV_LAND, (0, 0, 0, 0), _e7(landing.lat_deg), _e7(landing.lon_deg), z)
+    elif hold_radius_m is not None:
+        if not (math.isfinite(hold_radius_m) and hold_radius_m > 0.0):
+            raise MissionError(f"hold_radius_m {_num(hold_radius_m)} must be > 0")
+        last = waypoints[-1]
+        z = z_of("hold", last.lat_deg, last.lon_deg, last.alt_m)
+        params = (0.0, 0.0, float(hold_radius_m), 0.0)
+        add(frame, MAV_CMD_NAV_LOITER_UNLIM, params, _e7(last.lat_deg), _e7(last.lon_deg), z)
     if len(items) - 1 > _SEQ_MAX:
         raise MissionError(f"mission has {len(items)} items; MAVLink seq is at most {_SEQ_MAX}")
     return items

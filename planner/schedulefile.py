@@ -19,6 +19,7 @@ import numpy as np
 
 from planner.deconflict import Separation
 from planner.errors import PlannerError
+from planner.flightpath import FlightPath
 from planner.mission import (
     MAV_CMD_DO_CHANGE_SPEED,
     MAV_CMD_NAV_TAKEOFF,
@@ -29,8 +30,10 @@ from planner.mission import (
     Waypoint,
     compile_mission,
 )
+from planner.scenario import Vehicle
 from planner.schedule import Schedule, VehicleSchedule
 from planner.terrain import Terrain
+from planner.timing import flyable_loiter_radius_m
 
 SCHEDULE_FORMAT = "tcgcs-schedule/1"
 _MERGE_M = 1.0
@@ -162,6 +165,9 @@ def path_mission(
     if landing is not None:
         t_lat, t_lon = frame.to_geodetic(*landing.touchdown.local(frame))
         touchdown = Waypoint(float(t_lat), float(t_lon), landing.touchdown.alt_m)
+    hold_radius_m = None
+    if runout_m > 0.0 and landing is None:
+        hold_radius_m = _clear_hold_radius_m(v, waypoints[-1], s_sorted[-1], path, terrain)
     items = compile_mission(
         home=home,
         waypoints=waypoints,
@@ -178,6 +184,7 @@ def path_mission(
         airspeed_limits_m_s=(v.speed_min_m_s, v.speed_max_m_s),
         land=touchdown,
         land_start=landing is not None,
+        hold_radius_m=hold_radius_m,
     )
     first = first_route_seq(items)
     item_s: list[float | None] = [None] * first
@@ -191,6 +198,25 @@ def path_mission(
         else:
             item_s.append(s_sorted[k])
     return PathMission(tuple(items), tuple(item_s))
+
+
+def _clear_hold_radius_m(
+    v: Vehicle, last: Waypoint, s_last_m: float, path: FlightPath, terrain: Terrain
+) -> float | None:
+    """The radius of the hold after the run-out (the vehicle's flyable loiter radius), when
+    its circle keeps the vehicle's terrain clearance all round at the run-out's altitude;
+    else None (no hold: the mission ends as it did)."""
+    radius = flyable_loiter_radius_m(v.min_turn_radius_m)
+    end = path.end
+    over = max(s_last_m - path.length_m, 0.0)
+    e = end.east_m + over * math.sin(end.heading_rad)
+    n = end.north_m + over * math.cos(end.heading_rad)
+    # ArduPlane circles the point clockwise: the circle's centre is the point itself.
+    angles = np.linspace(0.0, 2.0 * math.pi, 36, endpoint=False)
+    ground = terrain.elevation_m(e + radius * np.cos(angles), n + radius * np.sin(angles))
+    if float(np.max(ground)) + v.clearance_m > last.alt_m:
+        return None
+    return radius
 
 
 def splice_mission(old: PathMission, keep_through_seq: int, new: PathMission) -> PathMission:

@@ -16,7 +16,12 @@ from gcs.coordination.missionclock import MissionClock
 from gcs.coordination.runner import FlightRunner, InfeasibleRequest
 from planner.atmosphere import eas2tas
 from planner.errors import PlannerError
-from planner.mission import MAV_CMD_DO_CHANGE_SPEED, MAV_CMD_NAV_LOITER_TURNS, MAV_CMD_NAV_WAYPOINT
+from planner.mission import (
+    MAV_CMD_DO_CHANGE_SPEED,
+    MAV_CMD_NAV_LOITER_TURNS,
+    MAV_CMD_NAV_LOITER_UNLIM,
+    MAV_CMD_NAV_WAYPOINT,
+)
 from planner.plan import World
 from planner.popup import PopupOutcome, apply_popup, popup_zones
 from planner.retime import retime_vehicle
@@ -24,6 +29,7 @@ from planner.scenario import Scenario, load_scenario
 from planner.schedule import Anchor, Schedule
 from planner.schedulefile import path_mission, splice_mission
 from planner.threats import active, build_threats
+from planner.timing import flyable_loiter_radius_m
 
 PAPER = Path(__file__).resolve().parents[2] / "scenarios" / "paper_three_uav.yaml"
 
@@ -40,9 +46,18 @@ def test_runout_waypoint_lies_beyond_the_goal_on_the_final_heading(
     vs = schedule.vehicle("UAV1")
     plain = path_mission(schedule, vs, world.terrain)
     longer = path_mission(schedule, vs, world.terrain, runout_m=300.0)
-    assert len(longer.items) == len(plain.items) + 1
-    assert longer.item_s_m[-1] == pytest.approx(vs.path.length_m + 300.0)
-    assert longer.items[:-1] == plain.items
+    assert len(longer.items) == len(plain.items) + 2
+    assert longer.items[:-2] == plain.items
+    runout, hold = longer.items[-2:]
+    assert runout.command == MAV_CMD_NAV_WAYPOINT
+    assert longer.item_s_m[-2] == pytest.approx(vs.path.length_m + 300.0)
+    # Then it holds there (NAV_LOITER_UNLIM, clockwise at its loiter radius, the run-out's
+    # altitude) rather than ending the mission, which ArduPlane follows with RTL home at
+    # RTL_ALTITUDE over whatever lies between.
+    assert hold.command == MAV_CMD_NAV_LOITER_UNLIM
+    assert (hold.x, hold.y, hold.z) == (runout.x, runout.y, runout.z)
+    scenario = schedule.scenario
+    assert hold.param3 == flyable_loiter_radius_m(scenario.vehicle("UAV1").min_turn_radius_m)
 
 
 def test_retime_in_flight_adds_loiter_with_speed_margin(
