@@ -35,7 +35,6 @@ from gcs.coordination.config import FlightConfig
 from gcs.coordination.events import EventKind, FlightEvent
 from gcs.coordination.member import Member
 from gcs.coordination.missionclock import MissionClock
-from gcs.coordination.planning import run_planning, warm_up
 from gcs.coordination.team import TeamController
 from gcs.errors import GcsError
 from gcs.mavlink import commands, mission_client
@@ -565,7 +564,7 @@ class FlightRunner:
         result: Any = None
         error: Exception | None = None
         try:
-            result = await run_planning(a.job.run)
+            result = await asyncio.to_thread(a.job.run)
         except Exception as err:
             if not isinstance(err, GcsError | ValueError):
                 log.exception("planning job failed")
@@ -613,7 +612,6 @@ class FlightRunner:
         """Launch on schedule and hold the arrival times until every vehicle has arrived (or
         was aborted, or the mission overran); returns the flight's final state."""
         team = self._team()
-        warm_up()  # the planning workers, before a pop-up needs them
         if self.state is FlightState.PLANNED:
             await self.upload_all()
         if not self.resumed:

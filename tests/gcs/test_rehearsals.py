@@ -184,11 +184,23 @@ async def test_spaced_rehearsal_meets_each_60_s_slot_with_an_operator_threat(
     after = [e for e in record["events"] if e["t_s"] >= t_op1 - 0.5]
     replans = [e for e in after if e["kind"] == "replan" and "OP1" in e["reason"]]
     told = story(record["events"])
-    assert [e["reason"] for e in replans] == ["re-planning UAV3 around OP1"], told
-    # The team time that re-plan gave (said with it, at its decision time) is the same one.
-    moves = [e for e in after if e["kind"] == "arrival" and e["t_s"] == replans[0]["t_s"]]
-    assert moves and all("feasible for every vehicle" in e["reason"] for e in moves), told
-    assert replans[0]["t_s"] < t_op1 + 1.0, told
+    assert replans and all(e["reason"] == "re-planning UAV3 around OP1" for e in replans), told
+    failed = [
+        e for e in after if e["kind"] == "popup" and "re-plan around OP1 failed" in e["reason"]
+    ]
+    if replans[0]["t_s"] < t_op1 + 1.0:
+        # Re-planned from a waypoint ahead as it appeared, for the same team time (said with
+        # the re-plan, at its decision time).
+        moves = [e for e in after if e["kind"] == "arrival" and e["t_s"] == replans[0]["t_s"]]
+        assert moves and all("feasible for every vehicle" in e["reason"] for e in moves), told
+    else:
+        # How far ahead that waypoint is depends on the planning time (times the speed-up):
+        # from some, no smoothed route keeps out of the box. Said, and UAV3 held short of the
+        # box until its route around it, planned from its hold point, was on board.
+        assert failed and "UAV3" in failed[0]["reason"] and failed[0]["t_s"] < t_op1 + 1.0, told
+        held = [e for e in after if e["kind"] == "fallback" and e["vehicle"] == "UAV3"]
+        assert any("holding" in e["reason"] for e in held), told
+        assert any("route around OP1 on board" in e["reason"] for e in held), told
     assert [p["label"] for p in by_id["UAV3"]["planned_paths"]][-1] == "after OP1"
     # The flown track keeps out of the box (the truth log, every 2 s).
     for row in by_id["UAV3"]["track"]:
