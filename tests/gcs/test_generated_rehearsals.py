@@ -71,7 +71,7 @@ async def test_a_generated_scenario_flies_each_vehicle_to_its_slot_or_is_refused
         assert any(v["id"] in said for v in doc["vehicles"]) or "arrival" in said, said
         pytest.xfail(f"refused before launch: {said}")
     told = story(record["events"])
-    assert record["state"] == "completed", (record["state_reason"], told)
+    assert record["state"] == "completed", f"{record['state_reason']}\n{told}"
     assert record["arrival_source"] == "simulator"
     at = {v["id"]: v["arrival_utc_s"] - record["start_utc_s"] for v in record["vehicles"]}
     slots = _slots(doc, record["required_arrival_s"], at)
@@ -84,4 +84,4 @@ async def test_a_generated_scenario_flies_each_vehicle_to_its_slot_or_is_refused
             continue
         # A miss is never silent: an alarm named the vehicle before it arrived.
         said = [e for e in record["events"] if e["kind"] == "alarm" and e["vehicle"] == vid]
-        assert alarmed_ok and said and said[0]["t_s"] < t, (vid, t, slot, wind, told)
+        assert alarmed_ok and said and said[0]["t_s"] < t, f"{(vid, t, slot, wind)}\n{told}"

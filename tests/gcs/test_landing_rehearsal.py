@@ -57,7 +57,7 @@ async def test_landing_slots_cross_the_fix_on_course_90_s_apart_and_land_in_orde
     doc, wind = landing_scenario(seed)
     record = await rehearse_doc(doc, wind, seed, tmp_path)
     told = story(record["events"])
-    assert record["state"] == "completed", (record["state_reason"], told)
+    assert record["state"] == "completed", f"{record['state_reason']}\n{told}"
     assert record["arrival_source"] == "simulator"
     landing = doc["landing"]
     c = math.radians(landing["heading_deg"])
@@ -73,17 +73,19 @@ async def test_landing_slots_cross_the_fix_on_course_90_s_apart_and_land_in_orde
     for k, vid in enumerate(order):
         v = by_id[vid]
         crossed = _crossing(v["track"], goals[vid], u)
-        assert crossed is not None, (vid, told)
+        assert crossed is not None, f"{vid}\n{told}"
         t_utc, flown, across = crossed
         slot = ref + 90.0 * k
-        assert t_utc - start == pytest.approx(slot, abs=1.0), (vid, t_utc - start, slot, told)
+        assert t_utc - start == pytest.approx(slot, abs=1.0), (
+            f"{(vid, t_utc - start, slot)}\n{told}"
+        )
         # On the approach course, on the centreline.
         assert flown[0] * u[0] + flown[1] * u[1] > math.cos(math.radians(10.0)), (vid, flown)
         assert abs(across) < 50.0, (vid, across)
         # Down on the runway: on the centreline, past the touchdown point by no more than
         # the roll-out, and disarmed (the coordinator saw it land).
         down = _touchdown(v["track"], runway_alt, t_utc)
-        assert down is not None, (vid, told)
+        assert down is not None, f"{vid}\n{told}"
         de, dn = down[1] - td[0], down[2] - td[1]
         along_m, across_m = de * u[0] + dn * u[1], -de * u[1] + dn * u[0]
         assert -150.0 <= along_m <= 1_000.0, (vid, along_m)

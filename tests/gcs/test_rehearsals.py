@@ -120,8 +120,7 @@ async def test_paper_rehearsal_absorbs_airspeed_errors_and_wrong_clocks_with_a_s
     assert [e["seq"] for e in record["events"]] == list(range(1, bus.published + 1))
     errors = _errors(record)
     assert all(e is not None and abs(e) <= 1.0 for e in errors.values()), (
-        errors,
-        story(record["events"]),
+        f"{errors}\n{story(record['events'])}"
     )
     assert record["min_separation_m"] >= record["separation_m"]
     said = {e["vehicle"]: e["value"] for e in record["events"] if e["kind"] == "clock"}
@@ -163,8 +162,7 @@ async def test_spaced_rehearsal_meets_each_60_s_slot_with_an_operator_threat(
     assert_flight_kept(pg_url, record)
     errors = _errors(record)
     assert all(e is not None and abs(e) <= 1.0 for e in errors.values()), (
-        errors,
-        story(record["events"]),
+        f"{errors}\n{story(record['events'])}"
     )
     assert record["min_separation_m"] >= record["separation_m"]
     # The slots are the scenario's order, 60 s apart, and the true crossings keep them.
@@ -275,8 +273,7 @@ async def test_connect_rehearsal_flies_separately_started_vehicles_one_behind_ma
     assert record["arrival_source"] == "simulator"
     errors = _errors(record)
     assert all(e is not None and abs(e) <= 1.0 for e in errors.values()), (
-        errors,
-        story(record["events"]),
+        f"{errors}\n{story(record['events'])}"
     )
     for v in record["vehicles"]:
         # The coordinator's own arrival, from telemetry alone, agrees with the truth.
@@ -351,8 +348,7 @@ async def test_two_flights_at_once_on_one_fleet_each_to_its_own_time(tmp_path: P
         assert record["arrival_source"] == "simulator"
         errors = _errors(record)
         assert all(e is not None and abs(e) <= 1.0 for e in errors.values()), (
-            errors,
-            story(record["events"]),
+            f"{errors}\n{story(record['events'])}"
         )
 
 
@@ -542,7 +538,9 @@ async def test_waves_arrive_together_within_a_wave_and_the_gap_apart(tmp_path: P
     ref = record["required_arrival_s"]
     assert ref is not None
     slots = {"UAV1": ref, "UAV3": ref, "UAV2": ref + 120.0}
-    assert all(abs(at[v] - slots[v]) <= 1.0 for v in slots), (at, slots, story(record["events"]))
+    assert all(abs(at[v] - slots[v]) <= 1.0 for v in slots), (
+        f"{at} {slots}\n{story(record['events'])}"
+    )
     assert abs(at["UAV2"] - 0.5 * (at["UAV1"] + at["UAV3"]) - 120.0) <= 1.5
     assert passed(record, 1.0)
 
@@ -568,7 +566,7 @@ async def test_windows_each_vehicle_arrives_in_its_own_window(tmp_path: Path) ->
     at = _truth_arrivals(record)
     for v in record["vehicles"]:
         lo, hi = own[v["id"]]
-        assert lo - 1.0 <= at[v["id"]] <= hi + 1.0, (v["id"], at, story(record["events"]))
+        assert lo - 1.0 <= at[v["id"]] <= hi + 1.0, f"{v['id']} {at}\n{story(record['events'])}"
         target = v["target_arrival_utc_s"] - record["start_utc_s"]
         assert abs(at[v["id"]] - target) <= 1.0, (v["id"], at[v["id"]], target)
     assert passed(record, 1.0)

@@ -53,7 +53,7 @@ async def test_thirty_aircraft_keep_out_of_a_pop_up_zone_whatever_the_re_plan_la
         )
     )
     events = story(record["events"])
-    assert record["state"] == "completed", (record["state_reason"], events)
+    assert record["state"] == "completed", f"{record['state_reason']}\n{events}"
     assert all(v["state"] == "arrived" for v in record["vehicles"]), events
     # The truth log against the disc, from the time it appeared.
     frame = scenario.frame()
@@ -69,7 +69,7 @@ async def test_thirty_aircraft_keep_out_of_a_pop_up_zone_whatever_the_re_plan_la
         closest = min(closest, d)
         n += 1
     assert n > 1000
-    assert closest > 0.0, (closest, events)
+    assert closest > 0.0, f"{closest:.0f} m\n{events}"
     assert record["zone_entries"] == []
     # The routes it touched were re-planned around it or held short of it, and said so.
     touched = [e for e in record["events"] if e["kind"] == "replan" and "POP30" in e["reason"]]

@@ -184,7 +184,9 @@ async def test_paper_flight_over_http_with_a_no_fly_zone_a_later_team_time_and_f
 
     assert record["arrival_source"] == "simulator"
     errors = {v["id"]: v["error_s"] for v in record["vehicles"]}
-    assert all(e is not None and abs(e) <= 1.0 for e in errors.values()), (errors, story(events))
+    assert all(e is not None and abs(e) <= 1.0 for e in errors.values()), (
+        f"{errors}\n{story(events)}"
+    )
     # The team time the vehicles met is the operator's (+120 s), or later if one forced it.
     assert record["required_arrival_s"] >= ref + 120.0 - 1e-3
     assert {a["strategy"] for a in record["adjustments"]} >= {"takeoff_delay", "speed", "loiter"}
@@ -197,7 +199,7 @@ async def test_paper_flight_over_http_with_a_no_fly_zone_a_later_team_time_and_f
     assert replanned == {"UAV3"}
     for v in record["vehicles"]:
         inside = [row for row in v["track"] if _inside(row[1], row[2], box)]
-        assert not inside, (v["id"], inside[:3], story(events))
+        assert not inside, f"{v['id']} {inside[:3]}\n{story(events)}"
     # Every stream client, and the one that went away for 10 s, got every event once, in order.
     seqs = [e["seq"] for e in events]
     assert seqs == sorted(seqs) and len(set(seqs)) == len(seqs)
@@ -232,7 +234,7 @@ async def test_an_aborted_vehicle_goes_home_over_http_and_the_others_arrive_on_t
     by_id = {v["id"]: v for v in record["vehicles"]}
     assert by_id["UAV1"]["state"] == "aborted" and by_id["UAV1"]["arrival_utc_s"] is None
     for vid in ("UAV2", "UAV3"):
-        assert abs(by_id[vid]["error_s"]) <= 1.0, (by_id[vid], story(events))
+        assert abs(by_id[vid]["error_s"]) <= 1.0, f"{vid} {by_id[vid]['error_s']}\n{story(events)}"
     # Said once, when RTL was taken: a few command round trips after the request.
     aborts = [e for e in events if e["kind"] == "abort"]
     assert [e["vehicle"] for e in aborts] == ["UAV1"], aborts
