@@ -343,6 +343,13 @@ def parser() -> argparse.ArgumentParser:
     rh.add_argument("--speedup", type=float, default=200.0, help="stub time / wall time")
     rh.add_argument("--wind", help="SPEED_M_S,FROM_DEG mean wind for the stub")
     rh.add_argument(
+        "--free-run",
+        action="store_true",
+        help="the stub keeps its speed-up on the wall clock whatever the coordinator's delays "
+        "(default: in lock step, it waits for the coordinator, so a busy machine slows the "
+        "flight instead of answering late in it)",
+    )
+    rh.add_argument(
         "--forecast-wind",
         metavar="SPEED_M_S,FROM_DEG",
         help="forecast wind the schedule is timed in (instead of the scenario's wind; the "
@@ -355,6 +362,13 @@ def parser() -> argparse.ArgumentParser:
         "--truth",
         help="with --connect: the simulator's truth log (sitl_stub --truth), for true arrivals; "
         "without: where the rehearsal's stub writes its truth log (kept)",
+    )
+    rh.add_argument(
+        "--lockstep",
+        metavar="FILE",
+        help="with --connect: the lock-step file of the simulator flown (sitl_stub --lockstep "
+        "FILE): the mission clock runs on its pace clock and the simulator waits for this "
+        "coordinator",
     )
     rh.add_argument("--json", dest="json_out", help="write the flight record here")
     rh.add_argument("--report", help="write the report (figures, tables) into this directory")
@@ -535,6 +549,10 @@ def _rehearsal_options(args: argparse.Namespace) -> object:
             "--blackout, --wind, --loss, --speed-bias, --utc-offset and --hill apply to the "
             "stub, not to --connect"
         )
+    if args.lockstep and not args.connect:
+        raise UsageError("--lockstep FILE joins a simulator flown with --connect")
+    if args.lockstep and not Path(args.lockstep).is_file():
+        raise UsageError(f"--lockstep {args.lockstep}: no such file (start sitl_stub first)")
     if args.truth and not Path(args.truth).resolve().parent.is_dir():
         raise UsageError(f"--truth {args.truth}: directory does not exist")
     return RehearsalOptions(
@@ -556,6 +574,8 @@ def _rehearsal_options(args: argparse.Namespace) -> object:
         hills=hills,
         threats_from=Path(args.threats_from) if args.threats_from else None,
         quiet=args.quiet,
+        lockstep=not args.free_run,
+        lockstep_file=Path(args.lockstep) if args.lockstep else None,
         config=FlightConfig(
             seed=args.seed,
             on_vehicle_lost=args.on_vehicle_lost,

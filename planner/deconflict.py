@@ -116,6 +116,72 @@ def separation(vehicles: Sequence[VehicleSchedule], required_m: float) -> Separa
     return Separation(required_m, tuple(pairs))
 
 
+TRACK_STEP_S = 2.0
+"""Sampling of the team's tracks for :class:`TeamTracks`, s (60 m at 30 m/s)."""
+
+
+@dataclass(frozen=True)
+class TeamTracks:
+    """Every place some vehicles will be from a time on, whenever they are there (their
+    schedules sampled every :data:`TRACK_STEP_S`, loiters included; time left out, as a
+    schedule's times in flight are good to a minute, not to a second): what a loiter circle
+    decided in flight must keep the separation from."""
+
+    east_m: FloatArray
+    north_m: FloatArray
+    margin_m: FloatArray
+    """Half a sample's travel at the vehicle's top speed (the track between two samples)."""
+    vehicle: tuple[str, ...]
+
+    @classmethod
+    def of(cls, others: Sequence[VehicleSchedule], from_s: float) -> TeamTracks:
+        east, north, margin, who = [], [], [], []
+        for other in others:
+            t = np.arange(max(from_s, other.takeoff_s), other.arrival_s, TRACK_STEP_S)
+            if t.size == 0:
+                continue
+            p = _positions(other, np.append(t, other.arrival_s))
+            p = p[~np.isnan(p[:, 0])]
+            east.append(p[:, 0])
+            north.append(p[:, 1])
+            margin.append(np.full(len(p), 0.5 * other.speed_max_m_s * TRACK_STEP_S))
+            who += [other.vehicle_id] * len(p)
+        if not who:
+            return cls(np.empty(0), np.empty(0), np.empty(0), ())
+        return cls(np.concatenate(east), np.concatenate(north), np.concatenate(margin), tuple(who))
+
+    def clearance(
+        self, centre_east_m: float, centre_north_m: float, radius_m: float
+    ) -> tuple[float, str | None]:
+        """How far a circle stays from the tracks, m, and whose track comes nearest
+        (``(inf, None)`` with no tracks)."""
+        if not self.vehicle:
+            return math.inf, None
+        gap = (
+            np.hypot(self.east_m - centre_east_m, self.north_m - centre_north_m)
+            - radius_m
+            - self.margin_m
+        )
+        k = int(np.argmin(gap))
+        return float(gap[k]), self.vehicle[k]
+
+
+def loiter_conflict(
+    vs: VehicleSchedule, others: Sequence[VehicleSchedule], required_m: float, from_s: float
+) -> str | None:
+    """Why the loiter circles ``vs`` flies from ``from_s`` on do not keep ``required_m`` from
+    the ``others``' tracks (:class:`TeamTracks`), or None."""
+    new = [lo for lo in vs.loiters if lo.t_end_s > from_s]
+    if not new:
+        return None
+    tracks = TeamTracks.of([x for x in others if x.vehicle_id != vs.vehicle_id], from_s)
+    for lo in new:
+        gap_m, near = tracks.clearance(lo.centre_east_m, lo.centre_north_m, lo.radius_m)
+        if gap_m < required_m:
+            return f"its turns at {lo.s_m / 1000:.1f} km come {gap_m:.0f} m from {near}'s track"
+    return None
+
+
 def check_separation(sep: Separation) -> None:
     """Refuse a team separation with a pair closer than ``d_s``.
 

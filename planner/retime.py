@@ -16,14 +16,14 @@ in the buffers (:func:`find_loiter_site`), legs and loiter circles along the pat
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, replace
 
 import numpy as np
 from numpy.typing import NDArray
 
 from planner.climbout import climb_out
-from planner.deconflict import Separation, check_separation, separation
+from planner.deconflict import Separation, TeamTracks, check_separation, separation
 from planner.dubins import Pose
 from planner.errors import ArrivalTimeError, InfeasibleError
 from planner.flightpath import FlightPath
@@ -61,6 +61,8 @@ from planner.timing import (
 FloatArray = NDArray[np.float64]
 
 SITE_STEP_M = 100.0
+SiteCheck = Callable[[float, float, float], bool]
+"""``(centre_east_m, centre_north_m, radius_m) -> bool``: may a loiter circle go there."""
 FREE_SITE = "path"
 """The ``buffer_id`` of loiter turns on the path outside any buffer (:func:`free_loiter_site`)."""
 
@@ -101,8 +103,10 @@ def find_loiter_site(
     s_from_m: float,
     radius_m: float,
     threats: Sequence[ThreatZone] = (),
+    keep_clear: SiteCheck | None = None,
 ) -> _Site | None:
-    """Where to loiter on ``path`` after ``s_from_m``, inside a buffer the vehicle may use.
+    """Where to loiter on ``path`` after ``s_from_m``, inside a buffer the vehicle may use
+    (and, with ``keep_clear``, where it says the circle may go).
 
     A circle tangent to the path at a path point, entirely inside a buffer, is preferred (the
     paper keeps the added path within ``2 r_min`` of the planned one); among those, the first
@@ -125,7 +129,7 @@ def find_loiter_site(
         for t in threats:
             if t.forbidden and float(t.distance_m(np.array([e]), np.array([n]))[0]) < radius_m:
                 return False
-        return True
+        return keep_clear is None or keep_clear(e, n, radius_m)
 
     best: tuple[float, _Site] | None = None
     poses = [path.pose_at(float(s)) for s in s_values]
@@ -165,10 +169,12 @@ def free_loiter_site(
     radius_m: float,
     threats: Sequence[ThreatZone],
     terrain: Terrain,
+    keep_clear: SiteCheck | None = None,
 ) -> _Site | None:
     """Where to loiter on the path after ``s_from_m`` when no buffer serves: the first circle
     tangent to the path (no detour) that keeps a radius clear of every threat zone, forbidden
-    or not, and the vehicle's terrain clearance all round at the path's altitude there."""
+    or not, and the vehicle's terrain clearance all round at the path's altitude there (and,
+    with ``keep_clear``, where it says the circle may go)."""
     angles = np.linspace(0.0, 2.0 * math.pi, 36, endpoint=False)
     for s in _site_s_m(vs.path, s_from_m, radius_m):
         p = vs.path.pose_at(float(s))
@@ -183,6 +189,8 @@ def free_loiter_site(
                 ce + radius_m * np.cos(angles), cn + radius_m * np.sin(angles)
             )
             if float(np.max(ground)) + vehicle.clearance_m > vs.alt_at(float(s)):
+                continue
+            if keep_clear is not None and not keep_clear(ce, cn, radius_m):
                 continue
             return _Site(float(s), (ce, cn), (p.east_m, p.north_m), clockwise, 0.0, FREE_SITE)
     return None
@@ -259,6 +267,7 @@ def retime_on_path(
     at: tuple[float, float] | None = None,
     loiter_margin_m_s: float = 0.0,
     terrain: Terrain | None = None,
+    keep_clear: SiteCheck | None = None,
 ) -> Retimed:
     """Re-time one vehicle from ``now_s`` to arrive at ``target_s`` on its current path.
 
@@ -266,6 +275,7 @@ def retime_on_path(
     instead of where the schedule has it at ``now_s``. With ``terrain``, a surplus that no
     buffer can absorb (none ahead, or its detour alone is longer than the time to lose) gets
     its turns on the path where the airspace and the terrain allow (:func:`free_loiter_site`).
+    With ``keep_clear``, loiter circles go only where it says they may.
     """
     limits = _limits(v, step_m_s)
     if at is None:
@@ -317,7 +327,7 @@ def retime_on_path(
                     f"window [{window[0]:g}, {window[1]:g}] s)",
                 )
             )
-    site = find_loiter_site(scenario, v, vs.path, s0, radius, threats)
+    site = find_loiter_site(scenario, v, vs.path, s0, radius, threats, keep_clear)
     # In a wind the ground covered per metre of airspeed depends on the airspeed: timed at
     # the mean speed the time asks for, then again at the mean speed that timing flies.
     budget_s = max(target_s - start_t, 1e-9)
@@ -350,7 +360,7 @@ def retime_on_path(
         except InfeasibleError:
             free = None
             if terrain is not None and (at_site is None or at_site.detour_m > 0.0):
-                free = free_loiter_site(v, vs, s0, radius, threats, terrain)
+                free = free_loiter_site(v, vs, s0, radius, threats, terrain, keep_clear)
             if free is None or target_s - start_t < remaining / ratio / v.speed_max_m_s:
                 raise
             return free, timed(free)
@@ -770,27 +780,51 @@ def retime_vehicle(
     threats: Sequence[ThreatZone],
     loiter_margin_m_s: float = 0.0,
     terrain: Terrain | None = None,
+    separate: bool = False,
 ) -> tuple[VehicleSchedule, tuple[Adjustment, ...]]:
     """Re-time one airborne vehicle from where it really is (``s_m`` along its path, flying
     ``speed_m_s``) at ``now_s`` to arrive at ``target_s``: speeds, and loiter turns in a buffer
     ahead when the speed range cannot absorb the surplus (eqs. 6-9).
 
+    With ``separate``, loiter circles keep the scenario's separation from every place the
+    rest of the team will fly from ``now_s`` on (:class:`~planner.deconflict.TeamTracks`).
+
     Raises
     ------
     InfeasibleError
-        Too late even at top speed, or too early with no buffer ahead; names the vehicle.
+        Too late even at top speed, or too early with no buffer ahead, or (``separate``) no
+        place for the turns that keeps the separation; names the vehicle.
     """
     v = schedule.scenario.vehicle(vehicle_id)
-    r = retime_on_path(
-        schedule.scenario,
-        v,
-        schedule.vehicle(vehicle_id),
-        now_s=now_s,
-        target_s=target_s,
-        step_m_s=schedule.step_m_s,
-        threats=threats,
-        at=(s_m, speed_m_s),
-        loiter_margin_m_s=loiter_margin_m_s,
-        terrain=terrain,
-    )
+    keep_clear: SiteCheck | None = None
+    required = schedule.scenario.separation_m
+    if separate:
+        others = [x for x in schedule.vehicles if x.vehicle_id != vehicle_id]
+        tracks = TeamTracks.of(others, now_s)
+
+        def keep_clear(e: float, n: float, radius_m: float) -> bool:
+            return tracks.clearance(e, n, radius_m)[0] >= required
+
+    try:
+        r = retime_on_path(
+            schedule.scenario,
+            v,
+            schedule.vehicle(vehicle_id),
+            now_s=now_s,
+            target_s=target_s,
+            step_m_s=schedule.step_m_s,
+            threats=threats,
+            at=(s_m, speed_m_s),
+            loiter_margin_m_s=loiter_margin_m_s,
+            terrain=terrain,
+            keep_clear=keep_clear,
+        )
+    except InfeasibleError as err:
+        if keep_clear is None:
+            raise
+        raise InfeasibleError(
+            f"{err} (loiter sites within {required:g} m of the team's tracks left out)",
+            vehicle=err.vehicle,
+            earliest_s=err.earliest_s,
+        ) from None
     return r.schedule, tuple(r.adjustments)

@@ -28,6 +28,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from sitl_stub.api import DEFAULT_TCP_BASE, Home, SimTeam
+from sitl_stub.lockstep import DEFAULT_LEAD_S, Lockstep
 from sitl_stub.model import AirframeParams
 from sitl_stub.terrain import GridTerrain, Hill
 from sitl_stub.truth import DEFAULT_TRUTH_PERIOD_S
@@ -216,6 +217,22 @@ def parse_args(argv: Sequence[str] | None = None) -> argparse.Namespace:
         action="store_true",
         help="read uploaded mission items back exactly as sent (default: in ArduPilot's "
         "stored form: frames 0/3/10, whole-centimetre altitudes, per-command parameters)",
+    )
+    ap.add_argument(
+        "--lockstep",
+        metavar="FILE",
+        help="keep a clock file (created) that one ground station reads and acknowledges: the "
+        "simulation steps no further than --lockstep-lead beyond what it has acknowledged, so "
+        "a busy machine slows the flight instead of delaying the ground station's answers "
+        "(see sitl_stub.lockstep)",
+    )
+    ap.add_argument(
+        "--lockstep-lead",
+        type=float,
+        default=DEFAULT_LEAD_S,
+        metavar="S",
+        help=f"flight seconds the simulation may run ahead of the ground station "
+        f"(default {DEFAULT_LEAD_S:g})",
     )
     ap.add_argument("--host", default="127.0.0.1")
     ap.add_argument("-v", "--verbose", action="store_true")
@@ -587,6 +604,11 @@ async def serve(
                     v.link.faults(loss=args.loss, latency_ms=args.latency_ms)
             for b in blackouts:
                 team.schedule_blackout(b.vehicle_index, b.start_sim_s, b.duration_s)
+            if args.lockstep:
+                team.server.lockstep = Lockstep(
+                    Path(args.lockstep), create=True, speedup=args.speedup
+                )
+                team.server.lockstep_lead_s = args.lockstep_lead
             for i, port in enumerate(team.ports):
                 log.info("vehicle %d: sysid %d on tcp:%s:%d", i, i + 1, args.host, port)
             print(f"sitl_stub: {len(homes)} vehicle(s) ready, ports {team.ports}", flush=True)
@@ -630,6 +652,10 @@ def main(argv: Sequence[str] | None = None) -> int:
         for option, path in (("--truth", args.truth), ("--counters", args.counters)):
             if path and not Path(path).resolve().parent.is_dir():
                 raise UsageError(f"{option} {path}: directory does not exist")
+        if not (math.isfinite(args.lockstep_lead) and args.lockstep_lead > 0):
+            raise UsageError(f"--lockstep-lead must be a positive number, got {args.lockstep_lead}")
+        if args.lockstep and not Path(args.lockstep).resolve().parent.is_dir():
+            raise UsageError(f"--lockstep {args.lockstep}: directory does not exist")
         if not (math.isfinite(args.truth_period) and args.truth_period > 0):
             raise UsageError(f"--truth-period must be a positive number, got {args.truth_period}")
         homes = homes_from_args(args)

@@ -27,6 +27,7 @@ from __future__ import annotations
 import asyncio
 import itertools
 import logging
+import math
 from collections.abc import Sequence
 from typing import Any
 
@@ -34,6 +35,7 @@ from pymavlink.dialects.v20 import ardupilotmega as mavlink2
 
 from sitl_stub.clock import SimClock
 from sitl_stub.link import DelayQueue
+from sitl_stub.lockstep import DEFAULT_LEAD_S, Lockstep
 from sitl_stub.mission_server import LinkId
 from sitl_stub.vehicle import Vehicle
 
@@ -317,6 +319,9 @@ class TeamServer:
             for v, p in zip(vehicles, ports, strict=True)
         ]
         self._step_listeners: list[Any] = []
+        self.lockstep: Lockstep | None = None
+        """With it, the steps wait for the ground station (:mod:`sitl_stub.lockstep`)."""
+        self.lockstep_lead_s = DEFAULT_LEAD_S
 
     async def open(self) -> None:
         try:
@@ -354,10 +359,23 @@ class TeamServer:
         clock.start(loop.time())
         while True:
             due = clock.steps_due(loop.time())
+            if self.lockstep is not None:
+                limit_s = self.lockstep.limit_s(self.lockstep_lead_s)
+                if limit_s < math.inf:
+                    due = min(due, max(int((limit_s - clock.sim_time_s) / clock.step_s), 0))
+            paced = self.lockstep
             for k in range(due):
                 self.step_once()
-                if k % STEPS_PER_YIELD == STEPS_PER_YIELD - 1:
+                if paced is not None:
+                    # Each step's packets go out with the pace clock at that step: a ground
+                    # station dating what it reads on the pace clock sees them no older than
+                    # they are (a batch sent at its end made its first steps' look older).
+                    paced.publish(clock.sim_time_s)
                     await asyncio.sleep(0)
+                elif k % STEPS_PER_YIELD == STEPS_PER_YIELD - 1:
+                    await asyncio.sleep(0)
+            if paced is not None:
+                paced.publish(clock.sim_time_s)
             now = loop.time()
             for v in self.vehicles:
                 v.tick_wall(now)

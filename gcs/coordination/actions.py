@@ -270,6 +270,7 @@ class LoiterJob:
             threats=list(self.threats),
             loiter_margin_m_s=self.loiter_margin_m_s,
             terrain=self.terrain,
+            separate=True,
         )
         return vs, list(adjustments)
 

@@ -131,6 +131,27 @@ class MissionClock:
         self.rejected = 0
         self.resets = 0  # vehicles whose UTC jumped back by more than JUMP_BACK_S
         self.backlogged = 0  # reports that came out of a backlog (not used for dating)
+        self.paced = False
+        """Its monotonic clock is the simulator's pace clock (:meth:`follow`)."""
+
+    def follow(self, pace_s: Callable[[], float]) -> None:
+        """Read the simulator's pace clock (flight time / speed-up, :mod:`sitl_stub.lockstep`)
+        as the monotonic clock, and date each report when it is handled: a report handled
+        late then reads as one sent late, not as a clock behind.
+
+        Raises
+        ------
+        GcsError
+            After the first observation (the clock would mix two time bases).
+        """
+        if self._vehicles:
+            raise GcsError("mission clock: follow() after the first SYSTEM_TIME")
+        self._monotonic = pace_s
+        self.paced = True
+
+    def monotonic(self) -> float:
+        """The clock's monotonic time now (the pace clock when :attr:`paced`)."""
+        return self._monotonic()
 
     # -- input -------------------------------------------------------------------------------
 

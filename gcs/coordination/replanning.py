@@ -19,6 +19,7 @@ from gcs.coordination.arrival import Decision
 from gcs.coordination.config import FlightConfig
 from gcs.coordination.events import EventKind
 from gcs.coordination.member import Member, path_en, route_track
+from planner.deconflict import loiter_conflict
 from planner.errors import InfeasibleError
 from planner.mission import MAV_CMD_NAV_WAYPOINT
 from planner.plan import World
@@ -168,6 +169,28 @@ class MissionChanges:
             return
         if m.done or not vs.loiters or all(lo.s_m < job.s_m for lo in vs.loiters):
             m.busy_mission = False
+            return
+        # The team as it will fly: each vehicle's schedule, or the one on its way up.
+        others = [
+            self.pending[x.vehicle_id].schedule if x.vehicle_id in self.pending else x
+            for x in self.current_schedule(still_air=True).vehicles
+            if x.vehicle_id != m.vehicle_id
+        ]
+        clash = loiter_conflict(vs, others, self.scenario.separation_m, t)
+        if clash is not None:
+            # Another vehicle's route or turns changed while these were worked out (turns
+            # decided together do not see each other): decided again against the team now.
+            m.busy_mission = False
+            m.next_decision_s = -math.inf
+            out.append(
+                act.Report(
+                    EventKind.LOITER,
+                    f"loiter turns worked out while the team's plans changed: {clash}; "
+                    "dropped, deciding again",
+                    m.vehicle_id,
+                    t_s=t,
+                )
+            )
             return
         out.append(
             act.Upload(

@@ -99,6 +99,14 @@ _AT_ONCE = frozenset(
 )
 
 
+PACED_TIMEOUT_FLIGHT_S = 1.0
+"""On a pace clock, a command's reply is awaited at least this long in flight time."""
+MIN_TIMEOUT_WALL_S = 0.004
+"""...and at least this long in wall time (a loopback round trip with room to spare)."""
+MIN_COMMAND_WALL_S = 0.4
+"""A command is retried for at least this long (wall s) before it is given up."""
+
+
 class InfeasibleRequest(GcsError):
     """The required arrival cannot be met; refused before launch."""
 
@@ -383,7 +391,10 @@ class FlightRunner:
                 rtt = link.counters.rtt_s
                 if rtt is not None and rtt < least[0]:
                     least[0] = rtt
-                sent_s = rx_s - (0.0 if math.isinf(least[0]) else 0.5 * least[0])
+                if self.clock.paced:
+                    sent_s = self.clock.monotonic()  # the pace clock: no link delay to remove
+                else:
+                    sent_s = rx_s - (0.0 if math.isinf(least[0]) else 0.5 * least[0])
                 if msg.time_unix_usec:
                     self.clock.observe(
                         sysid, msg.time_unix_usec * 1e-6, msg.time_boot_ms * 1e-3, sent_s
@@ -394,9 +405,21 @@ class FlightRunner:
             self._detach.append(link.add_listener(on_msg))
 
     def _wall_timeout_s(self, vehicle: Vehicle) -> float:
-        """A reply timeout from the link's round trip, not tuned to any vehicle."""
+        """A reply timeout from the link's round trip, not tuned to any vehicle. On a pace
+        clock (lock step with a simulator) it is at least a second of flight rather than 50 ms
+        of wall time, which at 200x is 10 s of flight flown on a lost command."""
         rtt = vehicle.link.counters.rtt_s
-        return float(min(1.5, max(0.05, 5.0 * rtt))) if rtt else 0.25
+        floor = PACED_TIMEOUT_FLIGHT_S / self.clock.rate if self.clock.paced else 0.05
+        floor = max(floor, MIN_TIMEOUT_WALL_S)
+        return float(min(1.5, max(floor, 5.0 * rtt))) if rtt else max(floor, 0.25)
+
+    def _command(self, vehicle: Vehicle) -> dict[str, Any]:
+        """``timeout_s`` and ``retries`` for a command: the configured retries, and more when
+        the timeout is short, so that a command is given up only after
+        :data:`MIN_COMMAND_WALL_S` of wall time however busy the machine."""
+        timeout = self._wall_timeout_s(vehicle)
+        retries = max(self.config.command_retries, math.ceil(MIN_COMMAND_WALL_S / timeout))
+        return {"timeout_s": timeout, "retries": retries}
 
     # -- carrying out actions -------------------------------------------------------------------
 
@@ -455,12 +478,11 @@ class FlightRunner:
         return None
 
     async def _arm_auto(self, v: Vehicle) -> None:
-        await v.arm(timeout_s=self._wall_timeout_s(v), retries=self.config.command_retries)
+        await v.arm(**self._command(v))
         await self._auto(v)
 
     async def _auto(self, v: Vehicle) -> None:
-        timeout, retries = self._wall_timeout_s(v), self.config.command_retries
-        await v.set_mode("AUTO", timeout_s=timeout, retries=retries)
+        await v.set_mode("AUTO", **self._command(v))
 
     async def _launch(self, a: act.Launch) -> None:
         v = self.vehicles[a.vehicle_id]
@@ -469,22 +491,12 @@ class FlightRunner:
 
     async def _command_speed(self, a: act.CommandSpeed) -> None:
         v = self.vehicles[a.vehicle_id]
-        err = await self._outcome(
-            v.change_speed(
-                a.airspeed_m_s,
-                timeout_s=self._wall_timeout_s(v),
-                retries=self.config.command_retries,
-            )
-        )
+        err = await self._outcome(v.change_speed(a.airspeed_m_s, **self._command(v)))
         self._feed(act.SpeedCommanded(a.vehicle_id, a.airspeed_m_s, a.reason, a.decided_s, err))
 
     async def _set_mode(self, a: act.SetMode) -> str | None:
         v = self.vehicles[a.vehicle_id]
-        err = await self._outcome(
-            v.set_mode(
-                a.mode, timeout_s=self._wall_timeout_s(v), retries=self.config.command_retries
-            )
-        )
+        err = await self._outcome(v.set_mode(a.mode, **self._command(v)))
         r = self._team().abort_done(a.vehicle_id, a.mode, err, self.now_s())
         self._publish(r)
         self._checkpoint(True)
@@ -505,8 +517,7 @@ class FlightRunner:
             y=round(a.lon_deg * 1e7),
             z=a.alt_amsl_m,
             target_component=v.component_id,
-            timeout_s=self._wall_timeout_s(v),
-            retries=self.config.command_retries,
+            **self._command(v),
         )
 
     async def _hold(self, a: act.Hold) -> None:
@@ -517,9 +528,8 @@ class FlightRunner:
         """The item to go on from (MISSION_SET_CURRENT while in GUIDED), then AUTO: ArduPlane
         resumes its mission at the current item (AP_Mission::resume)."""
         v = self.vehicles[a.vehicle_id]
-        timeout, retries = self._wall_timeout_s(v), self.config.command_retries
-        await v.set_current_item(a.seq, timeout_s=timeout, retries=retries)
-        await v.set_mode("AUTO", timeout_s=timeout, retries=retries)
+        await v.set_current_item(a.seq, **self._command(v))
+        await v.set_mode("AUTO", **self._command(v))
 
     async def _resume(self, a: act.Resume) -> None:
         err = await self._outcome(self._auto_at(a))

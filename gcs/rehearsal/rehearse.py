@@ -43,7 +43,7 @@ from gcs.mavlink.link import Link
 from gcs.mavlink.vehicle import Vehicle
 from gcs.rehearsal.truth import TruthSample, closest_approach, min_separation, read_truth
 from gcs.service.fleet import Fleet
-from gcs.service.stubs import StubProcess
+from gcs.service.stubs import StubProcess, follow_lockstep
 from gcs.store.repository import FlightKeeper, Store
 from planner.deconflict import separation
 from planner.plan import build_terrain
@@ -113,6 +113,12 @@ class RehearsalOptions:
     fleet: Fleet | None = None
     """Take the ``connect`` vehicles from this fleet (its links, kept open; a vehicle already
     in another flight is refused, naming it and that flight) instead of opening links."""
+    lockstep: bool = True
+    """The rehearsal's own stub waits for the coordinator (:mod:`sitl_stub.lockstep`): a busy
+    machine slows the flight instead of delaying the coordinator's answers in it."""
+    lockstep_file: Path | None = None
+    """With ``connect``: the lock-step file of the simulator flown (``sitl_stub --lockstep
+    FILE``): its pace clock is the mission clock's, and it waits for this coordinator."""
     db_url: str | None = None
     """Keep the flight in this database (SQLAlchemy URL) as it happens: scenario, flight and
     its state, every event, every mission uploaded, the checkpoint a restart resumes from."""
@@ -310,6 +316,7 @@ async def _rehearse(
             )
     truth_path: Path | None = None
     stub: StubProcess | None = None
+    pacer: asyncio.Task[None] | None = None
     tmp = tempfile.TemporaryDirectory(prefix="tcgcs-rehearse-")
     try:
         mission_start: float | None = None
@@ -323,14 +330,20 @@ async def _rehearse(
             conns = list(opts.connect)
             sysids: list[int | None] = [None] * len(conns)
             truth_path = opts.truth
+            if opts.lockstep_file is not None:
+                pacer = follow_lockstep(opts.lockstep_file, clock)
         else:
             truth_path = opts.truth or Path(tmp.name) / "truth.jsonl"
             stub_start = time.time()
+            args = stub_args(opts, coord, truth_path, stub_start)
+            pace_path = Path(tmp.name) / "pace"
+            if opts.lockstep:
+                args += ["--lockstep", str(pace_path)]
             stub = await StubProcess.start(
-                len(opts.scenario.vehicles),
-                stub_args(opts, coord, truth_path, stub_start),
-                control=bool(opts.blackouts),
+                len(opts.scenario.vehicles), args, control=bool(opts.blackouts)
             )
+            if opts.lockstep:
+                pacer = follow_lockstep(pace_path, clock)
             conns = stub.connections
             sysids = [i + 1 for i in range(len(conns))]
         async with contextlib.AsyncExitStack() as stack:
@@ -374,6 +387,9 @@ async def _rehearse(
                 for task in tasks:
                     task.cancel()
                 await coord.close()
+        if pacer is not None:
+            pacer.cancel()
+            pacer = None
         if stub is not None:
             await stub.stop()
             stub = None
@@ -384,6 +400,8 @@ async def _rehearse(
     finally:
         printed.close()  # the printer drains what is queued, then ends
         await printer
+        if pacer is not None:
+            pacer.cancel()
         if stub is not None:
             await stub.stop()
         tmp.cleanup()

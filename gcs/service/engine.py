@@ -42,7 +42,7 @@ from gcs.rehearsal.rehearse import RehearsalOptions, flight_record, stub_args
 from gcs.rehearsal.report import write_report
 from gcs.service.fleet import Fleet, FleetVehicle, VehicleBusy
 from gcs.service.mapview import flight_map, terrain_png
-from gcs.service.stubs import StubProcess
+from gcs.service.stubs import StubProcess, follow_lockstep
 from gcs.store.repository import FlightKeeper, Store, StoreNotFound
 from planner.errors import InfeasibleError, PlannerError
 from planner.missionfile import to_qgc_plan, to_wpl
@@ -137,6 +137,11 @@ def parse_scenario_text(body: str, media_type: str) -> Scenario:
         ) from None
 
 
+LOCKSTEP_FILE = "pace"
+"""A flight's bundled simulator keeps its lock-step file here, beside the flight's other
+files (``sitl_stub --lockstep``): a service restarted on the flight follows it again."""
+
+
 @dataclass
 class Job:
     """Long work (a schedule): polled until it has succeeded or failed."""
@@ -214,6 +219,8 @@ class FlightHandle:
     rehearsal: Rehearsal | None = None
     stub: StubProcess | None = None
     truth_path: Path | None = None
+    pacer: asyncio.Task[None] | None = None
+    """Lock step with the flight's bundled simulator (:func:`follow_lockstep`)."""
     upload_task: asyncio.Task[None] | None = None
     task: asyncio.Task[None] | None = None
     keeper: FlightKeeper | None = None
@@ -471,6 +478,7 @@ class Engine:
         )
         stub: StubProcess | None = None
         truth: Path | None = None
+        pacer: asyncio.Task[None] | None = None
         flight_dir = self.data_dir / "flights" / fid
         if vehicles is None:
             if rehearsal is None:
@@ -478,9 +486,11 @@ class Engine:
             flight_dir.mkdir(parents=True, exist_ok=True)
             truth = flight_dir / "truth.jsonl"
             opts = self._options(entry, rehearsal, flight_dir, None)
+            pace = flight_dir / LOCKSTEP_FILE
             stub = await self.fleet.start_stubs(
-                len(ids), stub_args(opts, runner, truth, time.time())
+                len(ids), [*stub_args(opts, runner, truth, time.time()), "--lockstep", str(pace)]
             )
+            pacer = follow_lockstep(pace, clock)
             conns = dict(zip(ids, stub.connections, strict=True))
             sysids: list[int | None] = list(range(1, len(ids) + 1))
         else:
@@ -505,6 +515,7 @@ class Engine:
             rehearsal=rehearsal,
             stub=stub,
             truth_path=truth,
+            pacer=pacer,
         )
         for h in held:
             if h.connection not in self.vehicle_ids.values():
@@ -539,7 +550,8 @@ class Engine:
             row = self.store.flight(fid)
             events = self.store.events(fid)
             bus = EventBus(first_seq=(events[-1].seq if events else 0) + 1)
-            runner = FlightRunner.resume(blob, MissionClock(), bus=bus, events=events)
+            clock = MissionClock()
+            runner = FlightRunner.resume(blob, clock, bus=bus, events=events)
             team = runner.team
             assert team is not None
             entry = PlannedSchedule(
@@ -552,6 +564,9 @@ class Engine:
             handle = FlightHandle(
                 fid, entry, runner, {}, conns, truth_path=truth if truth.exists() else None
             )
+            if (flight_dir / LOCKSTEP_FILE).exists():  # its bundled simulator, still flying
+                with contextlib.suppress(OSError, ValueError):
+                    handle.pacer = follow_lockstep(flight_dir / LOCKSTEP_FILE, clock)
             self.flights[fid] = handle
             sysids = [row.vehicles[v.id][2] for v in team.scenario.vehicles]
             handle.task = self._spawn(self._resume(handle, sysids))
@@ -573,6 +588,8 @@ class Engine:
             await runner.reconcile()
         except (GcsError, TimeoutError, OSError, ValueError) as err:
             runner.fail(f"not resumed after a restart: {err}")
+            if handle.pacer is not None:
+                handle.pacer.cancel()
             await self._stop_writers(handle)
             self.fleet.release(handle.id)
             handle.task = None
@@ -706,6 +723,8 @@ class Engine:
             log.exception("flight %s: record or report failed", handle.id)
         await self._stop_writers(handle)
         self.fleet.release(handle.id)
+        if handle.pacer is not None:
+            handle.pacer.cancel()
         await self._stop_simulator(handle)
 
     async def _stop_simulator(self, handle: FlightHandle) -> None:

@@ -15,10 +15,13 @@ import subprocess
 import sys
 from collections.abc import Sequence
 from dataclasses import dataclass
+from pathlib import Path
 
+from gcs.coordination.missionclock import MissionClock
 from gcs.errors import GcsError
+from sitl_stub.lockstep import Lockstep
 
-__all__ = ["IDLE_EXIT_S", "StubProcess", "free_tcp_base"]
+__all__ = ["IDLE_EXIT_S", "StubProcess", "follow_lockstep", "free_tcp_base"]
 
 IDLE_EXIT_S = 120.0
 """A bundled simulator with no client for this long (wall s) stops: its ground station died
@@ -117,3 +120,23 @@ class StubProcess:
             except TimeoutError:
                 proc.kill()
                 await proc.wait()
+
+
+def follow_lockstep(path: Path, clock: MissionClock) -> asyncio.Task[None]:
+    """Lock step with the simulator that keeps ``path`` (``sitl_stub --lockstep``): the
+    mission clock runs on its pace clock, and a task acknowledges the flight as the event
+    loop turns, every millisecond of wall time, so the simulator waits for this process
+    (cancel the task to let it run on by itself)."""
+    pace = Lockstep(path)
+    clock.follow(pace.pace_s)
+    return asyncio.create_task(_acknowledge(pace))
+
+
+async def _acknowledge(pace: Lockstep) -> None:
+    try:
+        while True:
+            pace.acknowledge()
+            await asyncio.sleep(0.001)
+    finally:
+        pace.release()
+        pace.close()

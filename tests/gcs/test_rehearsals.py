@@ -243,8 +243,8 @@ async def test_connect_rehearsal_flies_separately_started_vehicles_one_behind_ma
 ) -> None:
     base = free_port_base(3)
     udp = free_udp_port()
-    truth = tmp_path / "truth.jsonl"
-    proc = await start_stub(PAPER, base, truth)
+    truth, pace = tmp_path / "truth.jsonl", tmp_path / "pace"
+    proc = await start_stub(PAPER, base, truth, "--lockstep", str(pace))
     try:
         async with mavproxy_router(
             f"tcp:127.0.0.1:{base}", f"udpout:127.0.0.1:{udp}", tmp_path, "--streamrate=-1"
@@ -259,6 +259,7 @@ async def test_connect_rehearsal_flies_separately_started_vehicles_one_behind_ma
                         f"tcp:127.0.0.1:{base + 20}",
                     ],
                     truth=truth,
+                    lockstep_file=pace,  # the stub waits for the coordinator, not for MAVProxy
                     seed=1,
                     quiet=True,
                 )

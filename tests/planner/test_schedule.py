@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import math
 import pickle
-from dataclasses import replace
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 from planner.atmosphere import eas2tas, mean_eas2tas
-from planner.deconflict import separation
+from planner.deconflict import loiter_conflict, separation
 from planner.errors import ArrivalTimeError, InfeasibleError, SeparationError
 from planner.plan import build_world, plan
 from planner.popup import replay_popups
@@ -362,6 +362,58 @@ def test_a_surplus_no_buffer_absorbs_gets_turns_on_the_path_clear_of_threats_and
         terrain=world.terrain,
     )  # fmt: skip
     assert flat.loiters[0].s_m < lo.s_m
+
+
+@dataclass(frozen=True)
+class _Parked:
+    """A team member at one point the whole time (what :class:`TeamTracks` reads of a
+    schedule)."""
+
+    vehicle_id: str
+    east_m: float
+    north_m: float
+    speed_max_m_s: float = 30.0
+    takeoff_s: float = 0.0
+    arrival_s: float = 5_000.0
+
+    def position_at(self, t_s: float) -> tuple[float, float] | None:
+        return (self.east_m, self.north_m) if self.takeoff_s <= t_s <= self.arrival_s else None
+
+
+def test_loiter_turns_in_flight_keep_the_separation_from_the_team() -> None:
+    """Turns whose circle would come within the separation of where another team member will
+    be go elsewhere on the path (checked here from the circle's geometry); with nowhere left,
+    the re-time is refused and says why."""
+    s, s0, target, world = _airborne_surplus(small_scenario())
+    zones = list(world.threats)
+    kw: dict[str, Any] = {
+        "now_s": 1_000.0, "s_m": s0, "speed_m_s": 20.0, "target_s": target, "threats": zones,
+        "terrain": world.terrain,
+    }  # fmt: skip
+    alone, _ = retime_vehicle(s, "A", **kw)
+    (first,) = alone.loiters
+    # Someone at the far side of that circle.
+    ux = first.centre_east_m - first.entry_east_m
+    uy = first.centre_north_m - first.entry_north_m
+    parked = _Parked("X", first.centre_east_m + ux, first.centre_north_m + uy)
+    crowded = replace(s, vehicles=(*s.vehicles, parked))  # type: ignore[arg-type]
+    required = s.scenario.separation_m
+    assert loiter_conflict(alone, [parked], required, 1_000.0) is not None
+    unseparated, _ = retime_vehicle(crowded, "A", **kw)
+    assert unseparated.loiters[0].s_m == first.s_m  # without separate, the same place
+    vs, _ = retime_vehicle(crowded, "A", separate=True, **kw)
+    (lo,) = vs.loiters
+    gap = math.hypot(lo.centre_east_m - parked.east_m, lo.centre_north_m - parked.north_m)
+    assert gap - lo.radius_m >= required
+    assert loiter_conflict(vs, [parked], required, 1_000.0) is None
+    assert vs.arrival_s == pytest.approx(target, abs=0.5)
+    # Members every 500 m along the path: no circle tangent to it keeps 300 m from them all.
+    poses = [vs.path.pose_at(float(d)) for d in np.arange(0.0, vs.path.length_m, 500.0)]
+    everywhere = [_Parked(f"X{k}", p.east_m, p.north_m) for k, p in enumerate(poses)]
+    jammed = replace(s, vehicles=(*s.vehicles, *everywhere))  # type: ignore[arg-type]
+    with pytest.raises(InfeasibleError, match=r"A.*team's tracks left out") as info:
+        retime_vehicle(jammed, "A", separate=True, **kw)
+    assert info.value.vehicle == "A"
 
 
 class _Wall:
