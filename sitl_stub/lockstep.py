@@ -6,9 +6,10 @@ planning thread holding the interpreter) answers seconds of flight late, and a r
 verdict then depends on how busy the machine was. In lock step the simulator and the ground
 station keep one clock, the *pace clock*: the simulator's flight time divided by its speed-up.
 
-- the simulator publishes it after each batch of steps (:meth:`Lockstep.publish`); the
-  ground station reads it as its monotonic clock (:meth:`Lockstep.pace_s`), so what it
-  measures between two messages is flight time, however late it read them;
+- the simulator publishes it after each step, before that step's packets go out
+  (:meth:`Lockstep.publish`); the ground station reads it as its monotonic clock
+  (:meth:`Lockstep.pace_s`), so what it measures between two messages is flight time,
+  however late it read them;
 - the ground station acknowledges, while its event loop turns, the pace time it has seen
   (:meth:`Lockstep.acknowledge`), and the simulator steps no further than ``lead_s`` of pace
   time beyond that (:meth:`Lockstep.limit_s`): the ground station is never more than the

@@ -359,11 +359,11 @@ class TeamServer:
         clock.start(loop.time())
         while True:
             due = clock.steps_due(loop.time())
-            if self.lockstep is not None:
-                limit_s = self.lockstep.limit_s(self.lockstep_lead_s)
+            paced = self.lockstep
+            if paced is not None:
+                limit_s = paced.limit_s(self.lockstep_lead_s)
                 if limit_s < math.inf:
                     due = min(due, max(int((limit_s - clock.sim_time_s) / clock.step_s), 0))
-            paced = self.lockstep
             for k in range(due):
                 self.step_once()
                 if paced is not None:
@@ -374,8 +374,6 @@ class TeamServer:
                     await asyncio.sleep(0)
                 elif k % STEPS_PER_YIELD == STEPS_PER_YIELD - 1:
                     await asyncio.sleep(0)
-            if paced is not None:
-                paced.publish(clock.sim_time_s)
             now = loop.time()
             for v in self.vehicles:
                 v.tick_wall(now)
