@@ -65,6 +65,9 @@ SiteCheck = Callable[[float, float, float], bool]
 """``(centre_east_m, centre_north_m, radius_m) -> bool``: may a loiter circle go there."""
 FREE_SITE = "path"
 """The ``buffer_id`` of loiter turns on the path outside any buffer (:func:`free_loiter_site`)."""
+WINDOW_MARGIN_S = 5.0
+"""How far inside its arrival window a vehicle aims when its natural arrival is outside it (s;
+the middle of a window narrower than twice this)."""
 
 
 # --- loiter sites ----------------------------------------------------------------------
@@ -514,7 +517,10 @@ def arrival_targets(
                     f"{why}: short by {short:.1f} s",
                     vehicle=w.vehicle_id,
                 )
-            out[w.vehicle_id] = min(max(natural_s[w.vehicle_id], lo), hi)
+            # Aimed inside the window by a margin where it has room, not at its edge: an
+            # arrival a second off its aim still meets the window.
+            margin_s = min(WINDOW_MARGIN_S, max(hi - lo, 0.0) / 2.0)
+            out[w.vehicle_id] = min(max(natural_s[w.vehicle_id], lo + margin_s), hi - margin_s)
         return out, None, "each vehicle within its own arrival window"
     offsets = scenario.arrival_offsets_s()
     ref, reason = team_arrival(windows, requested_s, offsets_s=offsets)

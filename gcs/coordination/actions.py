@@ -171,8 +171,18 @@ class Report:
 
 
 @dataclass(frozen=True)
+class Arm:
+    """Arm a vehicle on the ground ahead of its takeoff time, so that :class:`Launch` has only
+    AUTO left to send (ArduPlane waits on the ground, armed, until AUTO starts the takeoff).
+    Best effort: the launch arms a vehicle that does not report itself armed."""
+
+    vehicle_id: str
+
+
+@dataclass(frozen=True)
 class Launch:
-    """Arm the vehicle and put it in AUTO (only AUTO when ``airborne``: it is flying)."""
+    """Arm the vehicle and put it in AUTO (only AUTO when ``airborne``: it is flying; or when
+    it reports itself armed already, after :class:`Arm`)."""
 
     vehicle_id: str
     airborne: bool = False
@@ -327,4 +337,4 @@ Input = (
     | Resumed
     | PlanningLead
 )
-Action = Report | Launch | CommandSpeed | Upload | SetMode | Hold | Resume | Stop | Compute
+Action = Report | Arm | Launch | CommandSpeed | Upload | SetMode | Hold | Resume | Stop | Compute

@@ -24,6 +24,10 @@ class FlightConfig:
     """Loiter turns leave the speed this far above the minimum (room to slow down after)."""
     late_margin_s: float = 2.0
     """A late vehicle moves the team time to its earliest arrival plus this."""
+    arm_lead_s: float = 10.0
+    """A vehicle on the ground is armed this long before its takeoff time: at the takeoff
+    time only the AUTO command's round trip is left (on a lossy link each retry of a command
+    is a second of flight lost)."""
     min_lead_s: float = 60.0
     """Mission changes start at a waypoint at least this far ahead (more at high clock rates:
     the planning and upload wall time scaled by the rate)."""

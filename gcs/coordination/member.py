@@ -88,6 +88,8 @@ class Member:
     target_s: float
     takeoff_s: float
     phase: Phase = "ground"
+    arm_sent: bool = False
+    """Armed ahead of the takeoff time (:class:`gcs.coordination.actions.Arm` sent)."""
     launched_s: float | None = None
     """Mission time it was armed and put in AUTO."""
     level_m_s: float | None = None

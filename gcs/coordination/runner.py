@@ -100,7 +100,11 @@ _AT_ONCE = frozenset(
 
 
 PACED_TIMEOUT_FLIGHT_S = 1.0
-"""On a pace clock, a command's reply is awaited at least this long in flight time."""
+"""On a pace clock, a command's reply is awaited at least this long in flight time..."""
+PACED_TIMEOUT_MAX_FLIGHT_S = 2.0
+"""...and at most this long, whatever the round trips measured in wall time (a busy machine
+makes them long in wall time, not in flight time: with five of them as the timeout a lost
+command cost up to 47 s of flight at 200x, a takeoff that late)."""
 MIN_TIMEOUT_WALL_S = 0.004
 """...and at least this long in wall time (a loopback round trip with room to spare)."""
 MIN_COMMAND_WALL_S = 0.4
@@ -409,8 +413,12 @@ class FlightRunner:
         clock (lock step with a simulator) it is at least a second of flight rather than 50 ms
         of wall time, which at 200x is 10 s of flight flown on a lost command."""
         rtt = vehicle.link.counters.rtt_s
-        floor = PACED_TIMEOUT_FLIGHT_S / self.clock.rate if self.clock.paced else 0.05
-        floor = max(floor, MIN_TIMEOUT_WALL_S)
+        if self.clock.paced:
+            rate = self.clock.rate
+            floor = max(PACED_TIMEOUT_FLIGHT_S / rate, MIN_TIMEOUT_WALL_S)
+            cap = max(PACED_TIMEOUT_MAX_FLIGHT_S / rate, floor)
+            return float(min(cap, max(floor, 5.0 * (rtt or 0.0))))
+        floor = max(0.05, MIN_TIMEOUT_WALL_S)
         return float(min(1.5, max(floor, 5.0 * rtt))) if rtt else max(floor, 0.25)
 
     def _command(self, vehicle: Vehicle) -> dict[str, Any]:
@@ -435,6 +443,8 @@ class FlightRunner:
                     self._publish(a)
                     changed = True
                     at_once = at_once or a.kind in _AT_ONCE
+                case act.Arm():
+                    self._spawn(self._arm_ahead(a))
                 case act.Launch():
                     self._spawn(self._launch(a))
                 case act.CommandSpeed():
@@ -484,9 +494,16 @@ class FlightRunner:
     async def _auto(self, v: Vehicle) -> None:
         await v.set_mode("AUTO", **self._command(v))
 
+    async def _arm_ahead(self, a: act.Arm) -> None:
+        v = self.vehicles[a.vehicle_id]
+        err = await self._outcome(v.arm(**self._command(v)))
+        if err is not None:
+            log.info("%s: arming ahead of takeoff failed (%s); the launch arms it", v, err)
+
     async def _launch(self, a: act.Launch) -> None:
         v = self.vehicles[a.vehicle_id]
-        err = await self._outcome(self._auto(v) if a.airborne else self._arm_auto(v))
+        armed = v.state.armed is True
+        err = await self._outcome(self._auto(v) if a.airborne or armed else self._arm_auto(v))
         self._feed(act.Launched(a.vehicle_id, err))
 
     async def _command_speed(self, a: act.CommandSpeed) -> None:
@@ -677,7 +694,8 @@ class FlightRunner:
             self._check_clocks()
             if self._checkpoint_dirty:
                 self._checkpoint(False)
-            await self.clock.sleep(1.0)
+            now = self.now_s()
+            await self.clock.sleep(min(1.0, self._team().next_due_s(now) - now))
 
     def _check_clocks(self) -> None:
         """Say which vehicles keep a UTC of their own (they are flown on the team's)."""

@@ -15,8 +15,9 @@ with three unknowns: the airspeed scale ``k`` and the wind error ``dw`` (east, n
 found by least squares over the recent fixes (exponential forgetting with
 ``time_constant_s``), regularised towards ``k = 1, dw = 0`` so that a straight leg, which
 cannot separate ``k`` from the wind along it, still predicts that leg right. Fixes taken while
-the airspeed is settling after a change, or while climbing or descending (the horizontal
-speed is then ``T cos(gamma)``), are not used.
+the airspeed is settling after a change, or while climbing or descending steeply, are not used;
+on a gentler climb or descent (a final approach sinking to its goal) the horizontal speed is
+``T cos(gamma)``.
 
 Sans-IO: pure arithmetic over the samples given to :meth:`SpeedBiasEstimator.update`.
 """
@@ -47,8 +48,9 @@ class BiasConfig:
     """The wind correction is kept within this magnitude."""
     settle_m_s: float = 0.6
     """A fix counts only when the reported airspeed is this close to the commanded one."""
-    max_climb_m_s: float = 1.0
-    """A fix counts only when climbing or sinking slower than this."""
+    max_climb_m_s: float = 3.0
+    """A fix counts only when climbing or sinking slower than this (steeper, the autopilot
+    trades airspeed for height while its energy controller settles)."""
 
 
 class SpeedBiasEstimator:
@@ -118,7 +120,10 @@ class SpeedBiasEstimator:
             self._vec *= decay
         self._last_t_s = t_s
         self._ref_tas_m_s = predicted_tas_m_s
-        tas = predicted_tas_m_s
+        # Along a climb or a descent the horizontal speed is the true airspeed times the cosine
+        # of the flight path angle.
+        climb = climb_m_s or 0.0
+        tas = math.sqrt(max(predicted_tas_m_s**2 - climb**2, 0.0))
         rows = np.array(
             [[tas * math.sin(heading_rad), 1.0, 0.0], [tas * math.cos(heading_rad), 0.0, 1.0]]
         )

@@ -182,6 +182,19 @@ class TeamController(ZoneGuard, TeamTime):
     def finished(self) -> bool:
         return self.stopped is not None or all(m.over for m in self.members.values())
 
+    def next_due_s(self, now_s: float) -> float:
+        """The next mission time after ``now_s`` at which a tick has work (a vehicle to arm or
+        to launch); inf when none. The runner ticks then rather than up to a second late."""
+        lead_s = self.config.arm_lead_s
+        times = [
+            t
+            for m in self.members.values()
+            if m.phase == "ground"
+            for t in (m.takeoff_s, m.takeoff_s - lead_s)
+            if t > now_s
+        ]
+        return min(times, default=math.inf)
+
     def _t(self, utc_s: float) -> float:
         assert self.start_utc_s is not None, "the mission has not started"
         return utc_s - self.start_utc_s
@@ -268,6 +281,10 @@ class TeamController(ZoneGuard, TeamTime):
             out.append(act.Stop(self.stopped))
             return
         for m in self.members.values():
+            arm_due = now >= m.takeoff_s - self.config.arm_lead_s
+            if m.phase == "ground" and arm_due and not (m.schedule.airborne_start or m.arm_sent):
+                m.arm_sent = True
+                out.append(act.Arm(m.vehicle_id))
             if m.phase == "ground" and now >= m.takeoff_s:
                 m.phase = "takeoff"
                 out.append(act.Launch(m.vehicle_id, m.schedule.airborne_start))

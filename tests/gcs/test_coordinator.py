@@ -7,6 +7,7 @@ from __future__ import annotations
 import re
 from dataclasses import replace
 from pathlib import Path
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
@@ -264,3 +265,23 @@ def test_popup_anchor_time_is_when_the_vehicle_reaches_the_splice_point(
         assert first_new.t_start_s == pytest.approx(t_p + ahead_s)
         _, s_then, _ = timed.schedule.vehicle(vid).state_at(t_p + ahead_s)
         assert s_then == pytest.approx(s_m, abs=1e-3)
+
+
+@pytest.mark.parametrize("rtt_wall_s", [None, 0.0005, 0.05, 0.3])
+def test_on_a_pace_clock_a_command_waits_one_to_two_seconds_of_flight_whatever_the_round_trip(
+    rtt_wall_s: float | None,
+) -> None:
+    """In lock step a busy machine makes round trips long in wall time, not in flight time:
+    five measured round trips as the reply timeout cost up to 47 s of flight at 200x when a
+    launch's command was lost. The timeout stays within 1-2 s of flight; the retries cover
+    0.4 s of wall time, so a busy machine does not give a command up."""
+    clock = MissionClock()
+    coord = FlightRunner(load_scenario(PAPER), clock)
+    clock.follow(lambda: 0.0)
+    clock._rate = 200.0  # what the simulator's SYSTEM_TIME shows at 200x
+    counters = SimpleNamespace(rtt_s=rtt_wall_s)
+    vehicle = SimpleNamespace(link=SimpleNamespace(counters=counters))
+    options = coord._command(vehicle)  # type: ignore[arg-type]
+    flight_s = options["timeout_s"] * 200.0
+    assert 1.0 - 1e-9 <= flight_s <= 2.0 + 1e-9
+    assert options["timeout_s"] * (options["retries"] + 1) >= 0.4

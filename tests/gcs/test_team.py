@@ -124,6 +124,15 @@ def test_vehicles_launch_at_their_takeoff_times_and_a_failed_launch_is_tried_aga
 ) -> None:
     takeoffs = {vid: m.takeoff_s for vid, m in team.members.items()}
     first = min(takeoffs, key=lambda v: takeoffs[v])
+    # Armed ahead of its takeoff time (once), so the launch has only AUTO left to send; the
+    # runner is told when to tick for each.
+    lead_s = FlightConfig().arm_lead_s
+    assert team.next_due_s(takeoffs[first] - lead_s - 5.0) == takeoffs[first] - lead_s
+    due = sorted(t for v in takeoffs.values() for t in (v, v - lead_s))
+    assert team.next_due_s(due[0]) == due[1]
+    assert of(team.handle(act.Tick(), takeoffs[first] - lead_s - 0.1), act.Arm) == []
+    assert of(team.handle(act.Tick(), takeoffs[first] - lead_s), act.Arm) == [act.Arm(first)]
+    assert of(team.handle(act.Tick(), takeoffs[first] - 0.1), act.Arm) == []
     assert of(team.handle(act.Tick(), takeoffs[first] - 0.1), act.Launch) == []
     out = team.handle(act.Tick(), takeoffs[first])
     assert of(out, act.Launch) == [act.Launch(first)]

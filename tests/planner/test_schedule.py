@@ -16,7 +16,13 @@ from planner.deconflict import loiter_conflict, separation
 from planner.errors import ArrivalTimeError, InfeasibleError, SeparationError
 from planner.plan import build_world, plan
 from planner.popup import replay_popups
-from planner.retime import build_schedule, check_arrival, check_feasible, retime_vehicle
+from planner.retime import (
+    WINDOW_MARGIN_S,
+    build_schedule,
+    check_arrival,
+    check_feasible,
+    retime_vehicle,
+)
 from planner.scenario import load_scenario, parse_scenario
 from planner.schedule import Schedule
 from tests.planner.conftest import small_scenario
@@ -135,6 +141,18 @@ def test_windows_arrivals_stay_in_their_windows() -> None:
     s = _small(arrival={"kind": "windows", "windows": windows})
     assert 2000 - 0.1 <= s.vehicle("A").arrival_s <= 2300 + 0.1
     assert 1900 - 0.1 <= s.vehicle("B").arrival_s <= 2000 + 0.1
+
+
+def test_a_vehicle_whose_natural_arrival_is_outside_its_window_aims_inside_it_by_a_margin() -> None:
+    # Both would arrive before their windows at cruise speed (A at about 2167 s, B at about
+    # 1496 s): aimed at the earliest edge, any second early in flight would miss the window.
+    windows = [
+        {"vehicle": "A", "earliest_s": 2200, "latest_s": 2500},
+        {"vehicle": "B", "earliest_s": 1900, "latest_s": 1906},
+    ]
+    s = _small(arrival={"kind": "windows", "windows": windows})
+    assert s.vehicle("A").arrival_s == pytest.approx(2200 + WINDOW_MARGIN_S, abs=0.1)
+    assert s.vehicle("B").arrival_s == pytest.approx(1903, abs=0.1)  # the narrow window's middle
 
 
 def test_unreachable_window_names_vehicle_and_shortfall() -> None:
