@@ -236,8 +236,12 @@ class TeamController(ZoneGuard, TeamTime):
                 self.loiter_lead_s = max(
                     self.config.min_lead_s, lead if loiter_lead is None else loiter_lead
                 )
-        # A fix changes only its own vehicle's state; anything else may change any.
-        self._states(out, now_s, event.vehicle_id if isinstance(event, act.Fix) else None)
+        # A fix changes only its own vehicle's state, and so does a heartbeat that changed
+        # nothing else (a lost vehicle may re-time the rest); anything else may change any.
+        only = None
+        if isinstance(event, act.Fix) or (isinstance(event, act.Heartbeat) and not out):
+            only = event.vehicle_id
+        self._states(out, now_s, only)
         for a in out:
             if isinstance(a, act.Upload):
                 self.pending[a.vehicle_id] = a

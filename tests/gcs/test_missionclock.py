@@ -447,3 +447,44 @@ def test_an_offset_within_the_reception_jitter_at_the_rate_is_not_applied(
         assert clock.offset_s(3) == pytest.approx(want, abs=0.05), (rate, off)
         utc = clock.utc_of_boot(3, 50.0)
         assert utc == pytest.approx(UTC0 + 50.0 + off - want, abs=0.05)
+
+
+def _team_utc_by_definition(clock: MissionClock, mono_s: float) -> float:
+    """The team's UTC from the clock's state, recomputed from the reports each time: the
+    lower median over the vehicles of the latest extrapolation of each one's newest reports,
+    less its applied offset."""
+    rate = clock.rate
+    estimates = []
+    for vc in clock._vehicles.values():
+        if not (vc.has_utc and vc.recent):
+            continue
+        newest = list(vc.recent)[-ANCHOR_OBSERVATIONS:]
+        own = max(o.utc_s + rate * (mono_s - o.rx_mono_s) for o in newest)
+        estimates.append(own - clock._applied(vc))
+    estimates.sort()
+    return estimates[(len(estimates) - 1) // 2]
+
+
+def test_the_team_utc_read_between_reports_is_what_the_reports_say_at_every_read() -> None:
+    """The team's UTC is read at every fix and recomputed only when a report comes: after any
+    interleaving of reports (delayed, from vehicles with their own offsets, one reset) and
+    reads, it equals the definition recomputed from scratch."""
+    rng = np.random.default_rng(7)
+    mono = FakeMono()
+    clock = MissionClock(mono, window=8)
+    offsets = {1: 0.0, 2: 7.0, 3: -4.0, 4: 0.3}
+    rate = 200.0
+    for step in range(600):
+        mono.t += float(rng.uniform(0.0, 0.004))
+        sid = int(rng.integers(1, 5))
+        utc_sent = UTC0 + rate * (mono.t - 1000.0) + offsets[sid]
+        if step == 300:
+            utc_sent -= 50.0  # vehicle sid's clock set back: it is reset
+        delay_s = float(rng.exponential(0.001))
+        clock.observe(sid, utc_sent - rate * delay_s, 10.0 + mono.t, mono.t)
+        for _ in range(int(rng.integers(0, 4))):
+            mono.t += float(rng.uniform(0.0, 0.001))
+            assert clock._team_at(mono.t) == pytest.approx(
+                _team_utc_by_definition(clock, mono.t), abs=1e-6
+            )
+    assert clock.resets == 1
