@@ -23,7 +23,13 @@ import numpy as np
 from numpy.typing import NDArray
 
 from planner.climbout import climb_out
-from planner.deconflict import Separation, TeamTracks, check_separation, separation
+from planner.deconflict import (
+    Separation,
+    TeamSamples,
+    TeamTracks,
+    check_separation,
+    separation,
+)
 from planner.dubins import Pose
 from planner.errors import ArrivalTimeError, InfeasibleError
 from planner.flightpath import FlightPath
@@ -51,6 +57,7 @@ from planner.timing import (
     SpeedLimits,
     Timing,
     flyable_loiter_radius_m,
+    speed_grid,
     takeoff_time_s,
     team_arrival,
     team_window,
@@ -676,6 +683,15 @@ def build_schedule(
         )
         timed.append(r.schedule)
         adjustments.extend(r.adjustments)
+    separated = _separate(scenario, base, timed, targets, step_m_s, threats)
+    for vid, (retimed, why) in separated.items():
+        timed = [retimed.schedule if x.vehicle_id == vid else x for x in timed]
+        said = [
+            replace(a, reason=f"{a.reason}; {why}") if a.strategy == "takeoff_delay" else a
+            for a in retimed.adjustments
+        ]
+        adjustments = [a for a in adjustments if a.vehicle != vid] + said
+        events.append(Event(0.0, "separation", why))
     stages.append(speed_stage("takeoff and speed adjustment", 0.0, timed))
     return Schedule(
         scenario,
@@ -690,6 +706,112 @@ def build_schedule(
         scenario.arrival_offsets_s(),
         bounds,
     )
+
+
+SEPARATION_SPEED_TRIES = 8
+"""Cruise speeds tried per vehicle for separation, nearest its own first (at 0.5 m/s steps,
+within 2 m/s: over 50 km of path that moves a passage by minutes)."""
+SEPARATION_CHECK_MARGIN = 1.1
+"""A timing tried for separation is kept when it comes no closer than this many ``d_s`` to
+the rest on the sampling grid (whose distances may be up to a tenth of ``d_s`` too long)."""
+
+
+def _separate(
+    scenario: Scenario,
+    base: Sequence[VehicleSchedule],
+    timed: Sequence[VehicleSchedule],
+    targets: Mapping[str, float],
+    step_m_s: float,
+    threats: Sequence[ThreatZone],
+) -> dict[str, tuple[Retimed, str]]:
+    """Pairs that come closer than ``separation_m``, separated in time where one of them
+    starts on the ground: it flies another cruise speed, taking off earlier or later for the
+    same arrival, so that it passes the place where they meet at another time (eq. 1 by the
+    takeoff staggering of eq. 5). Speeds are tried nearest its own cruise first, each against
+    the whole team, and the first that keeps the separation from everyone is kept.
+
+    Returns the re-timed vehicles and, for each, what was done and why. A pair no speed
+    separates is left as it is (:func:`check_feasible` refuses it, naming the pair).
+    """
+    required = scenario.separation_m
+    if len(timed) < 2:
+        return {}
+    conflicts = sorted(separation(timed, required).conflicts, key=lambda p: p.distance_m)
+    if not conflicts:
+        return {}
+    samples = TeamSamples(timed, required)
+    index = {x.vehicle_id: k for k, x in enumerate(timed)}
+    out: dict[str, tuple[Retimed, str]] = {}
+    for pair in conflicts:
+        near, _ = samples.nearest(timed[index[pair.a]])
+        if near >= SEPARATION_CHECK_MARGIN * required:
+            continue  # separated already by an earlier pair's re-timing
+        for vid, other in ((pair.b, pair.a), (pair.a, pair.b)):
+            if not _can_shift(scenario, timed[index[vid]], pair.time_s):
+                continue
+            found = _separating_speed(
+                scenario, base[index[vid]], targets[vid], step_m_s, threats, samples
+            )
+            if found is None:
+                continue
+            retimed, cruise = found
+            v = scenario.vehicle(vid)
+            samples.replace(retimed.schedule)
+            out[vid] = (
+                retimed,
+                f"{vid} cruises at {cruise:g} m/s instead of {v.cruise_m_s:g} m/s (takeoff at "
+                f"{retimed.schedule.takeoff_s:.1f} s): it came {pair.distance_m:.0f} m from "
+                f"{other} at {pair.time_s:.0f} s, under the {required:g} m separation",
+            )
+            break
+    return out
+
+
+def _can_shift(scenario: Scenario, vs: VehicleSchedule, meet_s: float) -> bool:
+    """Whether any cruise speed moves the vehicle's passage of the place it meets another at
+    ``meet_s`` by the time a pair needs to pass ``separation_m`` apart (at their top closing
+    speed) for the same arrival: the path left after that place, flown at the slowest speed
+    rather than the fastest. Not near the goals, where two arrivals meet at the one time."""
+    left_m = vs.path.length_m - vs.state_at(meet_s)[1]
+    shift_s = left_m * (1.0 / vs.speed_min_m_s - 1.0 / vs.speed_max_m_s)
+    return shift_s >= scenario.separation_m / (2.0 * vs.speed_max_m_s)
+
+
+def _separating_speed(
+    scenario: Scenario,
+    vs: VehicleSchedule,
+    target_s: float,
+    step_m_s: float,
+    threats: Sequence[ThreatZone],
+    samples: TeamSamples,
+) -> tuple[Retimed, float] | None:
+    """The timing of a vehicle on the ground at the cruise speed nearest its own that keeps
+    the separation from the rest of the team (``samples``), and that speed; None if none."""
+    v = scenario.vehicle(vs.vehicle_id)
+    if v.airborne:
+        return None
+    levels = speed_grid(v.speed_min_m_s, v.speed_max_m_s, step_m_s)
+    tries = sorted(
+        (c for c in levels if abs(c - v.cruise_m_s) > 1e-9),
+        key=lambda c: (abs(c - v.cruise_m_s), c),
+    )
+    for cruise in tries[:SEPARATION_SPEED_TRIES]:
+        other_cruise = v.model_copy(update={"cruise_speed_m_s": cruise})
+        try:
+            r = retime_on_path(
+                scenario,
+                other_cruise,
+                vs,
+                now_s=0.0,
+                target_s=target_s,
+                step_m_s=step_m_s,
+                threats=threats,
+            )
+        except InfeasibleError:
+            continue
+        if samples.nearest(r.schedule)[0] >= SEPARATION_CHECK_MARGIN * samples.required_m:
+            return r, cruise
+    return None
 
 
 def check_arrival(schedule: Schedule) -> None:

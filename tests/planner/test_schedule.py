@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 from planner.atmosphere import eas2tas, mean_eas2tas
-from planner.deconflict import loiter_conflict, separation
+from planner.deconflict import loiter_conflict, pair_separation, separation
 from planner.errors import ArrivalTimeError, InfeasibleError, SeparationError
 from planner.plan import build_world, plan
 from planner.popup import replay_popups
@@ -288,6 +288,38 @@ def test_same_goal_is_a_separation_error_naming_pair_time_and_distance() -> None
     # The operator's override: the conflicts are returned instead.
     sep = check_feasible(s, allow_conflicts=True)
     assert [(c.a, c.b) for c in sep.conflicts] == [("A", "B")]
+
+
+def test_routes_that_cross_at_the_same_time_are_separated_by_a_takeoff_and_speed() -> None:
+    """A flies east and B north across the middle of the map, both 36 km to goals they reach
+    together at 1500 s: as timed at cruise speed they cross the middle at the same moment. One
+    of them is flown at another cruise speed, taking off earlier or later for the same
+    arrival, and the schedule says so; the pair's closest approach, searched on its own,
+    keeps d_s."""
+    data = small_scenario(threats=[], arrival={"kind": "simultaneous", "required_s": 1500})
+    a, b = data["vehicles"]
+    a["start"], a["goal"] = (
+        {"east_m": 2000, "north_m": 20000, "alt_m": 500},
+        {"east_m": 38000, "north_m": 20000, "alt_m": 500},
+    )
+    b["start"], b["goal"] = (
+        {"east_m": 20000, "north_m": 2000, "alt_m": 500},
+        {"east_m": 20000, "north_m": 38000, "alt_m": 500},
+    )
+    scenario = parse_scenario(data)
+    s = build_schedule(scenario, plan(scenario, "astar"))
+    (said,) = [e for e in s.events if e.kind == "separation"]
+    moved = said.text.split()[0]
+    assert moved in ("A", "B") and "under the 300 m separation" in said.text, said.text
+    takeoffs = {v.vehicle_id: v.takeoff_s for v in s.vehicles}
+    assert takeoffs["A"] != pytest.approx(takeoffs["B"], abs=1.0)  # staggered
+    va, vb = s.vehicles
+    step = 300.0 / (10.0 * (va.speed_max_m_s + vb.speed_max_m_s))
+    assert pair_separation(va, vb, step_s=step).distance_m >= 300.0
+    assert va.arrival_s == pytest.approx(vb.arrival_s, abs=1e-6)
+    check_feasible(s)
+    (takeoff,) = [a for a in s.adjustments if a.vehicle == moved and a.strategy == "takeoff_delay"]
+    assert takeoff.reason.endswith(said.text)  # said in flight with the takeoff
 
 
 @pytest.mark.parametrize("name", ["paper_three_uav.yaml", "paper_spaced_60s.yaml"])
