@@ -2,7 +2,8 @@
 
 For each team size: wall time of the full plan (world, grid, exact search, ACO, smoothing,
 profiles, checks), the worst and mean ACO cost ratio to the exact optimum on the same graph,
-and the peak traced memory. Run: ``.venv/bin/python bench/bench_planner.py [--sizes 3 10]``.
+and the peak traced memory. Run: ``.venv/bin/python bench/bench_planner.py [--sizes 3 10]``;
+``--workers 2`` finishes the routes in two forked processes (the same plans).
 """
 
 from __future__ import annotations
@@ -38,7 +39,7 @@ def team_scenario(n: int, seed: int = 0) -> dict[str, Any]:
     rng = np.random.default_rng(seed)
     terrain = build_terrain(parse_scenario(base))
     template = base["vehicles"][0]
-    vehicles = []
+    vehicles: list[dict[str, Any]] = []
     goals: list[tuple[float, float]] = []
     while len(vehicles) < n:
         k = len(vehicles)
@@ -64,11 +65,11 @@ def team_scenario(n: int, seed: int = 0) -> dict[str, Any]:
     return base
 
 
-def run(n: int, seed: int) -> dict[str, Any]:
+def run(n: int, seed: int, workers: int = 1) -> dict[str, Any]:
     """Plan one team (in this process) and return the figures."""
     scenario = parse_scenario(team_scenario(n, seed)) if n != 3 else load_scenario(PAPER)
     t0 = time.perf_counter()
-    result = plan(scenario, "aco", rng=np.random.default_rng(seed))
+    result = plan(scenario, "aco", rng=np.random.default_rng(seed), workers=workers)
     wall = time.perf_counter() - t0
     ratios = [r.cost / r.optimal_cost for r in result.routes]
     return {
@@ -87,14 +88,18 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__)
     parser.add_argument("--sizes", type=int, nargs="*", default=[3, 10, 30, 100])
     parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument(
+        "--workers", type=int, default=1, help="processes that finish the routes (default 1)"
+    )
     parser.add_argument("--one", type=int, help=argparse.SUPPRESS)
     args = parser.parse_args()
     if args.one is not None:
-        print(json.dumps(run(args.one, args.seed)))
+        print(json.dumps(run(args.one, args.seed, args.workers)))
         return
     print(
         f"machine: {platform.machine()}, {os.cpu_count()} cores, "
-        f"{platform.python_implementation()} {platform.python_version()}, numpy {np.__version__}"
+        f"{platform.python_implementation()} {platform.python_version()}, numpy {np.__version__}, "
+        f"{args.workers} worker(s)"
     )
     print(
         "| UAVs | wall (s) | ACO iterations | cost / optimal, max | mean "
@@ -104,7 +109,16 @@ def main() -> None:
     for n in args.sizes:
         # A fresh process per size, so peak RSS is that size's own.
         out = subprocess.run(
-            [sys.executable, __file__, "--one", str(n), "--seed", str(args.seed)],
+            [
+                sys.executable,
+                __file__,
+                "--one",
+                str(n),
+                "--seed",
+                str(args.seed),
+                "--workers",
+                str(args.workers),
+            ],
             capture_output=True,
             text=True,
             check=True,

@@ -20,14 +20,15 @@ it, stop when the integrated cost settles).
 
 from __future__ import annotations
 
+import itertools
 import math
 from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import NDArray
 
-from planner.coupling import positions_at, team_timing, window_gap_s
-from planner.problem import Problem, Route, SolveResult, Status, polyline_length_m
+from planner.coupling import GridTracks, LimitArrays, positions_at, team_timing, window_gap_s
+from planner.problem import Problem, Route, SolveResult, Status, allclose_2d
 from planner.search import solve_exact
 
 IntArray = NDArray[np.int64]
@@ -75,6 +76,8 @@ class _Colonies:
         tasks = problem.tasks
         grid = tasks[0].cost_map.grid
         self.neighbors = tasks[0].cost_map.neighbors
+        # Neighbour indices with node 0 standing in off the grid (masked out by the cost).
+        self.safe_neighbors = np.where(self.neighbors >= 0, self.neighbors, 0)
         self.step_cost = grid.resolution_m
         maps: dict[int, int] = {}
         stacks: list[FloatArray] = []
@@ -121,11 +124,11 @@ class _Colonies:
             u = pos[act]
             c = col[act]
             nb = self.neighbors[u]
-            safe = np.where(nb >= 0, nb, 0)
+            safe = self.safe_neighbors[u]
             ec = self.edge[self.cls[c], u]
             regret = ec + self.h[c[:, None], safe] - self.h[c, u][:, None]
             valid = np.isfinite(regret)
-            valid &= ~(nb[:, :, None] == recent[act][:, None, :]).any(axis=-1)
+            valid &= ~_in_rows(nb, recent[act])
             eta = 1.0 / (1.0 + np.where(valid, regret, 0.0) / self.step_cost)
             w = self.tau[c[:, None], safe] ** o.alpha * eta**o.beta
             w = np.where(valid, w, 0.0)
@@ -134,7 +137,7 @@ class _Colonies:
             alive[act[~ok]] = False
             greedy = self.rng.random(act.size) < o.q0
             r = self.rng.random(act.size) * total
-            k_roulette = np.minimum((np.cumsum(w, axis=1) < r[:, None]).sum(axis=1), 7)
+            k_roulette = np.minimum(_count_true(np.cumsum(w, axis=1) < r[:, None]), 7)
             k = np.where(greedy, np.argmax(w, axis=1), k_roulette)
             nxt = nb[np.arange(act.size), k]
             act, nxt = act[ok], nxt[ok]
@@ -151,13 +154,93 @@ class _Colonies:
             routes.append(_erase_loops(trail[a, : length[a] + 1]))
         return col, routes
 
-    def path_cost(self, colony: int, nodes: IntArray) -> float:
-        return float(self.p.tasks[colony].cost_map.path_cost(nodes))
+
+def route_figures(
+    problem: Problem, index: int, walks: list[IntArray]
+) -> list[tuple[FloatArray, float, float]]:
+    """Polyline (m), graph cost and length (m) of many node routes of one task at once.
+
+    The same values as ``problem.route_points``, ``cost_map.path_cost`` and
+    ``polyline_length_m`` route by route (each route's sums are taken over its own slice, as
+    alone), with the per-route numpy calls shared: every ant's route is measured, so this
+    runs for tens of thousands of routes per plan.
+    """
+    if not walks:
+        return []
+    task = problem.tasks[index]
+    cmap = task.cost_map
+    nodes = np.concatenate(walks)
+    coords = cmap.grid.node_coords(nodes)
+    sizes = np.array([len(w) for w in walks])
+    ends = np.cumsum(sizes)
+    first_nodes = coords[ends - sizes].tolist()
+    last_nodes = coords[ends - 1].tolist()
+    node_bounds = [0, *ends.tolist()]
+    start = np.array([task.start_m], dtype=np.float64)
+    goal = np.array([task.goal_m], dtype=np.float64)
+    tail = np.array(task.tail_m, dtype=np.float64).reshape(-1, 2)
+    pieces: list[FloatArray] = []
+    point_bounds = [0]
+    for k, (lo, hi) in enumerate(itertools.pairwise(node_bounds)):
+        first = not allclose_2d(first_nodes[k], task.start_m)
+        last = not allclose_2d(last_nodes[k], task.goal_m)
+        pieces.extend([start[: int(first)], coords[lo:hi], goal[: int(last)], tail])
+        point_bounds.append(point_bounds[-1] + int(first) + (hi - lo) + int(last) + len(tail))
+    points = np.concatenate(pieces)
+    step = np.diff(points, axis=0)
+    leg_m = np.hypot(step[:, 0], step[:, 1])
+    a, b = nodes[:-1], nodes[1:]
+    match = cmap.neighbors[a] == b[:, None]
+    linked = match.any(axis=1)
+    edge = cmap.edge_cost[a, match.argmax(axis=1)]
+    out = []
+    for k, (lo, hi) in enumerate(itertools.pairwise(node_bounds)):
+        p_lo, p_hi = point_bounds[k], point_bounds[k + 1]
+        if hi - lo < 2:
+            cost = 0.0
+        elif not linked[lo : hi - 1].all():
+            cost = math.inf
+        else:
+            cost = float(edge[lo : hi - 1].sum())
+        out.append((points[p_lo:p_hi], cost, float(leg_m[p_lo : p_hi - 1].sum())))
+    return out
+
+
+_BITWISE_COUNT = getattr(np, "bitwise_count", None)
+
+
+def _count_true(mask: NDArray[np.bool_]) -> IntArray:
+    """Number of True values in each row of an (A, 8) mask (one per move of the grid).
+
+    A row's 8 booleans are the 8 bytes of one 64-bit word, each 0 or 1, so counting the
+    word's set bits counts them: a single fast pass, where a sum along the short axis is
+    one of the walk's slowest steps.
+    """
+    if _BITWISE_COUNT is None:  # numpy before 2.0
+        return np.asarray(mask.sum(axis=1), dtype=np.int64)
+    words = np.ascontiguousarray(mask).view(np.uint64)
+    return np.asarray(_BITWISE_COUNT(words)[:, 0], dtype=np.int64)
+
+
+_BROADCAST_TABU_ANTS = 200
+# Below this many walking ants one broadcast comparison is cheapest; above it, its reduction
+# over a short last axis costs more than a comparison per tabu column.
+
+
+def _in_rows(values: IntArray, rows: IntArray) -> NDArray[np.bool_]:
+    """Whether each ``values[a, k]`` occurs in ``rows[a]`` (a short row: the tabu list)."""
+    if len(values) < _BROADCAST_TABU_ANTS:
+        return np.asarray((values[:, :, None] == rows[:, None, :]).any(axis=-1))
+    found = np.zeros(values.shape, dtype=bool)
+    for column in rows.T:
+        found |= values == column[:, None]
+    return found
 
 
 def _erase_loops(nodes: IntArray) -> IntArray:
     """Remove cycles from a walk (keep the path from each node's last visit)."""
-    if len(np.unique(nodes)) == len(nodes):
+    ordered = np.sort(nodes)
+    if not (ordered[1:] == ordered[:-1]).any():
         return nodes
     out: list[int] = []
     where: dict[int, int] = {}
@@ -180,6 +263,7 @@ class _Shared:
         self.problem = problem
         limits = [t.timing for t in problem.tasks]
         self.limits = limits
+        self.limit_arrays = LimitArrays.of(limits)
         self.lengths = np.array([b.length_m for b in bests])
         self.timing = team_timing(self.lengths.tolist(), limits, problem.required_arrival_s)
         vmax = max(lim.speed_max_m_s for lim in limits)
@@ -187,8 +271,9 @@ class _Shared:
         t0 = min(self.timing.takeoff_s)
         t1 = max(self.timing.arrival_s)
         self.times = np.arange(t0, t1 + self.dt, self.dt)
-        self.positions = np.stack(
-            [self._track(b.points, i, b.length_m) for i, b in enumerate(bests)]
+        self.tracks = GridTracks(
+            self.times,
+            np.stack([self._track(b.points, i, b.length_m) for i, b in enumerate(bests)]),
         )
 
     def _track(self, points: FloatArray, index: int, length_m: float) -> FloatArray:
@@ -207,7 +292,7 @@ class _Shared:
         pos = positions_at(best.points, takeoff, speed, self.times)
         airborne = (self.times >= takeoff) & (self.times <= takeoff + best.length_m / speed)
         pos[~airborne] = np.nan
-        self.positions[index] = pos
+        self.tracks.set(index, pos)
 
     def candidate_timing(self, index: int, length_m: float) -> tuple[float, float]:
         """Takeoff and speed of vehicle ``index`` flying ``length_m`` to the team reference."""
@@ -225,21 +310,22 @@ class _Shared:
         """Team window miss (s) for candidate lengths of vehicle ``index``, others fixed."""
         team = np.tile(self.lengths, (len(lengths_m), 1))
         team[:, index] = lengths_m
-        return window_gap_s(team, self.limits, self.problem.required_arrival_s)
+        return window_gap_s(team, self.limit_arrays, self.problem.required_arrival_s)
 
     def separation_shortfall(self, index: int, points: FloatArray, length_m: float) -> float:
         """Summed shortfall (m) below ``d_s`` against every other vehicle's best route."""
         if len(self.lengths) < 2:
             return 0.0
         takeoff, speed = self.candidate_timing(index, length_m)
-        mine = positions_at(points, takeoff, speed, self.times)
-        airborne = (self.times >= takeoff) & (self.times <= takeoff + length_m / speed)
-        mine[~airborne] = np.nan
-        others = np.delete(self.positions, index, axis=0)
-        d = np.hypot(others[..., 0] - mine[None, :, 0], others[..., 1] - mine[None, :, 1])
-        d = np.where(np.isnan(d), np.inf, d)
-        shortfall = np.maximum(self.problem.separation_m - d.min(axis=1), 0.0)
-        return float(shortfall.sum())
+        # The airborne steps, takeoff <= t <= landing, are one run: the time grid is sorted.
+        first = int(np.searchsorted(self.times, takeoff, side="left"))
+        stop = max(
+            int(np.searchsorted(self.times, takeoff + length_m / speed, side="right")), first
+        )
+        mine = positions_at(points, takeoff, speed, self.times[first:stop])
+        shortfall = self.tracks.shortfalls_m(mine, first, self.problem.separation_m, skip=index)
+        # Summed over the others in vehicle order, as a plain loop over them would.
+        return float(np.delete(shortfall, index).sum())
 
 
 def _score(
@@ -249,11 +335,15 @@ def _score(
     points: FloatArray,
     length: float,
     o: AcoOptions,
+    gap_s: float | None = None,
 ) -> tuple[float, float, float]:
-    """Comprehensive cost, time miss (s) and separation shortfall (m) of one route."""
+    """Comprehensive cost, time miss (s) and separation shortfall (m) of one route.
+
+    ``gap_s`` is the route's time miss when it is already known (``shared.time_gap``).
+    """
     if shared is None:
         return cost, 0.0, 0.0
-    gap = float(shared.time_gap(index, np.array([length]))[0])
+    gap = float(shared.time_gap(index, np.array([length]))[0]) if gap_s is None else gap_s
     short = shared.separation_shortfall(index, points, length)
     # Any loss of separation costs at least a full d_s, so a small shortfall is never cheap.
     sep_cost = o.separation_penalty * (short + (shared.problem.separation_m if short > 0 else 0.0))
@@ -295,23 +385,27 @@ def solve_aco(
                 if best is not None and shared is not None:
                     best.score, _, _ = _score(shared, c, best.cost, best.points, best.length_m, o)
                 seen: set[bytes] = set()
-                cands: list[tuple[float, IntArray, FloatArray, float, float]] = []
+                new_walks: list[IntArray] = []
                 for a in np.flatnonzero(col == c).tolist():
                     nodes = walks[a]
                     if nodes is None or nodes.tobytes() in seen:
                         continue
                     seen.add(nodes.tobytes())
-                    pts = problem.route_points(c, nodes)
-                    length = polyline_length_m(pts)
-                    cost = state.path_cost(c, nodes)
-                    quick = cost
-                    if shared is not None:
-                        gap = float(shared.time_gap(c, np.array([length]))[0])
-                        quick += o.time_penalty_m_per_s * gap
-                    cands.append((quick, nodes, pts, cost, length))
-                cands.sort(key=lambda x: x[0])
-                for _q, nodes, pts, cost, length in cands[: o.candidates]:
-                    score, _, _ = _score(shared, c, cost, pts, length, o)
+                    new_walks.append(nodes)
+                figures = route_figures(problem, c, new_walks)
+                quick = [cost for _, cost, _ in figures]
+                miss_s = [0.0] * len(figures)
+                if shared is not None and figures:
+                    # One team-window evaluation for all of the colony's new routes.
+                    lengths_m = np.array([length for *_, length in figures])
+                    miss_s = shared.time_gap(c, lengths_m).tolist()
+                    quick = [
+                        q + o.time_penalty_m_per_s * m for q, m in zip(quick, miss_s, strict=True)
+                    ]
+                for k in sorted(range(len(figures)), key=quick.__getitem__)[: o.candidates]:
+                    nodes = new_walks[k]
+                    pts, cost, length = figures[k]
+                    score, _, _ = _score(shared, c, cost, pts, length, o, miss_s[k])
                     if c not in iter_best or score < iter_best[c].score:
                         iter_best[c] = _Best(nodes, pts, cost, length, score)
                 cand = iter_best.get(c)
@@ -323,12 +417,15 @@ def solve_aco(
                 else:
                     stall[c] += 1
             # STEP4: pheromone update, MAX-MIN style.
-            state.tau[running] *= 1.0 - o.rho
+            # Row by row in place: only the running colonies' rows change, and copying the
+            # selected rows out and back cost more than the update itself.
             for c in running.tolist():
+                tau = state.tau[c]
+                tau *= 1.0 - o.rho
                 for b, share in ((bests[c], 1.0), (iter_best.get(c), 0.5)):
                     if b is not None:
-                        state.tau[c, b.nodes] += o.rho * o.tau_max * share
-            np.clip(state.tau, o.tau_min, o.tau_max, out=state.tau)
+                        tau[b.nodes] += o.rho * o.tau_max * share
+                np.clip(tau, o.tau_min, o.tau_max, out=tau)
         if any(b is None for b in bests):
             missing = next(problem.tasks[i].vehicle_id for i, b in enumerate(bests) if b is None)
             return SolveResult(
@@ -378,14 +475,14 @@ def solve_aco(
 
 
 def _min_separation(shared: _Shared) -> float:
-    pos = shared.positions
+    """Smallest distance (m) between any two vehicles on the shared time grid while both fly."""
+    pos = shared.tracks.positions_m
     best = math.inf
-    for i in range(len(pos)):
-        for j in range(i + 1, len(pos)):
-            d = np.hypot(pos[i, :, 0] - pos[j, :, 0], pos[i, :, 1] - pos[j, :, 1])
-            d = d[~np.isnan(d)]
-            if d.size:
-                best = min(best, float(d.min()))
+    for i in range(len(pos) - 1):
+        d = np.hypot(pos[i + 1 :, :, 0] - pos[i, :, 0], pos[i + 1 :, :, 1] - pos[i, :, 1])
+        closest = float(np.fmin.reduce(d, axis=None))  # NaN: no two ever fly together
+        if closest < best:
+            best = closest
     return best
 
 

@@ -22,6 +22,8 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from planner.dubins import (
+    _S_REL_TOL,
+    TAU,
     TURN_SIGN,
     GeometryError,
     Pose,
@@ -248,6 +250,55 @@ class FlightPath:
         segment = self.segments[index]
         return segment.pose_at(min(max(s_m - self._starts_m[index], 0.0), segment.length_m))
 
+    def poses_at(self, s_m: ArrayLike) -> NDArray[np.float64]:
+        """Return the poses at many along-path distances at once: :meth:`pose_at`, vectorised.
+
+        Sampling a long route point by point costs a Python call per sample; this evaluates
+        the same formulas on arrays, with the same result to the last bit.
+
+        Parameters
+        ----------
+        s_m : array_like
+            (N,) along-path distances in [0, length_m], m; round-off overshoot is clamped.
+
+        Returns
+        -------
+        NDArray
+            (N, 3) rows ``[east_m, north_m, heading_rad]``.
+
+        Raises
+        ------
+        GeometryError
+            If a distance is outside [0, length_m].
+        """
+        s = np.asarray(s_m, dtype=np.float64).reshape(-1)
+        tolerance_m = _S_REL_TOL * max(1.0, self._length_m)
+        outside = ~((s >= -tolerance_m) & (s <= self._length_m + tolerance_m))
+        if outside.any():
+            bad = float(s[np.flatnonzero(outside)[0]])
+            raise GeometryError(f"s_m must be in [0, {self._length_m}] m, got {bad!r}")
+        s = np.minimum(np.maximum(s, 0.0), self._length_m)
+        starts_m = np.asarray(self._starts_m, dtype=np.float64)
+        index = np.maximum(np.searchsorted(starts_m, s, side="right") - 1, 0)
+        table = np.array(
+            [
+                (
+                    seg.start.east_m,
+                    seg.start.north_m,
+                    seg.start.heading_rad,
+                    seg.length_m,
+                    TURN_SIGN[seg.turn],
+                    seg.radius_m,
+                )
+                for seg in self.segments
+            ],
+            dtype=np.float64,
+        )[index]
+        along_m = np.minimum(np.maximum(s - starts_m[index], 0.0), table[:, 3])
+        return _advance_each(
+            table[:, 0], table[:, 1], table[:, 2], table[:, 4], along_m, table[:, 5]
+        )
+
     def remaining_m(self, s_m: float) -> float:
         """Return the distance left to fly from ``s_m`` to the end, m.
 
@@ -344,6 +395,40 @@ class FlightPath:
                 best_m, best_s_m = distance_m, start_m + s_m
         return min(best_s_m, self._length_m)
 
+    def project_many(self, points_m: ArrayLike) -> NDArray[np.float64]:
+        """Return :meth:`project` of each of many positions, with the same results.
+
+        A segment can only hold the closest point if its bounding box (the whole circle's,
+        for an arc) is no farther than the closest point found so far; the others are
+        skipped, and the rest are compared in route order exactly as :meth:`project` does.
+
+        Parameters
+        ----------
+        points_m : array_like
+            (N, 2) positions ``[east_m, north_m]``, m.
+
+        Returns
+        -------
+        NDArray
+            (N,) along-path distances, m.
+        """
+        points = np.asarray(points_m, dtype=np.float64).reshape(-1, 2)
+        boxes = np.array([_segment_box_m(segment) for segment in self.segments])
+        out = np.empty(len(points), dtype=np.float64)
+        for k, (east_m, north_m) in enumerate(points.tolist()):
+            gap_east = np.maximum(np.maximum(boxes[:, 0] - east_m, east_m - boxes[:, 1]), 0.0)
+            gap_north = np.maximum(np.maximum(boxes[:, 2] - north_m, north_m - boxes[:, 3]), 0.0)
+            floor_m = np.hypot(gap_east, gap_north)
+            nearest = int(np.argmin(floor_m))
+            bound_m, _ = self.segments[nearest]._closest(east_m, north_m)
+            best_m, best_s_m = math.inf, 0.0
+            for index in np.flatnonzero(floor_m <= bound_m + _PROJECT_SLACK_M).tolist():
+                distance_m, s_m = self.segments[index]._closest(east_m, north_m)
+                if distance_m < best_m:
+                    best_m, best_s_m = distance_m, self._starts_m[index] + s_m
+            out[k] = min(best_s_m, self._length_m)
+        return out
+
     def concat(self, other: FlightPath) -> FlightPath:
         """Return this route followed by ``other``.
 
@@ -358,6 +443,55 @@ class FlightPath:
                 f"other starts {gap[0]:.3g} m and {gap[1]:.3g} rad off this path's end"
             )
         return FlightPath(self.segments + other.segments)
+
+
+_PROJECT_SLACK_M = 1e-3
+# A segment whose bounding box is farther than the best distance by this much cannot be
+# closest, round-off included.
+
+
+def _segment_box_m(segment: Segment) -> tuple[float, float, float, float]:
+    """Least and greatest east, least and greatest north (m) bounding a segment's points."""
+    centre = segment.centre
+    if centre is not None:
+        r = segment.radius_m
+        return (centre[0] - r, centre[0] + r, centre[1] - r, centre[1] + r)
+    start, end = segment.start, segment.end
+    return (
+        min(start.east_m, end.east_m),
+        max(start.east_m, end.east_m),
+        min(start.north_m, end.north_m),
+        max(start.north_m, end.north_m),
+    )
+
+
+def _advance_each(
+    east_m: NDArray[np.float64],
+    north_m: NDArray[np.float64],
+    heading_rad: NDArray[np.float64],
+    sign: NDArray[np.float64],
+    s_m: NDArray[np.float64],
+    radius_m: NDArray[np.float64],
+) -> NDArray[np.float64]:
+    """Element-wise ``_advance`` (each row its own start, kind and distance); (N, 3) poses.
+
+    The operations are those of the scalar version in the same order, so the two agree
+    exactly; numpy's float64 sin and cos round as the C library's do.
+    """
+    out = np.empty((s_m.size, 3), dtype=np.float64)
+    line = sign == 0.0
+    out[line, 0] = east_m[line] + s_m[line] * np.sin(heading_rad[line])
+    out[line, 1] = north_m[line] + s_m[line] * np.cos(heading_rad[line])
+    out[line, 2] = heading_rad[line]
+    arc = ~line
+    half_turn_rad = 0.5 * s_m[arc] / radius_m[arc]
+    chord_m = 2.0 * radius_m[arc] * np.sin(half_turn_rad)
+    chord_heading_rad = heading_rad[arc] + sign[arc] * half_turn_rad
+    out[arc, 0] = east_m[arc] + chord_m * np.sin(chord_heading_rad)
+    out[arc, 1] = north_m[arc] + chord_m * np.cos(chord_heading_rad)
+    heading = np.mod(heading_rad[arc] + 2.0 * sign[arc] * half_turn_rad, TAU)
+    out[arc, 2] = np.where(heading >= TAU, 0.0, heading)
+    return out
 
 
 def straight(

@@ -11,6 +11,7 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass, field
+from functools import cached_property
 
 import numpy as np
 from numpy.typing import NDArray
@@ -114,7 +115,15 @@ class CostMap:
     edge_cost: FloatArray = field(repr=False)
 
     def graph(self) -> sparse.csr_array:
-        """The directed (symmetric) edge-cost graph for scipy.sparse.csgraph."""
+        """The directed (symmetric) edge-cost graph for scipy.sparse.csgraph.
+
+        Built once per cost map (vehicles of one class share it) and kept: callers must not
+        modify it.
+        """
+        return self._graph
+
+    @cached_property
+    def _graph(self) -> sparse.csr_array:
         n = self.grid.size
         src = np.repeat(np.arange(n), 8)
         dst = self.neighbors.ravel()

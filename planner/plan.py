@@ -11,7 +11,10 @@ error naming the vehicle; it is never returned as a plan.
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping, Sequence
+import multiprocessing as mp
+import threading
+from collections.abc import Iterator, Mapping, Sequence
+from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Literal
@@ -21,7 +24,7 @@ from numpy.typing import NDArray
 from scipy.ndimage import map_coordinates
 
 from planner.aco import AcoOptions, solve_aco
-from planner.coupling import TimingLimits, pair_min_separation, team_timing
+from planner.coupling import TimingLimits, team_min_separation_m, team_timing
 from planner.errors import InfeasibleError
 from planner.flightpath import FlightPath, Violation, check_polyline, smooth_polyline
 from planner.geo import LocalFrame
@@ -275,10 +278,25 @@ def solve(
 # --- route post-processing -------------------------------------------------------------
 
 
-def _sample_segment(a: FloatArray, b: FloatArray, step_m: float) -> FloatArray:
-    n = max(2, int(math.ceil(float(np.hypot(*(b - a))) / step_m)) + 1)
-    t = np.linspace(0.0, 1.0, n)[:, None]
-    return np.asarray(a + (b - a) * t, dtype=np.float64)
+def _sample_chords(
+    start_m: FloatArray, ends_m: FloatArray, step_m: float
+) -> tuple[FloatArray, FloatArray, list[int]]:
+    """Evenly spaced points on the chords from one point to each of ``ends_m`` (K, 2).
+
+    Each chord gets ``max(2, ceil(length / step_m) + 1)`` points, both ends included, at the
+    fractions ``np.linspace(0, 1, n)`` gives (``k * (1 / (n - 1))``, the last exactly 1), so a
+    chord's points are the same whether it is sampled alone or with others. Returns the
+    (N, 2) points, each chord's length (m) and the K + 1 bounds of the chords' rows.
+    """
+    delta_m = ends_m - start_m
+    length_m = np.hypot(delta_m[:, 0], delta_m[:, 1])
+    counts = np.maximum(2, np.ceil(length_m / step_m).astype(np.int64) + 1)
+    bounds = np.concatenate([[0], np.cumsum(counts)])
+    index = np.arange(int(bounds[-1])) - np.repeat(bounds[:-1], counts)
+    fraction = index * np.repeat(1.0 / (counts - 1), counts)
+    fraction[bounds[1:] - 1] = 1.0
+    points = start_m + np.repeat(delta_m, counts, axis=0) * fraction[:, None]
+    return np.asarray(points, dtype=np.float64), length_m, bounds.tolist()
 
 
 def _grid_field(cmap: CostMap, values: FloatArray, pts: FloatArray) -> FloatArray:
@@ -288,6 +306,13 @@ def _grid_field(cmap: CostMap, values: FloatArray, pts: FloatArray) -> FloatArra
     j = (pts[:, 1] - g.min_north_m) / g.resolution_m
     field = values.reshape(g.n_north, g.n_east)
     return np.asarray(map_coordinates(field, [j, i], order=1, mode="nearest"), dtype=np.float64)
+
+
+FIRST_CHORD_BATCH = 4
+"""Chords from one route point are checked in batches that start at this size and double up
+to ``MAX_CHORD_BATCH``: one cost-field and one terrain look-up per batch instead of per chord
+(the per-call overhead of those look-ups, not their size, dominated simplification)."""
+MAX_CHORD_BATCH = 32
 
 
 def simplify_route(
@@ -301,40 +326,109 @@ def simplify_route(
 
     A chord replaces a run of grid legs only when it keeps ``margin_m`` from every forbidden
     zone, stays flyable under the vehicle's ceiling, and costs no more than the legs it
-    replaces (so exposure never grows).
+    replaces (so exposure never grows). From each kept point the farthest point reached by
+    an unbroken run of acceptable chords is kept next (greedy).
     """
-    v = cmap.vehicle
-    step = 0.25 * cmap.grid.resolution_m
-    seg_len = np.hypot(*np.diff(points_m, axis=0).T)
-    cost_mid = _grid_field(cmap, cmap.node_cost, 0.5 * (points_m[:-1] + points_m[1:]))
-    leg_cost = np.concatenate([[0.0], np.cumsum(seg_len * cost_mid)])
-
-    def chord_ok(i: int, j: int) -> bool:
-        a, b = points_m[i], points_m[j]
-        pts = _sample_segment(a, b, step)
-        alt = np.maximum(terrain.elevation_m(pts[:, 0], pts[:, 1]) + v.clearance_m, v.alt_min_m)
-        if float(alt.max()) > v.alt_max_m:
-            return False
-        cost = float(np.hypot(*(b - a))) * float(_grid_field(cmap, cmap.node_cost, pts).mean())
-        if cost > leg_cost[j] - leg_cost[i] + 1e-6:
-            return False
-        for t in threats:
-            if not t.forbidden or float(alt.min()) >= t.ceiling_m:
-                continue
-            if t.segment_distance_m(a[0], a[1], b[0], b[1]) < margin_m:
-                return False
-        return True
-
+    chords = _ChordCheck(points_m, cmap, threats, terrain, margin_m)
     keep = [0]
     i = 0
     last = len(points_m) - 1
     while i < last:
-        j = i + 1
-        while j + 1 <= last and chord_ok(i, j + 1):
-            j += 1
-        keep.append(j)
-        i = j
+        i = chords.farthest_from(i)
+        keep.append(i)
     return np.asarray(points_m[keep], dtype=np.float64)
+
+
+class _ChordCheck:
+    """The chord test of :func:`simplify_route`, evaluated for batches of chord ends.
+
+    Each chord is sampled, looked up and judged exactly as on its own; a batch only shares
+    the terrain and cost-field calls, so the greedy result is the same as chord by chord.
+    """
+
+    def __init__(
+        self,
+        points_m: FloatArray,
+        cmap: CostMap,
+        threats: Sequence[ThreatZone],
+        terrain: Terrain,
+        margin_m: float,
+    ) -> None:
+        self.points_m = points_m
+        self.cmap = cmap
+        self.zones = [(t, t.bounding_box_m()) for t in threats if t.forbidden]
+        self.terrain = terrain
+        self.margin_m = margin_m
+        self.step_m = 0.25 * cmap.grid.resolution_m
+        seg_len = np.hypot(*np.diff(points_m, axis=0).T)
+        cost_mid = _grid_field(cmap, cmap.node_cost, 0.5 * (points_m[:-1] + points_m[1:]))
+        self.leg_cost = np.concatenate([[0.0], np.cumsum(seg_len * cost_mid)])
+
+    def farthest_from(self, i: int) -> int:
+        """The last point ``j > i`` such that every chord ``i -> i+2 .. j`` is acceptable."""
+        last = len(self.points_m) - 1
+        j = i + 1
+        batch = FIRST_CHORD_BATCH
+        while j < last:
+            ends = range(j + 1, min(j + batch, last) + 1)
+            accepted = self._leading_ok(i, ends)
+            j += accepted
+            if accepted < len(ends):
+                break
+            batch = min(2 * batch, MAX_CHORD_BATCH)
+        return j
+
+    def _leading_ok(self, i: int, ends: range) -> int:
+        """How many chords ``i -> j`` for ``j`` in ``ends``, in order, pass before one fails."""
+        pts, length_m, bounds = _sample_chords(
+            self.points_m[i], self.points_m[ends.start : ends.stop], self.step_m
+        )
+        # The cost test is the cheap one: the terrain is looked up only for the chords before
+        # the first that costs more than its legs (a chord must pass every test).
+        cost = _grid_field(self.cmap, self.cmap.node_cost, pts)
+        affordable = len(ends)
+        for k, j in enumerate(ends):
+            # The mean of the chord's own slice: the same sum as for the chord alone.
+            chord_cost = length_m[k] * float(cost[bounds[k] : bounds[k + 1]].mean())
+            if chord_cost > self.leg_cost[j] - self.leg_cost[i] + 1e-6:
+                affordable = k
+                break
+        if affordable == 0:
+            return 0
+        v = self.cmap.vehicle
+        flown = pts[: bounds[affordable]]
+        ground_m = self.terrain.elevation_m(flown[:, 0], flown[:, 1])
+        alt_m = np.maximum(ground_m + v.clearance_m, v.alt_min_m)
+        highest_m = np.maximum.reduceat(alt_m, bounds[:affordable]).tolist()
+        lowest_m = np.minimum.reduceat(alt_m, bounds[:affordable]).tolist()
+        for k, j in enumerate(ends[:affordable]):
+            if highest_m[k] > v.alt_max_m or not self._clear_of_zones(i, j, lowest_m[k]):
+                return k
+        return affordable
+
+    def _clear_of_zones(self, i: int, j: int, lowest_m: float) -> bool:
+        """Whether chord ``i -> j``, flown no lower than ``lowest_m``, keeps the margin."""
+        a, b = self.points_m[i], self.points_m[j]
+        chord_box = (min(a[0], b[0]), max(a[0], b[0]), min(a[1], b[1]), max(a[1], b[1]))
+        for t, zone_box in self.zones:
+            if lowest_m >= t.ceiling_m:
+                continue
+            if _box_gap_m(chord_box, zone_box) > self.margin_m + _BOX_SLACK_M:
+                continue  # the exact distance is at least the gap: no need to compute it
+            if t.segment_distance_m(a[0], a[1], b[0], b[1]) < self.margin_m:
+                return False
+        return True
+
+
+_BOX_SLACK_M = 1.0
+# Bounding boxes farther apart than the margin by this much are clear of it after round-off.
+
+
+def _box_gap_m(a: tuple[float, float, float, float], b: tuple[float, float, float, float]) -> float:
+    """Distance (m) between two boxes (least east, greatest east, least north, greatest north)."""
+    gap_east = max(a[0] - b[1], b[0] - a[1], 0.0)
+    gap_north = max(a[2] - b[3], b[2] - a[3], 0.0)
+    return math.hypot(gap_east, gap_north)
 
 
 def refine_corners(points_m: FloatArray, radius_m: float) -> FloatArray:
@@ -387,8 +481,7 @@ def sample_by_distance(path: FlightPath, step_m: float) -> tuple[FloatArray, Flo
     """Evenly spaced along-path distances (m) and the (N, 2) positions there."""
     n = max(2, int(math.ceil(path.length_m / step_m)) + 1)
     s = np.linspace(0.0, path.length_m, n)
-    pts = np.array([[p.east_m, p.north_m] for p in (path.pose_at(float(x)) for x in s)])
-    return s, pts
+    return s, path.poses_at(s)[:, :2]
 
 
 def _envelope(req: FloatArray, s: FloatArray, g: float) -> FloatArray:
@@ -398,8 +491,11 @@ def _envelope(req: FloatArray, s: FloatArray, g: float) -> FloatArray:
     return np.asarray(np.maximum(fwd, bwd), dtype=np.float64)
 
 
-def _upper_hull(s: FloatArray, z: FloatArray) -> list[int]:
+def _upper_hull(s_m: FloatArray, z_m: FloatArray) -> list[int]:
     """Indices of the upper convex hull of points sorted by ``s`` (monotone chain)."""
+    # Python floats: the same double arithmetic as numpy scalars, without their overhead.
+    s: list[float] = s_m.tolist()
+    z: list[float] = z_m.tolist()
     hull: list[int] = []
     for k in range(len(s)):
         while len(hull) >= 2:
@@ -424,16 +520,42 @@ def _leg_breakpoints(
     keep = [hull[0]]
     i = 0
     while i < len(hull) - 1:
+        # Extend the chord from hull[i] while it stays above the floor, a batch at a time.
         j = i + 1
+        batch = FIRST_CHORD_BATCH
         while j + 1 < len(hull):
-            a, b = hull[i], hull[j + 1]
-            chord = np.interp(s[a : b + 1], [s[a], s[b]], [lifted[a], lifted[b]])
-            if (chord < floor[a : b + 1] - 1e-6).any():
+            ends = hull[j + 1 : j + 1 + batch]
+            above = _chords_above(s, lifted, floor, hull[i], ends)
+            j += above
+            if above < len(ends):
                 break
-            j += 1
+            batch = min(2 * batch, MAX_CHORD_BATCH)
         keep.append(hull[j])
         i = j
     return keep
+
+
+def _chords_above(
+    s: FloatArray, lifted: FloatArray, floor: FloatArray, a: int, ends: list[int]
+) -> int:
+    """How many chords ``a -> b`` of ``lifted`` for ``b`` in ``ends``, in order, stay above
+    ``floor`` (less 1e-6 m) at every sample between, before one dips below.
+
+    The chords are evaluated together with ``np.interp``'s own arithmetic for two points
+    (``slope * (x - x_a) + z_a``, exactly ``z_b`` at ``x_b``), so each verdict is the one
+    ``np.interp`` on that chord alone gives.
+    """
+    stops = np.asarray(ends, dtype=np.int64)
+    counts = stops - a + 1
+    bounds = np.concatenate([[0], np.cumsum(counts)])
+    chord = np.repeat(stops, counts)
+    index = a + np.arange(int(bounds[-1])) - np.repeat(bounds[:-1], counts)
+    slope = (lifted[chord] - lifted[a]) / (s[chord] - s[a])
+    z = slope * (s[index] - s[a]) + lifted[a]
+    z[bounds[1:] - 1] = lifted[stops]
+    below = z < floor[index] - 1e-6
+    dips = np.flatnonzero(np.logical_or.reduceat(below, bounds[:-1]))
+    return int(dips[0]) if dips.size else len(ends)
 
 
 def altitude_profile(
@@ -467,7 +589,7 @@ def altitude_profile(
     lifted = np.maximum(_envelope(np.maximum(req + buffer_m, final), s, g), ends)
     lifted = np.maximum(np.minimum(lifted, max(v.alt_max_m, 0.0)), floor)
     base = path.waypoints()
-    base_s = np.array([path.project(float(e), float(n)) for e, n in base])
+    base_s = path.project_many(base)
     base_s[0], base_s[-1] = 0.0, length
     idx = np.unique(np.clip(np.searchsorted(s, base_s), 0, len(s) - 1))
     chosen: list[int] = [int(idx[0])]
@@ -475,7 +597,7 @@ def altitude_profile(
         chosen.extend(_leg_breakpoints(s, lifted, floor, lo, hi)[1:])
     wp_s = s[chosen]
     wp_alt = lifted[chosen]
-    wps = np.array([[p.east_m, p.north_m] for p in (path.pose_at(float(x)) for x in wp_s)])
+    wps = path.poses_at(wp_s)[:, :2]
     wps[0], wps[-1] = ps[0], ps[-1]
     flown = np.interp(s, wp_s, wp_alt)
     clearance = flown - ground
@@ -638,13 +760,19 @@ def finish_route(
     head, tail = (
         (pts[: -len(task.tail_m)], pts[-len(task.tail_m) :]) if task.tail_m else (pts, pts[:0])
     )
-    for candidate in (
-        np.concatenate([simplify_route(head, task.cost_map, threats, world.terrain, margin), tail]),
-        np.concatenate(
-            [simplify_route(head, task.cost_map, threats, world.terrain, 3.0 * margin), tail]
-        ),
-        pts,
-    ):
+
+    def candidates() -> Iterator[FloatArray]:
+        """Shortened with the margin, with three times it, then the grid route as it is.
+
+        Built one at a time: most routes are finished by the first, so the others are
+        never simplified.
+        """
+        for route_margin_m in (margin, 3.0 * margin):
+            simplified = simplify_route(head, task.cost_map, threats, world.terrain, route_margin_m)
+            yield np.concatenate([simplified, tail])
+        yield pts
+
+    for candidate in candidates():
         path = smooth_polyline(
             refine_corners(candidate, v.min_turn_radius_m),
             v.min_turn_radius_m,
@@ -738,32 +866,89 @@ def solve_and_finish(
     rng: np.random.Generator | None = None,
     options: AcoOptions | None = None,
     airborne: Mapping[str, tuple[float, float]] | None = None,
+    workers: int = 1,
 ) -> tuple[SolveResult, list[PlannedRoute]]:
     """Solve on the grid, refuse an infeasible result, and finish every route.
 
     ``airborne`` gives, per vehicle id, the altitude (m AMSL) and compass heading (rad) of a
-    vehicle re-planned in flight; the others start from their scenario start.
+    vehicle re-planned in flight; the others start from their scenario start. ``workers`` > 1
+    finishes the routes in that many forked processes (see :func:`finish_routes`).
     """
     result = solve(problem, method, rng=rng, options=options)
     if result.status is Status.INFEASIBLE or not all(result.routes):
         raise InfeasibleError(result.message)
-    routes = []
+    jobs = []
     for i, r in enumerate(result.routes):
         assert r is not None
         alt, heading = (airborne or {}).get(r.vehicle_id, (None, None))
-        routes.append(
-            finish_route(
-                world,
-                problem,
-                i,
-                r.nodes,
-                r.cost,
-                threats=threats,
-                start_alt_m=alt,
-                start_heading_rad=heading,
-            )
-        )
-    return result, routes
+        jobs.append(FinishJob(i, r.nodes, r.cost, alt, heading))
+    return result, finish_routes(world, problem, jobs, threats=threats, workers=workers)
+
+
+@dataclass(frozen=True)
+class FinishJob:
+    """The arguments of one :func:`finish_route` call besides the world and the problem."""
+
+    index: int
+    nodes: tuple[int, ...]
+    cost: float
+    start_alt_m: float | None
+    start_heading_rad: float | None
+
+
+_FORKED: tuple[World, Problem, Sequence[ThreatZone]] | None = None
+# What forked workers of finish_routes read: inherited with the parent's memory, never pickled.
+
+
+def _finish_forked(job: FinishJob) -> PlannedRoute:
+    assert _FORKED is not None
+    world, problem, threats = _FORKED
+    return _finish(world, problem, threats, job)
+
+
+def _finish(
+    world: World, problem: Problem, threats: Sequence[ThreatZone], job: FinishJob
+) -> PlannedRoute:
+    return finish_route(
+        world,
+        problem,
+        job.index,
+        job.nodes,
+        job.cost,
+        threats=threats,
+        start_alt_m=job.start_alt_m,
+        start_heading_rad=job.start_heading_rad,
+    )
+
+
+def finish_routes(
+    world: World,
+    problem: Problem,
+    jobs: Sequence[FinishJob],
+    *,
+    threats: Sequence[ThreatZone],
+    workers: int = 1,
+) -> list[PlannedRoute]:
+    """:func:`finish_route` for every job, in order, optionally in forked worker processes.
+
+    Each route is finished on its own (pure code), so workers give the same routes as one
+    process. They are forked so that the world and the problem (with its cost-to-go fields,
+    tens of MB for a large team) are shared rather than pickled; a process that runs other
+    threads is not forked (a forked child can deadlock on a lock another thread held), nor
+    where fork is unavailable: the routes are then finished here. The first failing route
+    (in job order) raises its ``InfeasibleError``, as without workers.
+    """
+    pool_size = min(workers, len(jobs))
+    if pool_size < 2 or threading.active_count() > 1 or "fork" not in mp.get_all_start_methods():
+        return [_finish(world, problem, threats, job) for job in jobs]
+    global _FORKED
+    _FORKED = (world, problem, threats)
+    try:
+        with ProcessPoolExecutor(pool_size, mp_context=mp.get_context("fork")) as pool:
+            chunk = max(1, len(jobs) // (4 * pool_size))
+            return list(pool.map(_finish_forked, jobs, chunksize=chunk))
+    finally:
+        _FORKED = None
 
 
 def plan(
@@ -773,8 +958,12 @@ def plan(
     rng: np.random.Generator | None = None,
     options: AcoOptions | None = None,
     world: World | None = None,
+    workers: int = 1,
 ) -> Plan:
     """Plan every vehicle's flyable route for the static threats of a scenario.
+
+    ``workers`` > 1 finishes the routes (simplify, smooth, profile, check) in that many
+    forked processes: the same plan, sooner on a multi-core machine for a large team.
 
     Raises
     ------
@@ -786,7 +975,7 @@ def plan(
     threats = active(world.threats, None)
     problem = build_problem(world, threats=threats)
     result, routes = solve_and_finish(
-        world, problem, method, threats=threats, rng=rng, options=options
+        world, problem, method, threats=threats, rng=rng, options=options, workers=workers
     )
     limits = [t.timing for t in problem.tasks]
     timing = team_timing([r.length_m for r in routes], limits, problem.required_arrival_s)
@@ -802,17 +991,4 @@ def _min_separation(
 ) -> float:
     vmax = max(speed_m_s) if speed_m_s else 1.0
     tracks = [r.path.sample(PROFILE_STEP_M)[:, :2] for r in routes]
-    best = math.inf
-    for i in range(len(routes)):
-        for j in range(i + 1, len(routes)):
-            d, _ = pair_min_separation(
-                tracks[i],
-                takeoff_s[i],
-                speed_m_s[i],
-                tracks[j],
-                takeoff_s[j],
-                speed_m_s[j],
-                step_s=max(d_s / (8.0 * vmax), 0.25),
-            )
-            best = min(best, d)
-    return best
+    return team_min_separation_m(tracks, takeoff_s, speed_m_s, step_s=max(d_s / (8.0 * vmax), 0.25))

@@ -45,6 +45,11 @@ class RadarSite:
         """Smallest distance (m) from the boundary to the segment; negative if it enters."""
         return _point_segment_distance(self.east_m, self.north_m, e0, n0, e1, n1) - self.radius_m
 
+    def bounding_box_m(self) -> tuple[float, float, float, float]:
+        """Least and greatest east, least and greatest north (m) of the detection disc."""
+        r = self.radius_m
+        return (self.east_m - r, self.east_m + r, self.north_m - r, self.north_m + r)
+
 
 @dataclass(frozen=True, slots=True)
 class NoFlyZone:
@@ -88,6 +93,12 @@ class NoFlyZone:
 
     def exposure(self, east_m: FloatArray, north_m: FloatArray) -> FloatArray:
         return self.contains(east_m, north_m).astype(np.float64)
+
+    def bounding_box_m(self) -> tuple[float, float, float, float]:
+        """Least and greatest east, least and greatest north (m) of the polygon."""
+        east = [e for e, _ in self.vertices_m]
+        north = [n for _, n in self.vertices_m]
+        return (min(east), max(east), min(north), max(north))
 
     def segment_distance_m(self, e0: float, n0: float, e1: float, n1: float) -> float:
         """Smallest distance (m) from the boundary to the segment; negative if it enters.

@@ -5,12 +5,22 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from planner.aco import solve_aco
+from planner.aco import (
+    _BROADCAST_TABU_ANTS,
+    AcoOptions,
+    _Colonies,
+    _count_true,
+    _erase_loops,
+    _in_rows,
+    route_figures,
+    solve_aco,
+)
 from planner.plan import build_problem, build_world, plan
-from planner.problem import Problem, Status
+from planner.problem import Problem, Status, polyline_length_m
 from planner.scenario import load_scenario, parse_scenario
 from planner.threats import active
 from tests.planner.conftest import small_scenario
+from tests.teams import landing_scenario
 
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -66,3 +76,56 @@ def test_separation_coupling_resolves_a_crossing_conflict() -> None:
     assert result.status is Status.APPROXIMATE, result.message
     assert result.min_separation_m >= 300.0
     assert sum(result.costs) > 64000.0  # someone detoured
+
+
+@pytest.mark.parametrize("n_ants", [1, 36, _BROADCAST_TABU_ANTS, 1200])
+def test_tabu_lookup_matches_a_plain_comparison(n_ants: int) -> None:
+    rng = np.random.default_rng(n_ants)
+    neighbours = rng.integers(-1, 40, (n_ants, 8))
+    recent = rng.integers(-1, 40, (n_ants, 8))
+    expected = [
+        [int(v) in row.tolist() for v in nb] for nb, row in zip(neighbours, recent, strict=True)
+    ]
+    assert _in_rows(neighbours, recent).tolist() == expected
+
+
+@pytest.mark.parametrize(
+    ("walk", "path"),
+    [
+        ([1, 2, 3], [1, 2, 3]),
+        ([1, 2, 3, 2, 4], [1, 2, 4]),
+        ([5, 6, 5, 6, 7], [5, 6, 7]),
+        ([1, 2, 3, 4, 2, 5, 3, 6], [1, 2, 5, 3, 6]),
+    ],
+)
+def test_erase_loops_keeps_the_path_from_each_last_visit(walk: list[int], path: list[int]) -> None:
+    assert _erase_loops(np.array(walk, dtype=np.int64)).tolist() == path
+
+
+@pytest.mark.parametrize("landing", [False, True])
+def test_route_figures_equal_the_route_by_route_measures(landing: bool) -> None:
+    # With landing slots each route ends with the slot's straight final (a tail).
+    problem = _problem(landing_scenario(0)[0] if landing else small_scenario())
+    assert any(t.tail_m for t in problem.tasks) == landing
+    colonies = _Colonies(problem, AcoOptions(), np.random.default_rng(3))
+    col, walks = colonies.walk(np.arange(len(problem.tasks)))
+    for c in range(len(problem.tasks)):
+        mine = [w for w, k in zip(walks, col.tolist(), strict=True) if k == c and w is not None]
+        task = problem.tasks[c]
+        # Also a single node, and a route that jumps between nodes that are not neighbours.
+        mine += [np.array([task.start_node]), np.array([task.start_node, task.goal_node])]
+        figures = route_figures(problem, c, mine)
+        assert len(figures) == len(mine) > 2
+        for nodes, (points, cost, length) in zip(mine, figures, strict=True):
+            expected = problem.route_points(c, nodes)
+            np.testing.assert_array_equal(points, expected)
+            assert cost == task.cost_map.path_cost(nodes)
+            assert length == polyline_length_m(expected)
+
+
+def test_count_true_counts_each_row() -> None:
+    mask = np.random.default_rng(9).random((500, 8)) < 0.4
+    mask[0] = True
+    mask[1] = False
+    assert _count_true(mask).tolist() == mask.sum(axis=1).tolist()
+    assert _count_true(mask[:, ::-1]).tolist() == mask.sum(axis=1).tolist()  # not contiguous

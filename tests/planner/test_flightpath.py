@@ -541,3 +541,47 @@ def test_concat_of_split_route_is_the_route(
     assert head.concat(tail) == route
     with pytest.raises(GeometryError, match="other"):
         tail.concat(head)
+
+
+@settings(max_examples=80, deadline=None)
+@given(case=polylines(), fractions=st.lists(st.floats(0.0, 1.0), min_size=1, max_size=40))
+def test_poses_at_equals_pose_at_point_by_point(
+    case: tuple[NDArray[np.float64], float], fractions: list[float]
+) -> None:
+    points, radius_m = case
+    route = smooth_polyline(points, radius_m)
+    s_m = [f * route.length_m for f in fractions] + [0.0, route.length_m]
+    s_m += list(route.cumulative_m())  # segment joints: the index lookup's edge cases
+    expected = np.array(
+        [[p.east_m, p.north_m, p.heading_rad] for p in (route.pose_at(s) for s in s_m)]
+    )
+    # Bit for bit: the vectorised sampling must not move a profile or a clearance check.
+    np.testing.assert_array_equal(route.poses_at(s_m), expected)
+
+
+def test_poses_at_clamps_round_off_and_rejects_distances_off_the_route() -> None:
+    route = straight(0.0, 0.0, 0.0, 100.0)
+    poses = route.poses_at([-1e-9, 100.0 + 1e-9])
+    np.testing.assert_array_equal(poses[:, :2], [[0.0, 0.0], [0.0, 100.0]])
+    with pytest.raises(GeometryError, match="s_m must be in"):
+        route.poses_at([50.0, 100.5])
+
+
+@settings(max_examples=80, deadline=None)
+@given(
+    case=polylines(),
+    offsets=st.lists(
+        st.tuples(st.floats(-1, 1), st.floats(-1, 1), st.floats(0, 1)), min_size=1, max_size=8
+    ),
+)
+def test_project_many_equals_project_point_by_point(
+    case: tuple[NDArray[np.float64], float], offsets: list[tuple[float, float, float]]
+) -> None:
+    points, radius_m = case
+    route = smooth_polyline(points, radius_m)
+    queries = [tuple(p) for p in route.waypoints()] + [tuple(p) for p in points]
+    for de, dn, fraction in offsets:
+        on = route.pose_at(fraction * route.length_m)
+        queries.append((on.east_m + 3 * radius_m * de, on.north_m + 3 * radius_m * dn))
+    expected = [route.project(e, n) for e, n in queries]
+    assert route.project_many(np.array(queries)).tolist() == expected

@@ -11,6 +11,7 @@ import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
+from numpy.typing import NDArray
 
 from planner.errors import TerrainError
 from planner.geo import LocalFrame
@@ -555,3 +556,36 @@ def test_min_clearance_along_rejects_empty_and_non_path_inputs() -> None:
         min_clearance_along(flat, np.zeros(0), np.zeros(0), np.zeros(0))
     with pytest.raises(ValueError, match="1-D"):
         min_clearance_along(flat, np.zeros((2, 2)), np.zeros((2, 2)), 0.0)
+
+
+def _relief_hill_by_hill(
+    terrain: SyntheticTerrain, east: NDArray[np.float64], north: NDArray[np.float64]
+) -> NDArray[np.float64]:
+    """The reference: each hill's float32 bump added to a float64 sum in turn."""
+    relief = np.zeros(east.shape)
+    for hill in terrain.hills:
+        c, s = math.cos(hill.major_axis_rad), math.sin(hill.major_axis_rad)
+        inv_a2 = 0.5 / hill.sigma_major_m**2
+        inv_b2 = 0.5 / hill.sigma_minor_m**2
+        de = (east - hill.east_m).astype(np.float32)
+        dn = (north - hill.north_m).astype(np.float32)
+        q = de * np.float32(c * c * inv_a2 + s * s * inv_b2)
+        q += dn * np.float32(2.0 * c * s * (inv_a2 - inv_b2))
+        q *= de
+        q += dn * dn * np.float32(s * s * inv_a2 + c * c * inv_b2)
+        relief += np.exp(-q) * np.float32(hill.height_m)
+    out: NDArray[np.float64] = terrain.base_m + terrain.peak_m * np.tanh(relief / terrain.peak_m)
+    return out
+
+
+@pytest.mark.parametrize("n_points", [1, 7, 4095, 4096, 4097, 9000])
+@pytest.mark.parametrize("hills", [0, 1, 40])
+def test_all_hills_at_once_equal_hill_by_hill(n_points: int, hills: int) -> None:
+    terrain = SyntheticTerrain.generate(seed=hills + n_points, hills=hills, **AREA)
+    rng = np.random.default_rng(n_points)
+    east = rng.uniform(-60_000.0, 60_000.0, n_points)
+    north = rng.uniform(-50_000.0, 50_000.0, n_points)
+    # Bit for bit, and independent of how many points one call takes.
+    expected = _relief_hill_by_hill(terrain, east, north)
+    np.testing.assert_array_equal(terrain.elevation_m(east, north), expected)
+    np.testing.assert_array_equal(terrain.elevation_m(east[:1], north[:1]), expected[:1])
