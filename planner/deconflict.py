@@ -13,12 +13,14 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
 
 from planner.errors import SeparationError
-from planner.schedule import VehicleSchedule
+from planner.flightpath import FlightPath
+from planner.schedule import VehicleSchedule, loiter_position
 
 FloatArray = NDArray[np.float64]
 
@@ -59,11 +61,37 @@ class Separation:
 
 
 def _positions(vs: VehicleSchedule, t: FloatArray) -> FloatArray:
+    """``vs.position_at`` at every time of ``t`` (NaN rows where it does not fly): the same
+    arithmetic on arrays, the path's poses looked up at once (:meth:`FlightPath.poses_at`)."""
+    t = np.asarray(t, dtype=np.float64)
     out = np.full((len(t), 2), np.nan)
-    for k, tk in enumerate(t):
-        p = vs.position_at(float(tk))
-        if p is not None:
-            out[k] = p
+    flying = (t >= vs.takeoff_s) & (t <= vs.arrival_s)
+    s = np.full(len(t), np.nan)
+    loitering = np.zeros(len(t), dtype=bool)
+    for lo in vs.loiters:
+        inside = flying & ~loitering & (t >= lo.t_start_s) & (t < lo.t_end_s)
+        for k in np.flatnonzero(inside):
+            out[k] = loiter_position(
+                lo, (float(t[k]) - lo.t_start_s) * lo.speed_m_s * lo.tas_per_eas
+            )
+        loitering |= inside
+    rest = flying & ~loitering
+    if not vs.airborne_start:
+        climbing = rest & (t < vs.climb_end_s)
+        span = max(vs.climb_end_s - vs.takeoff_s, 1e-9)
+        s[climbing] = vs.climb_s_m * (t[climbing] - vs.takeoff_s) / span
+        if not vs.legs:  # state_at: on the ground until it has legs
+            s[climbing] = 0.0
+    for leg in vs.legs:
+        on = rest & np.isnan(s) & (t >= leg.t_start_s) & (t <= leg.t_end_s)
+        s[on] = leg.s_start_m + (t[on] - leg.t_start_s) * leg.groundspeed_m_s
+    end = rest & np.isnan(s)
+    if end.any():
+        out[end] = (vs.path.end.east_m, vs.path.end.north_m)
+    along = rest & ~end
+    if along.any():
+        poses = vs.path.poses_at(np.minimum(np.maximum(s[along], 0.0), vs.path.length_m))
+        out[along] = poses[:, :2]
     return out
 
 
@@ -208,6 +236,32 @@ TRACK_STEP_S = 2.0
 """Sampling of the team's tracks for :class:`TeamTracks`, s (60 m at 30 m/s)."""
 
 
+_TRACK_CACHE_SIZE = 4096
+_track_cache: dict[tuple[Any, ...], tuple[FlightPath, FloatArray, FloatArray]] = {}
+"""Keyed by the path's identity and the timing (each entry keeps its path alive, so the
+identity is not reused while it is cached)."""
+
+
+def _track_samples(vs: VehicleSchedule) -> tuple[FloatArray, FloatArray]:
+    """A schedule's positions every :data:`TRACK_STEP_S` from its takeoff to its arrival,
+    sampled once per timing: every loiter decision in flight asks for the whole team's
+    tracks, and the team's timings change far less often than that (a hundred vehicles'
+    tracks took seconds to sample, each time, beside the coordinator's loop)."""
+    key = (
+        id(vs.path), vs.takeoff_s, vs.arrival_s, vs.airborne_start, vs.climb_end_s,
+        vs.climb_s_m, vs.legs, vs.loiters,
+    )  # fmt: skip
+    hit = _track_cache.get(key)
+    if hit is not None and hit[0] is vs.path:
+        return hit[1], hit[2]
+    t = np.append(np.arange(vs.takeoff_s, vs.arrival_s, TRACK_STEP_S), vs.arrival_s)
+    p = _positions(vs, t)
+    if len(_track_cache) >= _TRACK_CACHE_SIZE:
+        _track_cache.clear()
+    _track_cache[key] = (vs.path, t, p)
+    return t, p
+
+
 @dataclass(frozen=True)
 class TeamTracks:
     """Every place some vehicles will be from a time on, whenever they are there (their
@@ -225,11 +279,10 @@ class TeamTracks:
     def of(cls, others: Sequence[VehicleSchedule], from_s: float) -> TeamTracks:
         east, north, margin, who = [], [], [], []
         for other in others:
-            t = np.arange(max(from_s, other.takeoff_s), other.arrival_s, TRACK_STEP_S)
-            if t.size == 0:
+            if not other.arrival_s > from_s:
                 continue
-            p = _positions(other, np.append(t, other.arrival_s))
-            p = p[~np.isnan(p[:, 0])]
+            t, p = _track_samples(other)
+            p = p[(t >= from_s) & ~np.isnan(p[:, 0])]
             east.append(p[:, 0])
             north.append(p[:, 1])
             margin.append(np.full(len(p), 0.5 * other.speed_max_m_s * TRACK_STEP_S))

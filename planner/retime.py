@@ -708,9 +708,6 @@ def build_schedule(
     )
 
 
-SEPARATION_SPEED_TRIES = 8
-"""Cruise speeds tried per vehicle for separation, nearest its own first (at 0.5 m/s steps,
-within 2 m/s: over 50 km of path that moves a passage by minutes)."""
 SEPARATION_CHECK_MARGIN = 1.1
 """A timing tried for separation is kept when it comes no closer than this many ``d_s`` to
 the rest on the sampling grid (whose distances may be up to a tenth of ``d_s`` too long)."""
@@ -795,7 +792,7 @@ def _separating_speed(
         (c for c in levels if abs(c - v.cruise_m_s) > 1e-9),
         key=lambda c: (abs(c - v.cruise_m_s), c),
     )
-    for cruise in tries[:SEPARATION_SPEED_TRIES]:
+    for cruise in tries:
         other_cruise = v.model_copy(update={"cruise_speed_m_s": cruise})
         try:
             r = retime_on_path(

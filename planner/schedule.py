@@ -228,7 +228,7 @@ class VehicleSchedule:
         for lo in self.loiters:
             if lo.t_start_s <= t_s < lo.t_end_s:
                 u_m = (t_s - lo.t_start_s) * lo.speed_m_s * lo.tas_per_eas
-                return _loiter_position(lo, u_m)
+                return loiter_position(lo, u_m)
         s: float | None = None
         if not self.airborne_start and t_s < self.climb_end_s:
             s = self.state_at(t_s)[1]
@@ -239,7 +239,9 @@ class VehicleSchedule:
         return p.east_m, p.north_m
 
 
-def _loiter_position(lo: LoiterPlan, u_m: float) -> tuple[float, float]:
+def loiter_position(lo: LoiterPlan, u_m: float) -> tuple[float, float]:
+    """Where a vehicle is ``u_m`` metres into a loiter (the detour out to the circle, the turns,
+    the way back to the path), m."""
     half = 0.5 * lo.detour_m
     pe, pn = lo.entry_east_m, lo.entry_north_m
     if lo.detour_m > 0.0:

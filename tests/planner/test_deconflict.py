@@ -7,9 +7,13 @@ import math
 import numpy as np
 import pytest
 
-from planner.deconflict import pair_separation, separation
+from planner.deconflict import _positions, pair_separation, separation
 from planner.flightpath import straight
+from planner.plan import build_world, plan
+from planner.retime import build_schedule
+from planner.scenario import parse_scenario
 from planner.schedule import Leg, LoiterPlan, VehicleSchedule
+from tests.planner.conftest import small_scenario
 
 
 def _vs(
@@ -51,7 +55,8 @@ def test_not_airborne_together_is_no_conflict() -> None:
     assert separation([a, b], 500.0).min_separation_m == math.inf
 
 
-def test_loiter_positions_stay_on_the_circle() -> None:
+def _loitering() -> tuple[VehicleSchedule, LoiterPlan]:
+    """A, 20 km east at 20 m/s, with two turns of 300 m half way."""
     a = _vs("A", 0, 0, 20_000, 0, 20.0, 0.0)
     r = 300.0
     lo = LoiterPlan(
@@ -77,6 +82,12 @@ def test_loiter_positions_stay_on_the_circle() -> None:
     vs = VehicleSchedule(
         "A", a.path, a.wp_s_m, a.wp_alt_m, 0.0, 1000.0 + dur, legs, (lo,), 15, 25, False
     )
+    return vs, lo
+
+
+def test_loiter_positions_stay_on_the_circle() -> None:
+    vs, lo = _loitering()
+    r = lo.radius_m
     for t in np.linspace(lo.t_start_s, lo.t_end_s - 1e-6, 50):
         p = vs.position_at(float(t))
         assert p is not None
@@ -117,3 +128,20 @@ def test_the_team_separation_matches_every_pair_searched_on_its_own() -> None:
             assert math.isinf(p.distance_m)
         else:
             assert want - 1e-6 <= p.distance_m <= want + required / 20.0, (p, want)
+
+
+def test_positions_sampled_at_once_are_the_schedule_s_own_at_every_time() -> None:
+    """The team's tracks are sampled on arrays: the same positions as the schedule's own
+    ``position_at``, time by time, through the climb-out, the legs, a loiter and the end."""
+    scenario = parse_scenario(small_scenario(arrival={"kind": "simultaneous", "required_s": 2600}))
+    s = build_schedule(scenario, plan(scenario, "astar"), world=build_world(scenario))
+    assert all(vs.climb is not None for vs in s.vehicles)
+    for vs in [*s.vehicles, _loitering()[0]]:
+        t = np.linspace(vs.takeoff_s - 50.0, vs.arrival_s + 50.0, 3001)
+        got = _positions(vs, t)
+        for k, tk in enumerate(t):
+            want = vs.position_at(float(tk))
+            if want is None:
+                assert np.isnan(got[k]).all(), (vs.vehicle_id, tk)
+            else:
+                assert tuple(got[k]) == want, (vs.vehicle_id, tk, got[k], want)

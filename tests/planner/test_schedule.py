@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import math
 import pickle
-from dataclasses import dataclass, replace
+from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
@@ -14,6 +14,7 @@ import pytest
 from planner.atmosphere import eas2tas, mean_eas2tas
 from planner.deconflict import loiter_conflict, pair_separation, separation
 from planner.errors import ArrivalTimeError, InfeasibleError, SeparationError
+from planner.flightpath import straight
 from planner.plan import build_world, plan
 from planner.popup import replay_popups
 from planner.retime import (
@@ -24,7 +25,7 @@ from planner.retime import (
     retime_vehicle,
 )
 from planner.scenario import load_scenario, parse_scenario
-from planner.schedule import Schedule
+from planner.schedule import Leg, Schedule, VehicleSchedule
 from tests.planner.conftest import small_scenario
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -414,20 +415,14 @@ def test_a_surplus_no_buffer_absorbs_gets_turns_on_the_path_clear_of_threats_and
     assert flat.loiters[0].s_m < lo.s_m
 
 
-@dataclass(frozen=True)
-class _Parked:
-    """A team member at one point the whole time (what :class:`TeamTracks` reads of a
-    schedule)."""
-
-    vehicle_id: str
-    east_m: float
-    north_m: float
-    speed_max_m_s: float = 30.0
-    takeoff_s: float = 0.0
-    arrival_s: float = 5_000.0
-
-    def position_at(self, t_s: float) -> tuple[float, float] | None:
-        return (self.east_m, self.north_m) if self.takeoff_s <= t_s <= self.arrival_s else None
+def _parked(vehicle_id: str, east_m: float, north_m: float) -> VehicleSchedule:
+    """A team member at one point the whole time (a metre of path over 5,000 s)."""
+    path = straight(east_m, north_m, east_m + 1.0, north_m)
+    leg = Leg(0.0, 1.0, 20.0, 0.0, 5_000.0)
+    return VehicleSchedule(
+        vehicle_id, path, np.array([0.0, 1.0]), np.array([500.0, 500.0]), 0.0, 5_000.0,
+        (leg,), (), 18.0, 30.0, True,
+    )  # fmt: skip
 
 
 def test_loiter_turns_in_flight_keep_the_separation_from_the_team() -> None:
@@ -445,7 +440,7 @@ def test_loiter_turns_in_flight_keep_the_separation_from_the_team() -> None:
     # Someone at the far side of that circle.
     ux = first.centre_east_m - first.entry_east_m
     uy = first.centre_north_m - first.entry_north_m
-    parked = _Parked("X", first.centre_east_m + ux, first.centre_north_m + uy)
+    parked = _parked("X", first.centre_east_m + ux, first.centre_north_m + uy)
     crowded = replace(s, vehicles=(*s.vehicles, parked))  # type: ignore[arg-type]
     required = s.scenario.separation_m
     assert loiter_conflict(alone, [parked], required, 1_000.0) is not None
@@ -453,13 +448,14 @@ def test_loiter_turns_in_flight_keep_the_separation_from_the_team() -> None:
     assert unseparated.loiters[0].s_m == first.s_m  # without separate, the same place
     vs, _ = retime_vehicle(crowded, "A", separate=True, **kw)
     (lo,) = vs.loiters
-    gap = math.hypot(lo.centre_east_m - parked.east_m, lo.centre_north_m - parked.north_m)
+    spot = parked.path.start
+    gap = math.hypot(lo.centre_east_m - spot.east_m, lo.centre_north_m - spot.north_m)
     assert gap - lo.radius_m >= required
     assert loiter_conflict(vs, [parked], required, 1_000.0) is None
     assert vs.arrival_s == pytest.approx(target, abs=0.5)
     # Members every 500 m along the path: no circle tangent to it keeps 300 m from them all.
     poses = [vs.path.pose_at(float(d)) for d in np.arange(0.0, vs.path.length_m, 500.0)]
-    everywhere = [_Parked(f"X{k}", p.east_m, p.north_m) for k, p in enumerate(poses)]
+    everywhere = [_parked(f"X{k}", p.east_m, p.north_m) for k, p in enumerate(poses)]
     jammed = replace(s, vehicles=(*s.vehicles, *everywhere))  # type: ignore[arg-type]
     with pytest.raises(InfeasibleError, match=r"A.*team's tracks left out") as info:
         retime_vehicle(jammed, "A", separate=True, **kw)
