@@ -2,8 +2,10 @@
 
 For each team size: wall time of the full plan (world, grid, exact search, ACO, smoothing,
 profiles, checks), the worst and mean ACO cost ratio to the exact optimum on the same graph,
-and the peak traced memory. Run: ``.venv/bin/python bench/bench_planner.py [--sizes 3 10]``;
-``--workers 2`` finishes the routes in two forked processes (the same plans).
+and the peak traced memory; then the schedule's (takeoffs and speeds, pairs separated by
+timing) wall time and its minimum separation with every pair searched. Run:
+``.venv/bin/python bench/bench_planner.py [--sizes 3 10]``; ``--workers 2`` finishes the
+routes in two forked processes (the same plans).
 """
 
 from __future__ import annotations
@@ -21,8 +23,12 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+from procstat import TreeMemory  # bench/, beside this script
 
-from planner.plan import build_terrain, plan
+from planner.backend import Backend, RayBackend
+from planner.deconflict import separation
+from planner.plan import build_terrain, build_world, plan
+from planner.retime import build_schedule
 from planner.scenario import load_scenario, parse_scenario
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -32,8 +38,11 @@ PAPER = ROOT / "scenarios" / "paper_three_uav.yaml"
 def team_scenario(n: int, seed: int = 0) -> dict[str, Any]:
     """The paper's map and static threats with ``n`` vehicles from the west and south edges.
 
-    Goals sit on rings 3-15 km around the target at (200, 200) km, at least 800 m apart.
+    Goals sit on rings 3-15 km around the target at (200, 200) km, at least 800 m apart (for
+    more than 100 vehicles the outer ring grows with the team: 15 km x sqrt(n / 100), so the
+    goals keep that spacing).
     """
+    outer_m = 15_000.0 * max(1.0, math.sqrt(n / 100.0))
     base = load_scenario(PAPER).model_dump(mode="json", exclude_none=True)
     base["threats"] = [t for t in base["threats"] if "appears" not in t]
     rng = np.random.default_rng(seed)
@@ -50,7 +59,7 @@ def team_scenario(n: int, seed: int = 0) -> dict[str, Any]:
         ground = terrain.elevation_m(np.array([start[0]]), np.array([start[1]]))
         if float(ground[0]) > 900.0:  # launch sites in the lowlands
             continue
-        r, a = float(rng.uniform(3_000, 15_000)), float(rng.uniform(math.pi, 1.5 * math.pi))
+        r, a = float(rng.uniform(3_000, outer_m)), float(rng.uniform(math.pi, 1.5 * math.pi))
         goal = (200_000 + r * math.cos(a), 200_000 + r * math.sin(a))
         if any(math.dist(goal, g) < 800 for g in goals):
             continue
@@ -65,14 +74,29 @@ def team_scenario(n: int, seed: int = 0) -> dict[str, Any]:
     return base
 
 
-def run(n: int, seed: int, workers: int = 1) -> dict[str, Any]:
-    """Plan one team (in this process) and return the figures."""
+def run(
+    n: int, seed: int, workers: int = 1, ray_address: str | None = None, schedule: bool = True
+) -> dict[str, Any]:
+    """Plan one team (in this process) and return the figures. With ``ray_address`` the routes
+    are finished on Ray (``"local"``: a Ray started here, its start-up not timed)."""
     scenario = parse_scenario(team_scenario(n, seed)) if n != 3 else load_scenario(PAPER)
+    backend: Backend | None = None
+    if ray_address is not None:
+        backend = RayBackend(None if ray_address == "local" else ray_address)
     t0 = time.perf_counter()
-    result = plan(scenario, "aco", rng=np.random.default_rng(seed), workers=workers)
+    world = build_world(scenario)
+    result = plan(
+        scenario, "aco", rng=np.random.default_rng(seed), world=world, workers=workers,
+        backend=backend,
+    )  # fmt: skip
     wall = time.perf_counter() - t0
+    if isinstance(backend, RayBackend):
+        backend.close()
     ratios = [r.cost / r.optimal_cost for r in result.routes]
-    return {
+    # The schedule's timing (takeoffs, speeds; pairs separated by takeoff and speed where one
+    # starts on the ground) and its separation, every pair searched: what a flight is refused
+    # or flown on.
+    figures = {
         "uavs": n,
         "wall_s": wall,
         "iterations": result.result.iterations,
@@ -81,6 +105,18 @@ def run(n: int, seed: int, workers: int = 1) -> dict[str, Any]:
         "peak_rss_mib": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024,
         "status": str(result.result.status),
         "min_separation_m": result.min_separation_m,
+    }
+    if not schedule:
+        return figures
+    t0 = time.perf_counter()
+    timed = build_schedule(scenario, result, world=world)
+    sep = separation(timed.vehicles, scenario.separation_m)
+    schedule_wall = time.perf_counter() - t0
+    return figures | {
+        "schedule_s": schedule_wall,
+        "schedule_min_separation_m": sep.min_separation_m,
+        "schedule_conflicts": len(sep.conflicts),
+        "separated": sum(1 for e in timed.events if e.kind == "separation"),
     }
 
 
@@ -91,21 +127,33 @@ def main() -> None:
     parser.add_argument(
         "--workers", type=int, default=1, help="processes that finish the routes (default 1)"
     )
+    parser.add_argument(
+        "--ray",
+        metavar="ADDRESS",
+        help="finish the routes on Ray: 'local' starts one here, else ray.init(address=ADDRESS)",
+    )
+    parser.add_argument(
+        "--no-schedule", action="store_true", help="plan only (no schedule, no separation search)"
+    )
     parser.add_argument("--one", type=int, help=argparse.SUPPRESS)
     args = parser.parse_args()
     if args.one is not None:
-        print(json.dumps(run(args.one, args.seed, args.workers)))
+        # Peak memory of this process and all it starts (Ray's processes included).
+        with TreeMemory() as memory:
+            figures = run(args.one, args.seed, args.workers, args.ray, not args.no_schedule)
+        print(json.dumps(figures | {"tree_peak_rss_mib": memory.peak_mib}))
         return
     print(
         f"machine: {platform.machine()}, {os.cpu_count()} cores, "
         f"{platform.python_implementation()} {platform.python_version()}, numpy {np.__version__}, "
-        f"{args.workers} worker(s)"
+        f"{args.workers} worker(s)" + (f", routes finished on Ray ({args.ray})" if args.ray else "")
     )
     print(
         "| UAVs | wall (s) | ACO iterations | cost / optimal, max | mean "
-        "| peak RSS (MiB) | status | min separation (m) |"
+        "| peak RSS (MiB) | with child processes (MiB) | status | min separation (m) "
+        "| schedule (s) | separated by timing | schedule min separation (m) | pairs under d_s |"
     )
-    print("|---:|---:|---:|---:|---:|---:|---|---:|")
+    print("|---:|---:|---:|---:|---:|---:|---:|---|---:|---:|---:|---:|---:|")
     for n in args.sizes:
         # A fresh process per size, so peak RSS is that size's own.
         out = subprocess.run(
@@ -118,16 +166,24 @@ def main() -> None:
                 str(args.seed),
                 "--workers",
                 str(args.workers),
+                *(["--ray", args.ray] if args.ray else []),
+                *(["--no-schedule"] if args.no_schedule else []),
             ],
             capture_output=True,
             text=True,
             check=True,
         )
-        r = json.loads(out.stdout)
+        r = json.loads(out.stdout.strip().splitlines()[-1])
+        timed = (
+            f"{r['schedule_s']:.2f} | {r['separated']} | {r['schedule_min_separation_m']:.0f} | "
+            f"{r['schedule_conflicts']}"
+            if "schedule_s" in r
+            else "- | - | - | -"
+        )
         print(
             f"| {r['uavs']} | {r['wall_s']:.2f} | {r['iterations']} | {r['ratio_max']:.4f} | "
-            f"{r['ratio_mean']:.4f} | {r['peak_rss_mib']:.0f} | {r['status']} | "
-            f"{r['min_separation_m']:.0f} |",
+            f"{r['ratio_mean']:.4f} | {r['peak_rss_mib']:.0f} | {r['tree_peak_rss_mib']:.0f} | "
+            f"{r['status']} | {r['min_separation_m']:.0f} | {timed} |",
             flush=True,
         )
 

@@ -20,7 +20,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import os
 import subprocess
 import sys
 import tempfile
@@ -32,35 +31,9 @@ import yaml
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))  # the generated teams live with the tests
+from procstat import children, cpu_s, rss_mib  # noqa: E402  (bench/, beside this script)
+
 from tests.teams import arc_team  # noqa: E402
-
-TICKS_PER_S = os.sysconf("SC_CLK_TCK")
-PAGE_BYTES = os.sysconf("SC_PAGE_SIZE")
-
-
-def _cpu_s(pid: int) -> float | None:
-    """User + system CPU seconds of a process (None once it has gone)."""
-    try:
-        fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
-    except OSError:
-        return None
-    return (int(fields[11]) + int(fields[12])) / TICKS_PER_S
-
-
-def _rss_mib(pid: int) -> float | None:
-    try:
-        pages = int(Path(f"/proc/{pid}/statm").read_text().split()[1])
-    except OSError:
-        return None
-    return pages * PAGE_BYTES / 2**20
-
-
-def _children(pid: int) -> list[int]:
-    try:
-        text = Path(f"/proc/{pid}/task/{pid}/children").read_text()
-    except OSError:
-        return []
-    return [int(x) for x in text.split()]
 
 
 class _Process:
@@ -75,7 +48,7 @@ class _Process:
         self.peak_rss_mib = 0.0
 
     def sample(self, wall_s: float) -> None:
-        cpu, rss = _cpu_s(self.pid), _rss_mib(self.pid)
+        cpu, rss = cpu_s(self.pid), rss_mib(self.pid)
         if cpu is None or rss is None:
             return
         if self.cpu_first_s is None:
@@ -111,7 +84,7 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
             coordinator.sample(now)
             if simulator is None:
                 # The simulator is the coordinator's child once the plan is made.
-                kids = _children(proc.pid)
+                kids = children(proc.pid)
                 if kids:
                     simulator = _Process(kids[0])
                     coordinator = _Process(proc.pid)  # from the flight on, not the planning

@@ -17,7 +17,7 @@ from collections.abc import Iterator, Mapping, Sequence
 from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Literal
+from typing import TYPE_CHECKING, Literal
 
 import numpy as np
 from numpy.typing import NDArray
@@ -45,6 +45,9 @@ from planner.scenario import (
 from planner.search import solve_exact
 from planner.terrain import SrtmTerrain, SyntheticTerrain, Terrain
 from planner.threats import ThreatZone, active, build_threats, forbidden_at, polyline_clearance_m
+
+if TYPE_CHECKING:
+    from planner.backend import Backend
 
 FloatArray = NDArray[np.float64]
 Method = Literal["aco", "astar"]
@@ -867,12 +870,14 @@ def solve_and_finish(
     options: AcoOptions | None = None,
     airborne: Mapping[str, tuple[float, float]] | None = None,
     workers: int = 1,
+    backend: Backend | None = None,
 ) -> tuple[SolveResult, list[PlannedRoute]]:
     """Solve on the grid, refuse an infeasible result, and finish every route.
 
     ``airborne`` gives, per vehicle id, the altitude (m AMSL) and compass heading (rad) of a
     vehicle re-planned in flight; the others start from their scenario start. ``workers`` > 1
-    finishes the routes in that many forked processes (see :func:`finish_routes`).
+    finishes the routes in that many forked processes (see :func:`finish_routes`); a
+    ``backend`` (:mod:`planner.backend`, e.g. Ray) finishes them instead.
     """
     result = solve(problem, method, rng=rng, options=options)
     if result.status is Status.INFEASIBLE or not all(result.routes):
@@ -882,6 +887,8 @@ def solve_and_finish(
         assert r is not None
         alt, heading = (airborne or {}).get(r.vehicle_id, (None, None))
         jobs.append(FinishJob(i, r.nodes, r.cost, alt, heading))
+    if backend is not None:
+        return result, backend.finish_routes(world, problem, jobs, threats=threats)
     return result, finish_routes(world, problem, jobs, threats=threats, workers=workers)
 
 
@@ -903,12 +910,13 @@ _FORKED: tuple[World, Problem, Sequence[ThreatZone]] | None = None
 def _finish_forked(job: FinishJob) -> PlannedRoute:
     assert _FORKED is not None
     world, problem, threats = _FORKED
-    return _finish(world, problem, threats, job)
+    return finish_job(world, problem, threats, job)
 
 
-def _finish(
+def finish_job(
     world: World, problem: Problem, threats: Sequence[ThreatZone], job: FinishJob
 ) -> PlannedRoute:
+    """One job's route (:func:`finish_route`)."""
     return finish_route(
         world,
         problem,
@@ -940,7 +948,7 @@ def finish_routes(
     """
     pool_size = min(workers, len(jobs))
     if pool_size < 2 or threading.active_count() > 1 or "fork" not in mp.get_all_start_methods():
-        return [_finish(world, problem, threats, job) for job in jobs]
+        return [finish_job(world, problem, threats, job) for job in jobs]
     global _FORKED
     _FORKED = (world, problem, threats)
     try:
@@ -959,11 +967,14 @@ def plan(
     options: AcoOptions | None = None,
     world: World | None = None,
     workers: int = 1,
+    backend: Backend | None = None,
 ) -> Plan:
     """Plan every vehicle's flyable route for the static threats of a scenario.
 
     ``workers`` > 1 finishes the routes (simplify, smooth, profile, check) in that many
-    forked processes: the same plan, sooner on a multi-core machine for a large team.
+    forked processes: the same plan, sooner on a multi-core machine for a large team. A
+    ``backend`` (:mod:`planner.backend`: Ray, on this machine or a cluster) finishes them
+    instead; the plan is the same for the same seed wherever its routes are finished.
 
     Raises
     ------
@@ -975,7 +986,14 @@ def plan(
     threats = active(world.threats, None)
     problem = build_problem(world, threats=threats)
     result, routes = solve_and_finish(
-        world, problem, method, threats=threats, rng=rng, options=options, workers=workers
+        world,
+        problem,
+        method,
+        threats=threats,
+        rng=rng,
+        options=options,
+        workers=workers,
+        backend=backend,
     )
     limits = [t.timing for t in problem.tasks]
     timing = team_timing([r.length_m for r in routes], limits, problem.required_arrival_s)

@@ -1,0 +1,125 @@
+"""Where the planner's per-vehicle work runs: in this process, in forked processes, or on Ray.
+
+The ACO search is one coupled computation (every candidate is scored against the team's
+tracks) and runs where :func:`planner.plan.plan` is called. What follows it is one job per
+vehicle and pure: the route is shortened, smoothed into a flyable path, given its altitude
+profile and checked against the zones and the terrain (:func:`planner.plan.finish_route`).
+A backend runs those jobs and returns the routes in job order; the routes do not depend on
+where they were finished, so every backend gives the same plan for the same seed.
+
+- :class:`LocalBackend`: here, or in ``workers`` forked processes sharing the world's memory
+  (:func:`planner.plan.finish_routes`). The default.
+- :class:`RayBackend`: each vehicle a Ray task. The world, the problem and the zones are put
+  into Ray's object store once and shared by the tasks (on a cluster, shipped once to each
+  node). ``address=None`` starts a Ray on this machine; ``address="auto"`` or
+  ``"ray://head:10001"`` joins a running cluster (``ray.init(address=...)``). Ray is imported
+  only when this backend is made.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+from typing import TYPE_CHECKING, Any, Protocol
+
+if TYPE_CHECKING:
+    from planner.plan import FinishJob, PlannedRoute, World
+    from planner.problem import Problem
+    from planner.threats import ThreatZone
+
+__all__ = ["Backend", "LocalBackend", "RayBackend"]
+
+
+class Backend(Protocol):
+    """Runs the route-finishing jobs of a plan; the routes come back in job order."""
+
+    def finish_routes(
+        self,
+        world: World,
+        problem: Problem,
+        jobs: Sequence[FinishJob],
+        *,
+        threats: Sequence[ThreatZone],
+    ) -> list[PlannedRoute]: ...
+
+
+@dataclass(frozen=True)
+class LocalBackend:
+    """This process (``workers`` 1) or that many forked processes."""
+
+    workers: int = 1
+
+    def finish_routes(
+        self,
+        world: World,
+        problem: Problem,
+        jobs: Sequence[FinishJob],
+        *,
+        threats: Sequence[ThreatZone],
+    ) -> list[PlannedRoute]:
+        from planner.plan import finish_routes
+
+        return finish_routes(world, problem, jobs, threats=threats, workers=self.workers)
+
+
+def _finish_one(shared: Any, job: FinishJob) -> Any:
+    """One vehicle's route, in a Ray worker (the shared parts come from the object store)."""
+    from planner.plan import finish_job
+
+    world, problem, threats = shared
+    return finish_job(world, problem, threats, job)
+
+
+class RayBackend:
+    """Each vehicle's route a Ray task.
+
+    Parameters
+    ----------
+    address
+        A running cluster to join (``ray.init(address=...)``: ``"auto"``, ``"ray://host:10001"``);
+        None starts a Ray on this machine, with ``num_cpus`` workers (all cores when None).
+    num_cpus
+        For a Ray started here only.
+
+    A Ray already initialised in this process is used as it is. :meth:`close` shuts down a
+    Ray this backend started.
+    """
+
+    def __init__(self, address: str | None = None, *, num_cpus: int | None = None) -> None:
+        import ray
+
+        self._ray = ray
+        self._started = False
+        if not ray.is_initialized():
+            options: dict[str, Any] = {
+                "include_dashboard": False,
+                "log_to_driver": False,
+                "configure_logging": False,
+            }
+            if address is None:
+                options["num_cpus"] = num_cpus
+            else:
+                options["address"] = address
+            ray.init(**options)
+            self._started = True
+        self._task = ray.remote(_finish_one)
+
+    def finish_routes(
+        self,
+        world: World,
+        problem: Problem,
+        jobs: Sequence[FinishJob],
+        *,
+        threats: Sequence[ThreatZone],
+    ) -> list[PlannedRoute]:
+        shared = self._ray.put((world, problem, tuple(threats)))
+        refs = [self._task.remote(shared, job) for job in jobs]
+        # ray.get returns in the order asked; the first failing route raises its error.
+        routes: list[PlannedRoute] = self._ray.get(refs)
+        return routes
+
+    def close(self) -> None:
+        """Shut down the Ray this backend started (one it joined or found is left running)."""
+        if self._started:
+            self._ray.shutdown()
+            self._started = False
