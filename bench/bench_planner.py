@@ -39,10 +39,10 @@ def team_scenario(n: int, seed: int = 0) -> dict[str, Any]:
     """The paper's map and static threats with ``n`` vehicles from the west and south edges.
 
     Goals sit on rings 3-15 km around the target at (200, 200) km, at least 800 m apart (for
-    more than 100 vehicles the outer ring grows with the team: 15 km x sqrt(n / 100), so the
-    goals keep that spacing).
+    more than 100 vehicles, 800 m x sqrt(100 / n) apart: the ring holds about 260 goals 800 m
+    apart, and a team that large is a planning load, not one the airspace could hold).
     """
-    outer_m = 15_000.0 * max(1.0, math.sqrt(n / 100.0))
+    spacing_m = 800.0 * min(1.0, math.sqrt(100.0 / n))
     base = load_scenario(PAPER).model_dump(mode="json", exclude_none=True)
     base["threats"] = [t for t in base["threats"] if "appears" not in t]
     rng = np.random.default_rng(seed)
@@ -59,9 +59,9 @@ def team_scenario(n: int, seed: int = 0) -> dict[str, Any]:
         ground = terrain.elevation_m(np.array([start[0]]), np.array([start[1]]))
         if float(ground[0]) > 900.0:  # launch sites in the lowlands
             continue
-        r, a = float(rng.uniform(3_000, outer_m)), float(rng.uniform(math.pi, 1.5 * math.pi))
+        r, a = float(rng.uniform(3_000, 15_000)), float(rng.uniform(math.pi, 1.5 * math.pi))
         goal = (200_000 + r * math.cos(a), 200_000 + r * math.sin(a))
-        if any(math.dist(goal, g) < 800 for g in goals):
+        if any(math.dist(goal, g) < spacing_m for g in goals):
             continue
         goals.append(goal)
         v = dict(template)

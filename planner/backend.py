@@ -11,13 +11,14 @@ where they were finished, so every backend gives the same plan for the same seed
   (:func:`planner.plan.finish_routes`). The default.
 - :class:`RayBackend`: each vehicle a Ray task. The world, the problem and the zones are put
   into Ray's object store once and shared by the tasks (on a cluster, shipped once to each
-  node). ``address=None`` starts a Ray on this machine; ``address="auto"`` or
-  ``"ray://head:10001"`` joins a running cluster (``ray.init(address=...)``). Ray is imported
-  only when this backend is made.
+  node). ``address=None`` starts a Ray on this machine, listening on the loopback address
+  only; ``address="auto"`` or ``"ray://head:10001"`` joins a running cluster
+  (``ray.init(address=...)``). Ray is imported only when this backend is made.
 """
 
 from __future__ import annotations
 
+import os
 from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any, Protocol
@@ -28,6 +29,10 @@ if TYPE_CHECKING:
     from planner.threats import ThreatZone
 
 __all__ = ["Backend", "LocalBackend", "RayBackend"]
+
+LOOPBACK_ONLY_ENV = "RAY_ENABLE_WINDOWS_OR_OSX_CLUSTER"
+"""Ray's switch between a cluster (its services on the node's network address) and one
+machine (on the loopback address, as on Windows and macOS): "0" is one machine."""
 
 
 class Backend(Protocol):
@@ -86,6 +91,10 @@ class RayBackend:
     """
 
     def __init__(self, address: str | None = None, *, num_cpus: int | None = None) -> None:
+        if address is None:
+            # A Ray started here is this machine's alone: its services listen on the loopback
+            # address, not the machine's network address (read when ray is first imported).
+            os.environ.setdefault(LOOPBACK_ONLY_ENV, "0")
         import ray
 
         self._ray = ray

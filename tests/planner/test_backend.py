@@ -44,6 +44,9 @@ def test_a_plan_finished_on_ray_is_the_plan_finished_here(
     ray_backend: RayBackend, name: str
 ) -> None:
     scenario = load_scenario(ROOT / "scenarios" / name)
+    import ray
+
+    assert ray.util.get_node_ip_address() == "127.0.0.1"  # this machine's alone
     here = plan(scenario, rng=np.random.default_rng(3))
     on_ray = plan(scenario, rng=np.random.default_rng(3), backend=ray_backend)
     _same(here, on_ray)
