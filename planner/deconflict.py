@@ -212,12 +212,18 @@ class TeamSamples:
         self.t_s = _grid_s(vehicles, team_step_s(vehicles, required_m))
         self.positions = np.stack([_positions(v, self.t_s) for v in vehicles])
 
-    def nearest(self, vs: VehicleSchedule) -> tuple[float, str | None]:
-        """How close ``vs`` comes to any other vehicle of the team (on the grid: at most a
-        twentieth of ``d_s`` more than the exact search finds, off the grid's span not
-        compared), and to whom; ``(inf, None)`` when they never fly together."""
+    def nearest(
+        self, vs: VehicleSchedule, among: Sequence[str] | None = None
+    ) -> tuple[float, str | None]:
+        """How close ``vs`` comes to any other vehicle of the team (or of ``among``) (on the
+        grid: at most a twentieth of ``d_s`` more than the exact search finds, off the grid's
+        span not compared), and to whom; ``(inf, None)`` when they never fly together."""
         mine = _positions(vs, self.t_s)
-        others = [k for k, vid in enumerate(self.ids) if vid != vs.vehicle_id]
+        others = [
+            k
+            for k, vid in enumerate(self.ids)
+            if vid != vs.vehicle_id and (among is None or vid in among)
+        ]
         if not others:
             return math.inf, None
         pos = self.positions[others]

@@ -728,13 +728,16 @@ def _separate(
     the whole team, and the first that keeps the separation from everyone is kept.
 
     Returns the re-timed vehicles and, for each, what was done and why. A pair no speed
-    separates is left as it is (:func:`check_feasible` refuses it, naming the pair).
+    separates is left as it is (:func:`check_feasible` refuses it, naming the pair), and so is
+    a team with more pairs in conflict than vehicles.
     """
     required = scenario.separation_m
     if len(timed) < 2:
         return {}
     conflicts = sorted(separation(timed, required).conflicts, key=lambda p: p.distance_m)
-    if not conflicts:
+    if not conflicts or len(conflicts) > len(timed):
+        # More pairs in conflict than vehicles: a crowd funnelling into one place, which
+        # takeoff times do not untangle (the routes must change); refused as it is, at once.
         return {}
     samples = TeamSamples(timed, required)
     index = {x.vehicle_id: k for k, x in enumerate(timed)}
@@ -747,7 +750,7 @@ def _separate(
             if not _can_shift(scenario, timed[index[vid]], pair.time_s):
                 continue
             found = _separating_speed(
-                scenario, base[index[vid]], targets[vid], step_m_s, threats, samples
+                scenario, base[index[vid]], targets[vid], step_m_s, threats, samples, other
             )
             if found is None:
                 continue
@@ -781,9 +784,12 @@ def _separating_speed(
     step_m_s: float,
     threats: Sequence[ThreatZone],
     samples: TeamSamples,
+    other: str,
 ) -> tuple[Retimed, float] | None:
     """The timing of a vehicle on the ground at the cruise speed nearest its own that keeps
-    the separation from the rest of the team (``samples``), and that speed; None if none."""
+    the separation from the rest of the team (``samples``), and that speed; None if none.
+    Each speed is checked against the vehicle it met (``other``) first: most speeds do not
+    separate even that pair, and the whole team is compared only for those that do."""
     v = scenario.vehicle(vs.vehicle_id)
     if v.airborne:
         return None
@@ -806,7 +812,10 @@ def _separating_speed(
             )
         except InfeasibleError:
             continue
-        if samples.nearest(r.schedule)[0] >= SEPARATION_CHECK_MARGIN * samples.required_m:
+        enough = SEPARATION_CHECK_MARGIN * samples.required_m
+        if samples.nearest(r.schedule, (other,))[0] < enough:
+            continue
+        if samples.nearest(r.schedule)[0] >= enough:
             return r, cruise
     return None
 
