@@ -101,12 +101,12 @@ _AT_ONCE = frozenset(
 
 PACED_TIMEOUT_FLIGHT_S = 1.0
 """On a pace clock, a command's reply is awaited at least this long in flight time..."""
-PACED_TIMEOUT_MAX_FLIGHT_S = 2.0
-"""...and at most this long, whatever the round trips measured in wall time (a busy machine
-makes them long in wall time, not in flight time: with five of them as the timeout a lost
-command cost up to 47 s of flight at 200x, a takeoff that late)."""
 MIN_TIMEOUT_WALL_S = 0.004
-"""...and at least this long in wall time (a loopback round trip with room to spare)."""
+"""...and at least this long in wall time (a loopback round trip with room to spare)..."""
+PACED_TIMEOUT_MAX_FLIGHT_S = 2.0
+"""...and at most this long in flight time, whatever the round trips measured in wall time
+(a busy machine makes them long in wall time, not in flight time: with five of them as the
+timeout a lost command cost up to 47 s of flight at 200x, a takeoff that late)."""
 MIN_COMMAND_WALL_S = 0.4
 """A command is retried for at least this long (wall s) before it is given up."""
 
