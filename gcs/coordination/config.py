@@ -47,6 +47,10 @@ class FlightConfig:
     link_silence_wall_s: float = 0.025
     """...and at least this long in wall time: at 200x, 3 s of mission is 15 ms, less than a
     busy two-core machine's scheduling jitter (25 ms wall is 5 s of mission at 200x)."""
+    conflict_horizon_s: float = 30.0
+    """Separation is predicted this far ahead of each fix (no further than either vehicle's
+    slot), from the two vehicles' present velocities (straight flight: not for a vehicle in a
+    loiter)."""
     runout_m: float = 300.0
     """A last waypoint this far past the goal, so the aircraft flies through the goal."""
     waypoint_spacing_m: float = 5000.0

@@ -54,6 +54,10 @@ class EventKind(enum.StrEnum):
     ABORT = "abort"
     """A vehicle (or the team) was aborted, or the loop stopped before every vehicle arrived
     (the overrun, or the flight's hard deadline)."""
+    CONFLICT = "conflict"
+    """Two flying vehicles predicted to come under the separation within the look-ahead at
+    their present velocities (``payload``: ``other``, ``distance_m``, ``at_s``); an alarm
+    follows if they do."""
     ALARM = "alarm"
     """A vehicle said something critical (STATUSTEXT at MAV_SEVERITY_CRITICAL or worse;
     ``payload``: ``severity``, ``text``), or its route enters a forbidden zone that appeared

@@ -414,7 +414,8 @@ class TeamController(ZoneGuard, TeamTime):
 
     def _watch_separation(self, m: Member, t: float, fix: act.Fix, out: list[act.Action]) -> None:
         """An alarm when the vehicle comes closer than the separation to another one flying
-        (once per encounter)."""
+        (once per encounter), and a conflict event when their straight flight is predicted
+        to bring them that close within the look-ahead (:class:`SeparationWatch`)."""
         if m.launched_s is None or m.east_m is None or m.north_m is None or fix.alt_amsl_m is None:
             return
         watch = self.separation
@@ -422,7 +423,30 @@ class TeamController(ZoneGuard, TeamTime):
         flying = [
             x.vehicle_id for x in self.members.values() if x.launched_s is not None and not x.over
         ]
-        for sf in watch.update(m.vehicle_id, pos, flying):
+        shortfalls = watch.update(m.vehicle_id, pos, flying)
+        ahead = {
+            vid: min(self.config.conflict_horizon_s, max(x.target_s - t, 0.0))
+            for vid in flying
+            if not (x := self.members[vid]).in_loiter() and x.hold_zone is None
+        }
+        for c in watch.predict(m.vehicle_id, ahead):
+            out.append(
+                act.Report(
+                    EventKind.CONFLICT,
+                    f"predicted {c.distance_m:.0f} m from {c.other} at {c.at_s:.1f} s (in "
+                    f"{c.at_s - t:.0f} s at their present velocities), below "
+                    f"{watch.separation_m:g} m",
+                    m.vehicle_id,
+                    value=round(c.distance_m, 1),
+                    t_s=t,
+                    payload={
+                        "other": c.other,
+                        "distance_m": round(c.distance_m, 1),
+                        "at_s": round(c.at_s, 1),
+                    },
+                )
+            )
+        for sf in shortfalls:
             out.append(
                 act.Report(
                     EventKind.ALARM,

@@ -852,6 +852,38 @@ def test_two_vehicles_closer_than_the_separation_are_an_alarm_once_per_encounter
     assert m1.launched_s is not None and m2.launched_s is not None
 
 
+def test_a_conflict_is_predicted_within_the_look_ahead_said_once_and_dropped() -> None:
+    """Head-on at 25 m/s each, 2 km apart, 100 m off each other's line: they would pass 100 m
+    apart in 40 s (worked out here by hand). Not within a 30 s look-ahead, then within it,
+    said once; a turn away drops it; apart in height, or side by side, none."""
+    w = SeparationWatch(500.0, stale_s=5.0)
+    ahead = {"A": 30.0, "B": 30.0}
+
+    def fixes(t: float, a: Position) -> None:
+        w.update("B", Position(t, 2000.0 - 25.0 * t, 100.0, 500.0, ve_m_s=-25.0), ["A", "B"])
+        w.update("A", a, ["A", "B"])
+
+    fixes(0.0, Position(0.0, 0.0, 0.0, 500.0, ve_m_s=25.0))
+    assert w.predict("A", ahead) == []  # in 40 s: beyond 30 s
+    fixes(12.0, Position(12.0, 300.0, 0.0, 500.0, ve_m_s=25.0))
+    (c,) = w.predict("A", ahead)  # 1400 m closed in 28 s
+    assert (c.vehicle, c.other) == ("A", "B")
+    assert c.distance_m == pytest.approx(100.0) and c.at_s == pytest.approx(40.0)
+    fixes(13.0, Position(13.0, 325.0, 0.0, 500.0, ve_m_s=25.0))
+    assert w.predict("A", ahead) == [] and ("A", "B") in w.predicted  # said once
+    fixes(14.0, Position(14.0, 350.0, 0.0, 500.0, vn_m_s=-25.0))  # turned away
+    assert w.predict("A", ahead) == [] and ("A", "B") not in w.predicted
+    # The same meeting 600 m apart in height, or side by side on parallel tracks.
+    high = SeparationWatch(500.0)
+    high.update("B", Position(0.0, 1000.0, 100.0, 1100.0, ve_m_s=-25.0), ["A", "B"])
+    high.update("A", Position(0.0, 0.0, 0.0, 500.0, ve_m_s=25.0), ["A", "B"])
+    assert high.predict("A", ahead) == []
+    side = SeparationWatch(500.0)
+    side.update("B", Position(0.0, 0.0, 400.0, 500.0, ve_m_s=25.0), ["A", "B"])
+    side.update("A", Position(0.0, 0.0, 0.0, 500.0, ve_m_s=25.0), ["A", "B"])
+    assert side.predict("A", ahead) == []  # 400 m apart now: a shortfall, not a prediction
+
+
 def test_the_separation_watch_skips_stale_fixes_and_clears_a_pair_once_apart() -> None:
     w = SeparationWatch(500.0, stale_s=5.0)
     w.update("A", Position(0.0, 0.0, 0.0, 100.0, ve_m_s=10.0), ["A", "B"])
