@@ -140,65 +140,11 @@ def _grid_s(vehicles: Sequence[VehicleSchedule], step_s: float) -> FloatArray:
     return np.unique(np.concatenate([np.linspace(t0, t1, n), ends]))
 
 
-def team_step_s(vehicles: Sequence[VehicleSchedule], required_m: float) -> float:
+def _team_step_s(vehicles: Sequence[VehicleSchedule], required_m: float) -> float:
     """A grid step on which no pair's distance is off by more than a twentieth of
     ``required_m`` between samples (at the team's top closing speed; at least 50 ms)."""
     fastest = max(v.speed_max_m_s for v in vehicles)
     return max(required_m / (10.0 * 2.0 * fastest), 0.05)
-
-
-def _coarse_pairs(
-    vehicles: Sequence[VehicleSchedule], step_s: float
-) -> list[tuple[int, int, float, float, FloatArray]]:
-    """Every pair's least distance on one time grid of ``step_s``: each vehicle's schedule is
-    sampled once (NaN where it does not fly) and the pairs are compared with array arithmetic.
-    ``(i, j, distance_m, time_s, midpoint)``; inf and NaN for a pair never airborne together."""
-    t = _grid_s(vehicles, step_s)
-    pos = np.stack([_positions(v, t) for v in vehicles])  # (vehicle, time, east/north)
-    out = []
-    for i in range(len(vehicles) - 1):
-        d = np.hypot(pos[i + 1 :, :, 0] - pos[i, :, 0], pos[i + 1 :, :, 1] - pos[i, :, 1])
-        together = ~np.isnan(d)
-        best = np.where(together, d, np.inf).argmin(axis=1)
-        for row, k in enumerate(best):
-            j = i + 1 + row
-            if not together[row, k]:
-                out.append((i, j, math.inf, math.nan, np.full(2, np.nan)))
-                continue
-            out.append((i, j, float(d[row, k]), float(t[k]), 0.5 * (pos[i, k] + pos[j, k])))
-    return out
-
-
-def separation(vehicles: Sequence[VehicleSchedule], required_m: float) -> Separation:
-    """Minimum separation of every pair of scheduled vehicles.
-
-    Every pair is first compared on one time grid fine enough that no pair's distance is off
-    by more than a twentieth of ``d_s`` (:func:`_coarse_pairs`: each schedule sampled once,
-    not once per pair); the pairs that may be close (under 1.5 ``d_s``, or within a tenth of
-    ``d_s`` of the closest) are then searched exactly (:func:`pair_separation`).
-
-    Parameters
-    ----------
-    vehicles
-        The team's schedules.
-    required_m
-        The separation minimum ``d_s``, m; pairs below it are conflicts.
-    """
-    if len(vehicles) < 2:
-        return Separation(required_m, ())
-    coarse = _coarse_pairs(vehicles, team_step_s(vehicles, required_m))
-    closest = min(d for _, _, d, _, _ in coarse)
-    search_below = max(1.5 * required_m, closest + 0.1 * required_m)
-    pairs = []
-    for i, j, d, t, mid in coarse:
-        a, b = vehicles[i], vehicles[j]
-        if d < search_below:
-            pairs.append(pair_separation(a, b, step_s=_pair_step_s(a, b, required_m)))
-        else:
-            pairs.append(
-                PairSeparation(a.vehicle_id, b.vehicle_id, d, t, float(mid[0]), float(mid[1]))
-            )
-    return Separation(required_m, tuple(pairs))
 
 
 class TeamSamples:
@@ -209,7 +155,7 @@ class TeamSamples:
         self.required_m = required_m
         self.ids = [v.vehicle_id for v in vehicles]
         # A timing that takes off before the team's first takeoff is alone in the air there.
-        self.t_s = _grid_s(vehicles, team_step_s(vehicles, required_m))
+        self.t_s = _grid_s(vehicles, _team_step_s(vehicles, required_m))
         self.positions = np.stack([_positions(v, self.t_s) for v in vehicles])
 
     def nearest(
@@ -236,6 +182,65 @@ class TeamSamples:
     def replace(self, vs: VehicleSchedule) -> None:
         """Take ``vs`` as its vehicle's schedule from now on."""
         self.positions[self.ids.index(vs.vehicle_id)] = _positions(vs, self.t_s)
+
+
+def _coarse_pairs(samples: TeamSamples) -> list[tuple[int, int, float, float, FloatArray]]:
+    """Every pair's least distance on the samples' time grid, compared with array arithmetic:
+    ``(i, j, distance_m, time_s, midpoint)``; inf and NaN for a pair never airborne together."""
+    t, pos = samples.t_s, samples.positions  # (vehicle, time, east/north)
+    out = []
+    for i in range(len(pos) - 1):
+        d = np.hypot(pos[i + 1 :, :, 0] - pos[i, :, 0], pos[i + 1 :, :, 1] - pos[i, :, 1])
+        together = ~np.isnan(d)
+        best = np.where(together, d, np.inf).argmin(axis=1)
+        for row, k in enumerate(best):
+            j = i + 1 + row
+            if not together[row, k]:
+                out.append((i, j, math.inf, math.nan, np.full(2, np.nan)))
+                continue
+            out.append((i, j, float(d[row, k]), float(t[k]), 0.5 * (pos[i, k] + pos[j, k])))
+    return out
+
+
+def separation(
+    vehicles: Sequence[VehicleSchedule],
+    required_m: float,
+    samples: TeamSamples | None = None,
+) -> Separation:
+    """Minimum separation of every pair of scheduled vehicles.
+
+    Every pair is first compared on one time grid fine enough that no pair's distance is off
+    by more than a twentieth of ``d_s`` (:class:`TeamSamples`: each schedule sampled once,
+    not once per pair); the pairs that may be close (under 1.5 ``d_s``, or within a tenth of
+    ``d_s`` of the closest) are then searched exactly (:func:`pair_separation`).
+
+    Parameters
+    ----------
+    vehicles
+        The team's schedules.
+    required_m
+        The separation minimum ``d_s``, m; pairs below it are conflicts.
+    samples
+        These schedules sampled already (for ``required_m``), when the caller has them.
+    """
+    if len(vehicles) < 2:
+        return Separation(required_m, ())
+    if samples is None:
+        samples = TeamSamples(vehicles, required_m)
+    assert samples.ids == [v.vehicle_id for v in vehicles], "samples of another team"
+    coarse = _coarse_pairs(samples)
+    closest = min(d for _, _, d, _, _ in coarse)
+    search_below = max(1.5 * required_m, closest + 0.1 * required_m)
+    pairs = []
+    for i, j, d, t, mid in coarse:
+        a, b = vehicles[i], vehicles[j]
+        if d < search_below:
+            pairs.append(pair_separation(a, b, step_s=_pair_step_s(a, b, required_m)))
+        else:
+            pairs.append(
+                PairSeparation(a.vehicle_id, b.vehicle_id, d, t, float(mid[0]), float(mid[1]))
+            )
+    return Separation(required_m, tuple(pairs))
 
 
 TRACK_STEP_S = 2.0

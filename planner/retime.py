@@ -734,20 +734,21 @@ def _separate(
     required = scenario.separation_m
     if len(timed) < 2:
         return {}
-    conflicts = sorted(separation(timed, required).conflicts, key=lambda p: p.distance_m)
+    samples = TeamSamples(timed, required)
+    conflicts = sorted(separation(timed, required, samples).conflicts, key=lambda p: p.distance_m)
     if not conflicts or len(conflicts) > len(timed):
         # More pairs in conflict than vehicles: a crowd funnelling into one place, which
         # takeoff times do not untangle (the routes must change); refused as it is, at once.
         return {}
-    samples = TeamSamples(timed, required)
     index = {x.vehicle_id: k for k, x in enumerate(timed)}
+    current = list(timed)  # with the re-timings made so far
     out: dict[str, tuple[Retimed, str]] = {}
     for pair in conflicts:
-        near, _ = samples.nearest(timed[index[pair.a]])
+        near, _ = samples.nearest(current[index[pair.a]])
         if near >= SEPARATION_CHECK_MARGIN * required:
             continue  # separated already by an earlier pair's re-timing
         for vid, other in ((pair.b, pair.a), (pair.a, pair.b)):
-            if not _can_shift(scenario, timed[index[vid]], pair.time_s):
+            if not _can_shift(scenario, current[index[vid]], pair.time_s):
                 continue
             found = _separating_speed(
                 scenario, base[index[vid]], targets[vid], step_m_s, threats, samples, other
@@ -757,6 +758,7 @@ def _separate(
             retimed, cruise = found
             v = scenario.vehicle(vid)
             samples.replace(retimed.schedule)
+            current[index[vid]] = retimed.schedule
             out[vid] = (
                 retimed,
                 f"{vid} cruises at {cruise:g} m/s instead of {v.cruise_m_s:g} m/s (takeoff at "
