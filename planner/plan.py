@@ -17,13 +17,14 @@ from collections.abc import Iterator, Mapping, Sequence
 from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass
 from pathlib import Path
-from typing import TYPE_CHECKING, Literal
+from typing import Literal
 
 import numpy as np
 from numpy.typing import NDArray
 from scipy.ndimage import map_coordinates
 
 from planner.aco import AcoOptions, solve_aco
+from planner.backend import Backend, LocalBackend
 from planner.coupling import TimingLimits, team_min_separation_m, team_timing
 from planner.errors import InfeasibleError
 from planner.flightpath import FlightPath, Violation, check_polyline, smooth_polyline
@@ -45,9 +46,6 @@ from planner.scenario import (
 from planner.search import solve_exact
 from planner.terrain import SrtmTerrain, SyntheticTerrain, Terrain
 from planner.threats import ThreatZone, active, build_threats, forbidden_at, polyline_clearance_m
-
-if TYPE_CHECKING:
-    from planner.backend import Backend
 
 FloatArray = NDArray[np.float64]
 Method = Literal["aco", "astar"]
@@ -887,9 +885,8 @@ def solve_and_finish(
         assert r is not None
         alt, heading = (airborne or {}).get(r.vehicle_id, (None, None))
         jobs.append(FinishJob(i, r.nodes, r.cost, alt, heading))
-    if backend is not None:
-        return result, backend.finish_routes(world, problem, jobs, threats=threats)
-    return result, finish_routes(world, problem, jobs, threats=threats, workers=workers)
+    finisher = backend if backend is not None else LocalBackend(workers)
+    return result, finisher.finish_routes(world, problem, jobs, threats=threats)
 
 
 @dataclass(frozen=True)
