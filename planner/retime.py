@@ -16,7 +16,7 @@ in the buffers (:func:`find_loiter_site`), legs and loiter circles along the pat
 from __future__ import annotations
 
 import math
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Callable, Iterator, Mapping, Sequence
 from dataclasses import dataclass, replace
 
 import numpy as np
@@ -25,7 +25,6 @@ from numpy.typing import NDArray
 from planner.climbout import climb_out
 from planner.deconflict import (
     Separation,
-    TeamSamples,
     TeamTracks,
     check_separation,
     separation,
@@ -46,6 +45,7 @@ from planner.schedule import (
     Stage,
     VehicleSchedule,
 )
+from planner.sequencing import sequence_team
 from planner.terrain import Terrain
 from planner.threats import ThreatZone, active
 from planner.timing import (
@@ -659,7 +659,25 @@ def build_schedule(
         if isinstance(scenario.arrival, Windows)
         else team_window(windows, offsets_s=scenario.arrival_offsets_s())
     )
+    team = _time_team(scenario, base, windows, targets, step_m_s, threats)
+    if team.separation.conflicts and requested is None and ref is not None and bounds is not None:
+        # Those in conflict could not move at the earliest time: later, they have room.
+        for delay_s in SEPARATION_DELAYS_S:
+            if ref + delay_s > bounds.latest_s:
+                break
+            later = {vid: t + delay_s for vid, t in targets.items()}
+            attempt = _time_team(scenario, base, windows, later, step_m_s, threats)
+            if not attempt.separation.conflicts:
+                pairs = len(team.separation.conflicts)
+                reason = (
+                    f"{reason}; moved {delay_s:g} s later to keep the "
+                    f"{scenario.separation_m:g} m separation ({pairs} pair"
+                    f"{'s' if pairs > 1 else ''} too close at {ref:.1f} s)"
+                )
+                team, targets, ref = attempt, later, ref + delay_s
+                break
     events = [Event(0.0, "arrival", f"team arrival {format_arrival(ref)}: {reason}")]
+    events += [Event(0.0, "separation", why) for why in team.said]
     # The pre-plan picture of Fig. 6b: everyone leaves at the earliest common takeoff and
     # flies the constant speed that arrives on time, in range or not.
     t0 = max((v.takeoff_window_s[0] for v in scenario.vehicles if not v.airborne), default=0.0)
@@ -668,38 +686,17 @@ def build_schedule(
         dep = 0.0 if v.airborne else t0
         need = vs.path.length_m / vs.tas_per_eas() / max(targets[v.id] - dep, 1e-9)
         pre[v.id] = (SpeedSpan(dep, targets[v.id], need, "required"),)
-    stages = [Stage("pre-plan (common takeoff)", 0.0, pre)]
-    timed: list[VehicleSchedule] = []
-    adjustments: list[Adjustment] = []
-    for v, vs in zip(scenario.vehicles, base, strict=True):
-        r = retime_on_path(
-            scenario,
-            v,
-            vs,
-            now_s=0.0,
-            target_s=targets[v.id],
-            step_m_s=step_m_s,
-            threats=threats,
-        )
-        timed.append(r.schedule)
-        adjustments.extend(r.adjustments)
-    separated = _separate(scenario, base, timed, targets, step_m_s, threats)
-    for vid, (retimed, why) in separated.items():
-        timed = [retimed.schedule if x.vehicle_id == vid else x for x in timed]
-        said = [
-            replace(a, reason=f"{a.reason}; {why}") if a.strategy == "takeoff_delay" else a
-            for a in retimed.adjustments
-        ]
-        adjustments = [a for a in adjustments if a.vehicle != vid] + said
-        events.append(Event(0.0, "separation", why))
-    stages.append(speed_stage("takeoff and speed adjustment", 0.0, timed))
+    stages = [
+        Stage("pre-plan (common takeoff)", 0.0, pre),
+        speed_stage("takeoff and speed adjustment", 0.0, team.vehicles),
+    ]
     return Schedule(
         scenario,
         requested,
         ref,
         reason,
-        tuple(timed),
-        tuple(adjustments),
+        team.vehicles,
+        team.adjustments,
         tuple(stages),
         tuple(events),
         step_m_s,
@@ -708,118 +705,87 @@ def build_schedule(
     )
 
 
-SEPARATION_CHECK_MARGIN = 1.1
-"""A timing tried for separation is kept when it comes no closer than this many ``d_s`` to
-the rest on the sampling grid (whose distances may be up to a tenth of ``d_s`` too long)."""
+SEPARATION_DELAYS_S = (60.0, 120.0, 240.0, 480.0, 960.0)
+"""How much later the team time is tried, in turn, when the vehicles in conflict at the
+earliest one cannot be separated by their own timings (a later time gives those that had to
+fly at their top speed the room to move). Not when the operator asked for a time."""
 
 
-def _separate(
+@dataclass(frozen=True)
+class _TeamTiming:
+    vehicles: tuple[VehicleSchedule, ...]
+    adjustments: tuple[Adjustment, ...]
+    said: tuple[str, ...]
+    """One line per vehicle moved for the separation."""
+    separation: Separation
+
+
+def _time_team(
     scenario: Scenario,
     base: Sequence[VehicleSchedule],
-    timed: Sequence[VehicleSchedule],
+    windows: Sequence[ArrivalWindow],
     targets: Mapping[str, float],
     step_m_s: float,
     threats: Sequence[ThreatZone],
-) -> dict[str, tuple[Retimed, str]]:
-    """Pairs that come closer than ``separation_m``, separated in time where one of them
-    starts on the ground: it flies another cruise speed, taking off earlier or later for the
-    same arrival, so that it passes the place where they meet at another time (eq. 1 by the
-    takeoff staggering of eq. 5). Speeds are tried nearest its own cruise first, each against
-    the whole team, and the first that keeps the separation from everyone is kept.
-
-    Returns the re-timed vehicles and, for each, what was done and why. A pair no speed
-    separates is left as it is (:func:`check_feasible` refuses it, naming the pair), and so is
-    a team with more pairs in conflict than vehicles.
-    """
+) -> _TeamTiming:
+    """Every vehicle timed for its target, then the team separated by timing
+    (:func:`planner.sequencing.sequence_team`)."""
+    timed: list[VehicleSchedule] = []
+    adjustments: list[Adjustment] = []
+    for v, vs in zip(scenario.vehicles, base, strict=True):
+        r = retime_on_path(
+            scenario, v, vs, now_s=0.0, target_s=targets[v.id], step_m_s=step_m_s,
+            threats=threats,
+        )  # fmt: skip
+        timed.append(r.schedule)
+        adjustments.extend(r.adjustments)
     required = scenario.separation_m
-    if len(timed) < 2:
-        return {}
-    samples = TeamSamples(timed, required)
-    conflicts = sorted(separation(timed, required, samples).conflicts, key=lambda p: p.distance_m)
-    if not conflicts or len(conflicts) > len(timed):
-        # More pairs in conflict than vehicles: a crowd funnelling into one place, which
-        # takeoff times do not untangle (the routes must change); refused as it is, at once.
-        return {}
-    index = {x.vehicle_id: k for k, x in enumerate(timed)}
-    current = list(timed)  # with the re-timings made so far
-    out: dict[str, tuple[Retimed, str]] = {}
-    for pair in conflicts:
-        near, _ = samples.nearest(current[index[pair.a]])
-        if near >= SEPARATION_CHECK_MARGIN * required:
-            continue  # separated already by an earlier pair's re-timing
-        for vid, other in ((pair.b, pair.a), (pair.a, pair.b)):
-            if not _can_shift(scenario, current[index[vid]], pair.time_s):
+    by_id = {vs.vehicle_id: vs for vs in base}
+
+    def other_cruises(vid: str) -> Iterator[tuple[VehicleSchedule, tuple[Retimed, float]]]:
+        """The vehicle at each other cruise speed, nearest its own first, for the same
+        arrival (its takeoff moved)."""
+        v = scenario.vehicle(vid)
+        levels = speed_grid(v.speed_min_m_s, v.speed_max_m_s, step_m_s)
+        for cruise in sorted(
+            (c for c in levels if abs(c - v.cruise_m_s) > 1e-9),
+            key=lambda c: (abs(c - v.cruise_m_s), c),
+        ):
+            other = v.model_copy(update={"cruise_speed_m_s": cruise})
+            try:
+                r = retime_on_path(
+                    scenario, other, by_id[vid], now_s=0.0, target_s=targets[vid],
+                    step_m_s=step_m_s, threats=threats,
+                )  # fmt: skip
+            except InfeasibleError:
                 continue
-            found = _separating_speed(
-                scenario, base[index[vid]], targets[vid], step_m_s, threats, samples, other
-            )
-            if found is None:
-                continue
-            retimed, cruise = found
-            v = scenario.vehicle(vid)
-            samples.replace(retimed.schedule)
-            current[index[vid]] = retimed.schedule
-            out[vid] = (
-                retimed,
-                f"{vid} cruises at {cruise:g} m/s instead of {v.cruise_m_s:g} m/s (takeoff at "
-                f"{retimed.schedule.takeoff_s:.1f} s): it came {pair.distance_m:.0f} m from "
-                f"{other} at {pair.time_s:.0f} s, under the {required:g} m separation",
-            )
-            break
-    return out
+            yield r.schedule, (r, cruise)
 
-
-def _can_shift(scenario: Scenario, vs: VehicleSchedule, meet_s: float) -> bool:
-    """Whether any cruise speed moves the vehicle's passage of the place it meets another at
-    ``meet_s`` by the time a pair needs to pass ``separation_m`` apart (at their top closing
-    speed) for the same arrival: the path left after that place, flown at the slowest speed
-    rather than the fastest. Not near the goals, where two arrivals meet at the one time."""
-    left_m = vs.path.length_m - vs.state_at(meet_s)[1]
-    shift_s = left_m * (1.0 / vs.speed_min_m_s - 1.0 / vs.speed_max_m_s)
-    return shift_s >= scenario.separation_m / (2.0 * vs.speed_max_m_s)
-
-
-def _separating_speed(
-    scenario: Scenario,
-    vs: VehicleSchedule,
-    target_s: float,
-    step_m_s: float,
-    threats: Sequence[ThreatZone],
-    samples: TeamSamples,
-    other: str,
-) -> tuple[Retimed, float] | None:
-    """The timing of a vehicle on the ground at the cruise speed nearest its own that keeps
-    the separation from the rest of the team (``samples``), and that speed; None if none.
-    Each speed is checked against the vehicle it met (``other``) first: most speeds do not
-    separate even that pair, and the whole team is compared only for those that do."""
-    v = scenario.vehicle(vs.vehicle_id)
-    if v.airborne:
-        return None
-    levels = speed_grid(v.speed_min_m_s, v.speed_max_m_s, step_m_s)
-    tries = sorted(
-        (c for c in levels if abs(c - v.cruise_m_s) > 1e-9),
-        key=lambda c: (abs(c - v.cruise_m_s), c),
-    )
-    for cruise in tries:
-        other_cruise = v.model_copy(update={"cruise_speed_m_s": cruise})
-        try:
-            r = retime_on_path(
-                scenario,
-                other_cruise,
-                vs,
-                now_s=0.0,
-                target_s=target_s,
-                step_m_s=step_m_s,
-                threats=threats,
-            )
-        except InfeasibleError:
-            continue
-        enough = SEPARATION_CHECK_MARGIN * samples.required_m
-        if samples.nearest(r.schedule, (other,))[0] < enough:
-            continue
-        if samples.nearest(r.schedule)[0] >= enough:
-            return r, cruise
-    return None
+    slack = {
+        v.id: 0.0
+        if v.airborne
+        else max(0.0, min(targets[v.id] - w.t_min_s, w.t_max_s - targets[v.id]))
+        for v, w in zip(scenario.vehicles, windows, strict=True)
+    }
+    moved, sep = sequence_team(timed, required, slack_s=slack, alternatives=other_cruises)
+    said: list[str] = []
+    for vid, m in moved.items():
+        retimed, cruise = m.chosen
+        other = m.conflict.b if m.conflict.a == vid else m.conflict.a
+        why = (
+            f"{vid} cruises at {cruise:g} m/s instead of {scenario.vehicle(vid).cruise_m_s:g} "
+            f"m/s (takeoff at {m.schedule.takeoff_s:.1f} s): it came "
+            f"{m.conflict.distance_m:.0f} m from {other} at {m.conflict.time_s:.0f} s, under "
+            f"the {required:g} m separation"
+        )
+        said.append(why)
+        timed = [m.schedule if x.vehicle_id == vid else x for x in timed]
+        # Said in flight with the takeoff.
+        adjustments = [a for a in adjustments if a.vehicle != vid] + [
+            replace(a, reason=f"{a.reason}; {why}") if a.strategy == "takeoff_delay" else a
+            for a in retimed.adjustments
+        ]
+    return _TeamTiming(tuple(timed), tuple(adjustments), tuple(said), sep)
 
 
 def check_arrival(schedule: Schedule) -> None:

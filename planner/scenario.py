@@ -32,6 +32,7 @@ from pydantic import (
 
 from planner.errors import ScenarioError
 from planner.geo import LocalFrame
+from planner.goals import assign_goals
 from planner.wind import CALM, Wind
 
 PositiveM = Annotated[float, Field(gt=0.0)]
@@ -401,12 +402,40 @@ class Scenario(_Model):
     wind: ForecastWind | None = Field(
         default=None, description="forecast wind the schedule is timed in; still air if absent"
     )
+    assign_goals: bool = Field(
+        default=False,
+        description=(
+            "the vehicles' goals are approach points any of them may fly to: they are shared "
+            "out so that the sum of squared start-goal distances is least (routes that fan "
+            "in rather than cross near the goals); each vehicle's goal is the one assigned"
+        ),
+    )
 
     def forecast_wind(self) -> Wind:
         """The forecast wind as the air mass's velocity (still air without one)."""
         if self.wind is None:
             return CALM
         return Wind.from_speed_from(self.wind.speed_m_s, self.wind.from_deg)
+
+    @model_validator(mode="before")
+    @classmethod
+    def _share_out_goals(cls, data: Any) -> Any:
+        """With ``assign_goals``, each vehicle's goal replaced by the one assigned to it
+        (:func:`planner.goals.assign_goals`) before the fields are validated."""
+        if not isinstance(data, dict) or data.get("assign_goals") is not True:
+            return data
+        vehicles = data.get("vehicles")
+        if not isinstance(vehicles, list) or not all(isinstance(v, dict) for v in vehicles):
+            return data
+        try:
+            frame = Area.model_validate(data["area"]).frame()
+            starts = [Point3.model_validate(v["start"]).local(frame) for v in vehicles]
+            goals = [Point3.model_validate(v["goal"]).local(frame) for v in vehicles]
+        except (KeyError, TypeError, ValueError):
+            return data  # the fields' own validation says what is wrong
+        order = assign_goals(starts, goals)
+        shared = [{**v, "goal": vehicles[k]["goal"]} for v, k in zip(vehicles, order, strict=True)]
+        return {**data, "vehicles": shared}
 
     @field_validator("vehicles")
     @classmethod
@@ -429,6 +458,10 @@ class Scenario(_Model):
                     raise ValueError(
                         f"vehicles[{i}] ({v.id}).{name} at ({e:.0f}, {n:.0f}) m is outside the area"
                     )
+        if self.assign_goals and self.landing is not None:
+            raise ValueError(
+                "assign_goals: not with landing slots (each vehicle's slot is given in order)"
+            )
         threat_ids: set[str] = set()
         for t in self.threats:
             if t.id in threat_ids:

@@ -1,0 +1,172 @@
+"""Separation for crowds at plan time: approach points shared out (planner.goals), the team
+placed in time one vehicle at a time (planner.sequencing) and the team time moved later when
+the vehicles in conflict have no room at the earliest one (planner.retime.build_schedule).
+
+Every verdict on separation is the pair's own closest-approach search
+(:func:`planner.deconflict.pair_separation`), not the grid the scheduler decides on."""
+
+from __future__ import annotations
+
+import itertools
+import math
+import sys
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pytest
+
+from planner.deconflict import pair_separation
+from planner.errors import ScenarioError, SeparationError
+from planner.goals import assign_goals
+from planner.plan import build_world, plan
+from planner.retime import build_schedule, check_feasible
+from planner.scenario import parse_scenario
+from planner.schedule import Schedule
+from tests.planner.conftest import small_scenario
+
+ROOT = Path(__file__).resolve().parents[2]
+sys.path.insert(0, str(ROOT / "bench"))
+from bench_planner import team_scenario  # noqa: E402  (the planner bench's generated teams)
+
+
+def _min_pair_separation_m(s: Schedule) -> tuple[float, tuple[str, str]]:
+    """Every pair searched on its own, at a tenth of d_s of relative motion per sample."""
+    best, pair = math.inf, ("", "")
+    d_s = s.scenario.separation_m
+    for a, b in itertools.combinations(s.vehicles, 2):
+        step = d_s / (10.0 * (a.speed_max_m_s + b.speed_max_m_s))
+        d = pair_separation(a, b, step_s=step).distance_m
+        if d < best:
+            best, pair = d, (a.vehicle_id, b.vehicle_id)
+    return best, pair
+
+
+@pytest.mark.parametrize("seed", range(5))
+def test_shared_goals_are_the_least_sum_of_squares_and_routes_flown_in_step_keep_apart(
+    seed: int,
+) -> None:
+    """Against every permutation of 6 goals; and, for 30 vehicles, straight routes flown in
+    step (each at the same fraction of its route) never come closer than the smallest start
+    or goal spacing over sqrt(2) (CAPT's guarantee), sampled in time."""
+    rng = np.random.default_rng(seed)
+    starts = [tuple(p) for p in rng.uniform(0, 50_000, (6, 2))]
+    goals = [tuple(p) for p in rng.uniform(0, 50_000, (6, 2))]
+    order = assign_goals(starts, goals)
+    assert sorted(order) == list(range(6))
+
+    def cost(perm: tuple[int, ...] | list[int]) -> float:
+        return sum(math.dist(starts[i], goals[k]) ** 2 for i, k in enumerate(perm))
+
+    assert cost(order) == pytest.approx(min(cost(p) for p in itertools.permutations(range(6))))
+
+    s = rng.uniform(0, 100_000, (30, 2))
+    g = rng.uniform(40_000, 60_000, (30, 2))
+    spacing = min(min(math.dist(p, q) for p, q in itertools.combinations(pts, 2)) for pts in (s, g))
+    order = assign_goals([tuple(p) for p in s], [tuple(p) for p in g])
+    f = np.linspace(0.0, 1.0, 2001)[:, None, None]
+    pos = (1 - f) * s[None] + f * g[order][None]  # (time, vehicle, xy)
+    d = np.linalg.norm(pos[:, :, None, :] - pos[:, None, :, :], axis=-1)
+    d[:, np.arange(30), np.arange(30)] = np.inf
+    assert d.min() >= spacing / math.sqrt(2) - 1e-6
+    # As drawn (each start to the goal of its index), some such pair comes closer.
+    drawn = (1 - f) * s[None] + f * g[None]
+    d = np.linalg.norm(drawn[:, :, None, :] - drawn[:, None, :, :], axis=-1)
+    d[:, np.arange(30), np.arange(30)] = np.inf
+    assert d.min() < spacing / math.sqrt(2)
+
+
+def test_a_scenario_with_assigned_goals_plans_the_goals_shared_out_the_same_on_reading_again() -> (
+    None
+):
+    data = team_scenario(12, seed=3)
+    drawn = [(v["goal"]["east_m"], v["goal"]["north_m"]) for v in data["vehicles"]]
+    scenario = parse_scenario(data)
+    got = [(v.goal.east_m, v.goal.north_m) for v in scenario.vehicles]
+    assert sorted(got) == sorted(drawn)  # the same points
+    assert got != drawn  # shared out otherwise than drawn
+    again = parse_scenario(scenario.model_dump(mode="json", exclude_none=True))
+    assert [v.goal for v in again.vehicles] == [v.goal for v in scenario.vehicles]
+    fixed = parse_scenario(team_scenario(12, seed=3, assign_goals=False))
+    assert [(v.goal.east_m, v.goal.north_m) for v in fixed.vehicles] == drawn
+
+
+def test_assigned_goals_are_refused_with_landing_slots() -> None:
+    data = small_scenario(threats=[], assign_goals=True)
+    data["landing"] = {
+        "touchdown": {"east_m": 39000, "north_m": 39000, "alt_m": 100},
+        "heading_deg": 45,
+    }
+    with pytest.raises(ScenarioError, match="assign_goals: not with landing slots"):
+        parse_scenario(data)
+
+
+def _crossing(**arrival: Any) -> dict[str, Any]:
+    """A flies east and B north, 36 km each, crossing in the middle; both may take off in
+    [0, 600] s."""
+    data = small_scenario(threats=[], arrival={"kind": "simultaneous", **arrival})
+    a, b = data["vehicles"]
+    a["start"], a["goal"] = (
+        {"east_m": 2000, "north_m": 20000, "alt_m": 500},
+        {"east_m": 38000, "north_m": 20000, "alt_m": 500},
+    )
+    b["start"], b["goal"] = (
+        {"east_m": 20000, "north_m": 2000, "alt_m": 500},
+        {"east_m": 20000, "north_m": 38000, "alt_m": 500},
+    )
+    for v in (a, b):
+        v["takeoff_window_s"] = [0, 600]
+    return data
+
+
+def test_a_pair_with_no_room_at_the_earliest_time_is_separated_by_a_later_team_time() -> None:
+    """At the earliest common arrival both take off at once at their top speed and cross the
+    middle together: neither can move. The team time moves a minute later, one of them flies
+    another speed, and the arrival reason says why."""
+    scenario = parse_scenario(_crossing())
+    s = build_schedule(scenario, plan(scenario, "astar"))
+    assert s.required_arrival_s is not None and s.team_window is not None
+    assert "s later to keep the 300 m separation (1 pair too close at" in s.arrival_reason
+    assert [e for e in s.events if e.kind == "separation"]
+    d, _ = _min_pair_separation_m(s)
+    assert d >= 300.0
+    a, b = s.vehicles
+    assert a.arrival_s == pytest.approx(b.arrival_s, abs=1e-6) == s.required_arrival_s
+    assert s.required_arrival_s == pytest.approx(s.team_window.earliest_s + 60.0, abs=1e-6)
+    check_feasible(s)
+
+
+def test_a_requested_time_is_not_moved_for_the_separation_and_the_pair_is_refused() -> None:
+    scenario = parse_scenario(_crossing())
+    first = build_schedule(scenario, plan(scenario, "astar"))
+    assert first.required_arrival_s is not None
+    earliest = float(first.team_window.earliest_s) if first.team_window else math.nan
+    asked = parse_scenario(_crossing(required_s=math.ceil(earliest)))
+    s = build_schedule(asked, plan(asked, "astar"))
+    assert s.required_arrival_s == pytest.approx(math.ceil(earliest))
+    with pytest.raises(SeparationError) as info:
+        check_feasible(s)
+    assert set(info.value.pair) == {"A", "B"}
+
+
+@pytest.mark.parametrize(("n", "assign"), [(10, True), (30, True), (30, False)])
+def test_the_planner_bench_teams_are_separated_with_their_approach_points_shared_out(
+    n: int, assign: bool
+) -> None:
+    """The teams of ``bench/bench_planner.py`` (launch sites on the west and south edges,
+    approach points on rings around the target): with the points shared out, every pair
+    keeps d_s; with each vehicle held to the point drawn for it, routes cross next to the
+    goals (where simultaneous arrivals cannot be told apart by time) and the schedule is
+    refused naming a pair."""
+    scenario = parse_scenario(team_scenario(n, seed=0, assign_goals=assign))
+    world = build_world(scenario)
+    planned = plan(scenario, "aco", rng=np.random.default_rng(0), world=world)
+    s = build_schedule(scenario, planned, world=world)
+    d, pair = _min_pair_separation_m(s)
+    if assign:
+        assert d >= scenario.separation_m, pair
+        check_feasible(s)
+    else:
+        assert d < scenario.separation_m
+        with pytest.raises(SeparationError, match="under the separation minimum"):
+            check_feasible(s)
