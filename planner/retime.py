@@ -661,21 +661,31 @@ def build_schedule(
     )
     team = _time_team(scenario, base, windows, targets, step_m_s, threats)
     if team.separation.conflicts and requested is None and ref is not None and bounds is not None:
-        # Those in conflict could not move at the earliest time: later, they have room.
-        for delay_s in SEPARATION_DELAYS_S:
-            if ref + delay_s > bounds.latest_s:
-                break
+        # Those in conflict could not move at the earliest time: later, they have room. The
+        # latest delay is tried first: if even that does not separate them, none will (the
+        # team is refused after two timings, not six); else the least delay that does.
+        pairs = len(team.separation.conflicts)
+        delays = [d for d in SEPARATION_DELAYS_S if ref + d <= bounds.latest_s]
+        found: tuple[float, _TeamTiming] | None = None
+        for delay_s in delays[-1:] + delays[:-1]:
             later = {vid: t + delay_s for vid, t in targets.items()}
             attempt = _time_team(scenario, base, windows, later, step_m_s, threats)
-            if not attempt.separation.conflicts:
-                pairs = len(team.separation.conflicts)
-                reason = (
-                    f"{reason}; moved {delay_s:g} s later to keep the "
-                    f"{scenario.separation_m:g} m separation ({pairs} pair"
-                    f"{'s' if pairs > 1 else ''} too close at {ref:.1f} s)"
-                )
-                team, targets, ref = attempt, later, ref + delay_s
-                break
+            if attempt.separation.conflicts:
+                if found is None:
+                    break  # not even the latest
+                continue
+            found = (delay_s, attempt)
+            if delay_s != delays[-1]:
+                break  # the least that separates them
+        if found is not None:
+            delay_s, team = found
+            targets = {vid: t + delay_s for vid, t in targets.items()}
+            reason = (
+                f"{reason}; moved {delay_s:g} s later to keep the "
+                f"{scenario.separation_m:g} m separation ({pairs} pair"
+                f"{'s' if pairs > 1 else ''} too close at {ref:.1f} s)"
+            )
+            ref += delay_s
     events = [Event(0.0, "arrival", f"team arrival {format_arrival(ref)}: {reason}")]
     events += [Event(0.0, "separation", why) for why in team.said]
     # The pre-plan picture of Fig. 6b: everyone leaves at the earliest common takeoff and
@@ -706,9 +716,10 @@ def build_schedule(
 
 
 SEPARATION_DELAYS_S = (60.0, 120.0, 240.0, 480.0, 960.0)
-"""How much later the team time is tried, in turn, when the vehicles in conflict at the
-earliest one cannot be separated by their own timings (a later time gives those that had to
-fly at their top speed the room to move). Not when the operator asked for a time."""
+"""How much later the team time may move, the least first, when the vehicles in conflict at
+the earliest one cannot be separated by their own timings (a later time gives those that had
+to fly at their top speed the room to move); within every vehicle's window, and not when the
+operator asked for a time."""
 
 
 @dataclass(frozen=True)
