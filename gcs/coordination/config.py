@@ -51,6 +51,15 @@ class FlightConfig:
     """Separation is predicted this far ahead of each fix (no further than either vehicle's
     slot), from the two vehicles' present velocities (straight flight: not for a vehicle in a
     loiter)."""
+    resolve_horizon_s: float = 90.0
+    """A pair predicted along their routes (at their present ground speeds) to come under the
+    separation this far ahead is resolved by one of them flying the slowest or fastest
+    airspeed of its range until they have passed (:mod:`gcs.coordination.resolution`); 0
+    resolves nothing (the conflict events and alarms still say it)."""
+    resolve_period_s: float = 2.0
+    """Each vehicle's pairs are predicted for resolution at most this often (mission s)."""
+    resolve_response_s: float = 5.0
+    """The time a vehicle is assumed to take to reach a new airspeed, for the prediction."""
     runout_m: float = 300.0
     """A last waypoint this far past the goal, so the aircraft flies through the goal."""
     waypoint_spacing_m: float = 5000.0

@@ -15,6 +15,7 @@ from typing import Any, Literal
 import numpy as np
 
 from gcs.coordination.arrival import ArrivalController, Decision, SpeedLimits
+from gcs.coordination.resolution import Resolution
 from gcs.coordination.routetrack import LoiterSpec, RouteTrack
 from gcs.coordination.speedbias import SpeedBiasEstimator
 from gcs.coordination.tracks import TruthSample
@@ -161,6 +162,11 @@ class Member:
     hold_zone: str | None = None
     """The zone it is told to hold short of (from the hold command to its resumption): not
     timed, not watched for progress meanwhile."""
+    resolving: Resolution | None = None
+    """The speed it flies to keep the separation from another vehicle, until when: not timed
+    for its slot meanwhile."""
+    next_resolve_s: float = -math.inf
+    """When its pairs are next predicted for resolution."""
 
     def tas_per_eas(self, s_m: float) -> float:
         """True airspeed flown per unit commanded from ``s_m`` on: the route's atmosphere

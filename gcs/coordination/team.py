@@ -36,6 +36,7 @@ from gcs.coordination.arrival import ArrivalController, Decision, SpeedLimits
 from gcs.coordination.config import FlightConfig
 from gcs.coordination.events import EventKind
 from gcs.coordination.member import Lost, LostCause, Member, path_en, route_track
+from gcs.coordination.resolution import Ahead, Resolution, resolve
 from gcs.coordination.separation import Position, SeparationWatch
 from gcs.coordination.teamtime import TeamTime, TeamTimeRefused
 from gcs.coordination.tracks import TruthSample, closest_approach
@@ -67,6 +68,15 @@ def is_crash_text(text: str) -> bool:
     detected" (or "Crash detected. No action taken"; ArduPlane/is_flying.cpp), ArduCopter's
     "Crash: Disarming" (ArduCopter/crash_check.cpp). A hard landing is not one."""
     return text.lstrip().lower().startswith("crash")
+
+
+def _resolving(r: Resolution) -> str:
+    """What a resolution is, for its event and its speed command."""
+    return (
+        f"flies {r.airspeed_m_s:g} m/s until {r.until_s:.1f} s to keep the separation from "
+        f"{r.other}: predicted {r.unresolved_m:.0f} m apart at {r.at_s:.1f} s as they fly, "
+        f"{r.predicted_m:.0f} m so"
+    )
 
 
 def reported_wind(fix: act.Fix) -> Wind:
@@ -400,6 +410,9 @@ class TeamController(ZoneGuard, TeamTime):
             return  # holding short of a zone: timed again once it resumes
         if m.busy_mission:
             return
+        self._resolve_conflicts(m, t, out)
+        if m.resolving is not None:
+            return  # flying a resolution: timed for its slot again once released
         if m.in_loiter():
             if t >= m.next_decision_s:
                 self._decide_in_loiter(m, t, fix, out)
@@ -458,6 +471,114 @@ class TeamController(ZoneGuard, TeamTime):
                     payload={"other": sf.other, "distance_m": round(sf.distance_m, 1)},
                 )
             )
+
+    def _ahead(self, m: Member) -> Ahead | None:
+        """The member's flight ahead for resolving conflicts, if it is predictable: on its
+        route, joined, timed (not in or before a loiter, holding or being re-planned), with a
+        fresh fix; movable unless on its final approach."""
+        if (
+            m.phase != "route"
+            or m.over
+            or m.landing_due
+            or not m.joined
+            or m.s_m is None
+            or m.last_fix_s is None
+            or m.level_m_s is None
+            or m.alt_amsl_m is None
+            or m.hold_zone is not None
+            or m.busy_mission
+            or m.in_loiter()
+            or m.loiter_turns_left() > 0.0
+        ):
+            return None
+        track = m.track
+        return Ahead(
+            m.vehicle_id,
+            m.last_fix_s,
+            m.s_m,
+            m.groundspeed_m_s,
+            m.level_m_s,
+            m.tas_per_eas(m.s_m),
+            m.limits.airspeed_min_m_s,
+            m.limits.airspeed_max_m_s,
+            m.alt_amsl_m,
+            track.sample_s_m,
+            track.sample_east_m,
+            track.sample_north_m,
+            horizon_s=max(m.target_s - m.last_fix_s, 0.0),
+            movable=track.length_m - m.s_m >= self.config.final_m and m.resolving is None,
+        )
+
+    def _resolve_conflicts(self, m: Member, t: float, out: list[act.Action]) -> None:
+        """Keep a resolution flown until it is over; else, every ``resolve_period_s``,
+        predict the vehicle's pairs along their routes and resolve the first that comes
+        under the separation (:func:`gcs.coordination.resolution.resolve`)."""
+        cfg = self.config
+        r = m.resolving
+        if r is not None:
+            if t >= r.until_s:
+                m.resolving = None
+                m.next_decision_s = -math.inf
+                out.append(
+                    act.Report(
+                        EventKind.CONFLICT,
+                        f"past {r.other}: timed for its slot again",
+                        m.vehicle_id,
+                        t_s=t,
+                        payload={"other": r.other, "resolution": "released"},
+                    )
+                )
+            elif m.level_m_s != r.airspeed_m_s and not m.busy_command:
+                m.busy_command = True
+                out.append(act.CommandSpeed(m.vehicle_id, r.airspeed_m_s, _resolving(r), t))
+            return
+        if cfg.resolve_horizon_s <= 0.0 or t < m.next_resolve_s:
+            return
+        m.next_resolve_s = t + cfg.resolve_period_s
+        mine = self._ahead(m)
+        if mine is None or m.east_m is None or m.north_m is None:
+            return
+        d_s = self.scenario.separation_m
+        for x in self.members.values():
+            if x is m or x.resolving is not None or x.east_m is None or x.north_m is None:
+                continue
+            # Beyond what both could close at top speed over a resolution's window: apart.
+            reach_m = (m.groundspeed_m_s + x.groundspeed_m_s + 10.0) * 2.0 * cfg.resolve_horizon_s
+            if math.hypot(x.east_m - m.east_m, x.north_m - m.north_m) > reach_m + d_s:
+                continue
+            theirs = self._ahead(x)
+            if theirs is None or t - theirs.t_s > self.separation.stale_s:
+                continue
+            res = resolve(
+                mine, theirs, now_s=t, separation_m=d_s, look_ahead_s=cfg.resolve_horizon_s,
+                response_s=cfg.resolve_response_s,
+            )  # fmt: skip
+            if res is None:
+                continue
+            mover = self.members[res.vehicle]
+            mover.resolving = res
+            out.append(
+                act.Report(
+                    EventKind.CONFLICT,
+                    _resolving(res),
+                    res.vehicle,
+                    value=round(res.predicted_m, 1),
+                    t_s=t,
+                    payload={
+                        "other": res.other,
+                        "resolution": "speed",
+                        "airspeed_m_s": res.airspeed_m_s,
+                        "until_s": round(res.until_s, 1),
+                        "distance_m": round(res.unresolved_m, 1),
+                        "resolved_m": round(res.predicted_m, 1),
+                        "at_s": round(res.at_s, 1),
+                    },
+                )
+            )
+            if not mover.busy_command:
+                mover.busy_command = True
+                out.append(act.CommandSpeed(mover.vehicle_id, res.airspeed_m_s, _resolving(res), t))
+            return
 
     def _watch_progress(self, m: Member, t: float, s: float, out: list[act.Action]) -> None:
         """Lose a vehicle that stops (moves less than ``stopped_m`` in ``stopped_bound_s``), or

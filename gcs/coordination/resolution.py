@@ -1,0 +1,153 @@
+"""Predicted losses of separation resolved ahead of time, by speed (pure: no clock, no I/O).
+
+Each vehicle's next seconds are predicted along its own route (not in a straight line: the
+routes turn) from its last fix at its present ground speed. A pair predicted to come closer
+than the separation within the look-ahead is resolved by one of the two flying the slowest or
+the fastest airspeed of its range until their closest approach has passed: of the four
+choices, the one predicted to keep them farthest apart (the smaller change of speed between
+two that keep the separation equally well). A new speed is reached in ``response_s`` (the
+prediction holds the old one until then). When no choice keeps the separation, none is
+taken: the conflict event and, if it comes true, the alarm say so.
+
+A vehicle flying a resolution is not timed for its slot meanwhile; once released, its arrival
+controller makes up the time (the seconds a minute at another speed costs are well inside what
+its speed range recovers over the rest of a route).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+
+FloatArray = NDArray[np.float64]
+
+
+@dataclass(frozen=True)
+class Ahead:
+    """One vehicle's flight ahead, as its last fix has it."""
+
+    vehicle: str
+    t_s: float
+    s_m: float
+    """Along its route at the fix, m."""
+    groundspeed_m_s: float
+    airspeed_m_s: float
+    """The airspeed it flies (commanded), m/s."""
+    tas_per_eas: float
+    """True airspeed per unit of commanded airspeed (altitude): a change of airspeed changes
+    the ground speed by this much times it (the wind kept)."""
+    airspeed_min_m_s: float
+    airspeed_max_m_s: float
+    alt_m: float
+    route_s_m: FloatArray
+    """The route's samples: along-track distance (increasing), east and north, m."""
+    route_east_m: FloatArray
+    route_north_m: FloatArray
+    horizon_s: float
+    """How far ahead of its fix it may be predicted at all (its slot: its route turns into
+    the goal there)."""
+    movable: bool = True
+    """Whether it may be asked another speed (not on its final approach, say)."""
+
+    def positions(self, t_s: FloatArray, airspeed_m_s: float, response_s: float) -> FloatArray:
+        """(east, north) at the times ``t_s`` flying ``airspeed_m_s`` from its fix (reached
+        ``response_s`` after it), NaN past its look-ahead."""
+        dt = t_s - self.t_s
+        gs = self.groundspeed_m_s
+        new_gs = max(gs + (airspeed_m_s - self.airspeed_m_s) * self.tas_per_eas, 0.0)
+        s = self.s_m + gs * np.minimum(dt, response_s) + new_gs * np.maximum(dt - response_s, 0.0)
+        s = np.clip(s, self.route_s_m[0], self.route_s_m[-1])
+        out = np.stack(
+            [np.interp(s, self.route_s_m, self.route_east_m),
+             np.interp(s, self.route_s_m, self.route_north_m)],
+            axis=-1,
+        )  # fmt: skip
+        out[dt > self.horizon_s] = np.nan
+        return out
+
+
+@dataclass(frozen=True)
+class Resolution:
+    """One vehicle flies ``airspeed_m_s`` until ``until_s`` to keep the separation from
+    ``other``."""
+
+    vehicle: str
+    other: str
+    airspeed_m_s: float
+    until_s: float
+    predicted_m: float
+    """The pair's closest approach so resolved, m."""
+    unresolved_m: float
+    """Their closest approach as they fly, m."""
+    at_s: float
+    """When that would be."""
+
+
+def closest_m(
+    a: Ahead,
+    b: Ahead,
+    t_s: FloatArray,
+    airspeed_a_m_s: float,
+    airspeed_b_m_s: float,
+    response_s: float,
+) -> tuple[float, float]:
+    """The pair's least 3-D distance (their present heights) over the times ``t_s`` at these
+    airspeeds, and when; ``(inf, nan)`` when they are never predicted together."""
+    pa = a.positions(t_s, airspeed_a_m_s, response_s)
+    pb = b.positions(t_s, airspeed_b_m_s, response_s)
+    d = np.sqrt(((pa - pb) ** 2).sum(axis=1) + (a.alt_m - b.alt_m) ** 2)
+    if np.isnan(d).all():
+        return math.inf, math.nan
+    k = int(np.nanargmin(d))
+    return float(d[k]), float(t_s[k])
+
+
+def resolve(
+    a: Ahead,
+    b: Ahead,
+    *,
+    now_s: float,
+    separation_m: float,
+    look_ahead_s: float = 90.0,
+    step_s: float = 1.0,
+    response_s: float = 5.0,
+    release_after_s: float = 10.0,
+) -> Resolution | None:
+    """The speed that keeps ``a`` and ``b`` apart if they are predicted to come closer than
+    ``separation_m`` within ``look_ahead_s`` (None if they are not, or if no choice keeps
+    them apart).
+
+    A choice is judged over twice the look-ahead (so that it does not merely put the meeting
+    beyond it) and held until ``release_after_s`` past the closest approach so resolved."""
+    bound = min(a.t_s + a.horizon_s, b.t_s + b.horizon_s)
+    if min(bound, now_s + look_ahead_s) <= now_s:
+        return None
+    t = np.arange(now_s, min(bound, now_s + look_ahead_s) + step_s, step_s)
+    as_flown, at = closest_m(a, b, t, a.airspeed_m_s, b.airspeed_m_s, response_s)
+    if not as_flown < separation_m:
+        return None
+    t = np.arange(now_s, min(bound, now_s + 2.0 * look_ahead_s) + step_s, step_s)
+    choices = []
+    for mover in (a, b):
+        if not mover.movable:
+            continue
+        for speed in (mover.airspeed_min_m_s, mover.airspeed_max_m_s):
+            if abs(speed - mover.airspeed_m_s) < 1e-9:
+                continue
+            if mover is a:
+                d, when = closest_m(a, b, t, speed, b.airspeed_m_s, response_s)
+            else:
+                d, when = closest_m(a, b, t, a.airspeed_m_s, speed, response_s)
+            kept = min(d, separation_m)  # beyond the separation, the smaller change
+            choices.append((-kept, abs(speed - mover.airspeed_m_s), mover.vehicle, speed, d, when))
+    if not choices:
+        return None
+    _, _, vid, speed, d, when = min(choices)
+    if d < separation_m:
+        return None
+    other = b.vehicle if vid == a.vehicle else a.vehicle
+    until = (when if math.isfinite(when) else at) + release_after_s
+    return Resolution(vid, other, speed, until, d, as_flown, at)

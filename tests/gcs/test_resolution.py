@@ -1,0 +1,196 @@
+"""Predicted losses of separation resolved ahead of time by speed: the pure choice
+(:func:`gcs.coordination.resolution.resolve`) on straight crossing tracks, and the team
+controller flying two aircraft scheduled to cross the same point at the same moment (fixes
+made here from a kinematic model of the two, their speeds answering its commands after a lag).
+Every verdict is the test's own arithmetic on the positions it flew, not the code's figures."""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from typing import Any
+
+import numpy as np
+import pytest
+
+from gcs.coordination import actions as act
+from gcs.coordination.config import FlightConfig
+from gcs.coordination.events import EventKind
+from gcs.coordination.resolution import Ahead, resolve
+from gcs.coordination.team import TeamController
+from planner.deconflict import pair_separation
+from planner.plan import build_world, plan
+from planner.retime import build_schedule, retime_on_path
+from planner.scenario import parse_scenario
+from tests.gcs.test_team import START_UTC, airborne, fix, of, reports
+from tests.planner.conftest import small_scenario
+
+
+def _straight(vid: str, start: tuple[float, float], heading_deg: float, **kw: Any) -> Ahead:
+    """A 40 km straight route from ``start`` on ``heading_deg``, flown from its start at
+    25 m/s (still air, commanded = true airspeed) with a fix at 0 s."""
+    h = math.radians(heading_deg)
+    s = np.array([0.0, 40_000.0])
+    fields: dict[str, Any] = {
+        "vehicle": vid, "t_s": 0.0, "s_m": 0.0, "groundspeed_m_s": 25.0,
+        "airspeed_m_s": 25.0, "tas_per_eas": 1.0, "airspeed_min_m_s": 18.0,
+        "airspeed_max_m_s": 30.0, "alt_m": 500.0, "route_s_m": s,
+        "route_east_m": start[0] + s * math.sin(h), "route_north_m": start[1] + s * math.cos(h),
+        "horizon_s": 3600.0,
+    }  # fmt: skip
+    return Ahead(**(fields | kw))
+
+
+def _flown_apart_m(a: Ahead, b: Ahead, speeds: dict[str, float], response_s: float) -> float:
+    """Least distance of two straight flights from t = 0 to 90 s, each at its speed after
+    ``response_s`` (the test's own geometry, 0.1 s steps)."""
+    best = math.inf
+    for t in np.arange(0.0, 90.0, 0.1):
+        pos = []
+        for x in (a, b):
+            v = speeds.get(x.vehicle, x.airspeed_m_s)
+            s = x.groundspeed_m_s * min(t, response_s) + v * max(t - response_s, 0.0)
+            h = math.atan2(
+                x.route_east_m[1] - x.route_east_m[0], x.route_north_m[1] - x.route_north_m[0]
+            )
+            pos.append((x.route_east_m[0] + s * math.sin(h), x.route_north_m[0] + s * math.cos(h)))
+        best = min(best, math.dist(*pos))
+    return best
+
+
+def test_a_crossing_predicted_along_the_routes_is_resolved_by_the_speed_that_keeps_them_apart() -> (
+    None
+):
+    """A east-bound and B north-bound, each 1,500 m (60 s) from the point their routes cross:
+    as they fly they meet there; the resolution's speed, flown in this test's own geometry,
+    keeps them 300 m apart."""
+    a = _straight("A", (-1500.0, 0.0), 90.0)
+    b = _straight("B", (0.0, -1500.0), 0.0)
+    assert _flown_apart_m(a, b, {}, 5.0) < 1.0
+    r = resolve(a, b, now_s=0.0, separation_m=300.0)
+    assert r is not None
+    assert r.unresolved_m < 1.0 and r.at_s == pytest.approx(60.0, abs=1.0)
+    assert r.airspeed_m_s in (18.0, 30.0) and r.vehicle in ("A", "B")
+    assert r.predicted_m >= 300.0
+    assert _flown_apart_m(a, b, {r.vehicle: r.airspeed_m_s}, 5.0) >= 300.0 - 1.0
+    assert r.until_s > r.at_s  # held past the closest approach
+
+
+def test_no_resolution_for_a_pair_apart_none_possible_or_only_the_movable_one_moved() -> None:
+    a = _straight("A", (-1500.0, 0.0), 90.0)
+    later = _straight("B", (0.0, -2500.0), 0.0)  # 40 s behind: 1 km south when A crosses
+    assert resolve(a, later, now_s=0.0, separation_m=300.0) is None
+    # Head-on on one line: no speed keeps them apart, and none is asked.
+    head_on = _straight("B", (3000.0, 0.0), 270.0)
+    assert resolve(a, head_on, now_s=0.0, separation_m=300.0) is None
+    # B on its final approach is not moved: A is, whatever would be better.
+    b = _straight("B", (0.0, -1500.0), 0.0, movable=False)
+    r = resolve(a, b, now_s=0.0, separation_m=300.0)
+    assert r is not None and r.vehicle == "A"
+    # Beyond the look-ahead nothing is predicted.
+    far = _straight("B", (0.0, -1500.0), 0.0, horizon_s=30.0)
+    assert (
+        resolve(
+            _straight("A", (-1500.0, 0.0), 90.0, horizon_s=30.0), far, now_s=0.0, separation_m=300.0
+        )
+        is None
+    )
+
+
+def _crossing_team() -> TeamController:
+    """Two aircraft whose schedule crosses the middle of the map at the same moment: the
+    schedule's separation by timing undone (each re-timed at its own cruise speed for the
+    same arrival), so that the controller must resolve in flight what a late vehicle or a
+    re-plan could cause."""
+    data = small_scenario(threats=[], arrival={"kind": "simultaneous", "required_s": 1500})
+    a, b = data["vehicles"]
+    a["start"], a["goal"] = (
+        {"east_m": 2000, "north_m": 20000, "alt_m": 500},
+        {"east_m": 38000, "north_m": 20000, "alt_m": 500},
+    )
+    b["start"], b["goal"] = (
+        {"east_m": 20000, "north_m": 2000, "alt_m": 500},
+        {"east_m": 20000, "north_m": 38000, "alt_m": 500},
+    )
+    scenario = parse_scenario(data)
+    world = build_world(scenario)
+    schedule = build_schedule(scenario, plan(scenario, "astar", world=world), world=world)
+    natural = tuple(
+        retime_on_path(
+            scenario, scenario.vehicle(vs.vehicle_id), vs, now_s=0.0, target_s=1500.0,
+            step_m_s=schedule.step_m_s, threats=[],
+        ).schedule
+        for vs in schedule.vehicles
+    )  # fmt: skip
+    a_, b_ = natural
+    assert pair_separation(a_, b_, step_s=0.1).distance_m < 1.0  # they meet, as timed
+    schedule = dataclasses.replace(schedule, vehicles=natural)
+    team = TeamController(scenario, schedule, world, FlightConfig(), rng=np.random.default_rng(0))
+    team.start(START_UTC)
+    return team
+
+
+def _fly(team: TeamController) -> tuple[float, list[act.Report], dict[str, float]]:
+    """Fly the team from the last takeoff to the goals, fixes every 0.5 s made from this
+    test's kinematics (still air; a commanded airspeed flown 3 s after its command). Returns
+    the least horizontal distance of the two while both fly (from the positions flown here),
+    the conflict reports, and when each crossed its goal."""
+    ids = list(team.members)
+    lag_s = 3.0
+    t0 = max(m.schedule.climb_end_s for m in team.members.values()) + 1.0
+    s, level = {}, {}
+    for vid in ids:
+        m = team.members[vid]
+        airborne(team, vid, m.takeoff_s)
+        _, s[vid], level[vid] = m.schedule.state_at(t0)  # as scheduled, on its route
+    pending: list[tuple[float, str, float]] = []
+    arrived: dict[str, float] = {}
+    closest = math.inf
+    said: list[act.Report] = []
+    dt, t = 0.5, t0
+    while len(arrived) < len(ids) and t < t0 + 3000.0:
+        t += dt
+        for p in [p for p in pending if p[0] <= t]:
+            level[p[1]] = p[2]
+            pending.remove(p)
+        for vid in ids:
+            if vid in arrived:
+                continue
+            m = team.members[vid]
+            gs = level[vid] * m.schedule.tas_per_eas(s[vid])
+            s[vid] += gs * dt
+            if s[vid] >= m.track.length_m:
+                arrived[vid] = t - (s[vid] - m.track.length_m) / gs  # within the step
+                continue
+            out = team.handle(fix(team, vid, s[vid], t, level[vid]), t)
+            said += reports(out, EventKind.CONFLICT)
+            for c in of(out, act.CommandSpeed):
+                lim = team.members[c.vehicle_id].limits
+                assert lim.airspeed_min_m_s <= c.airspeed_m_s <= lim.airspeed_max_m_s
+                team.handle(act.SpeedCommanded(c.vehicle_id, c.airspeed_m_s, c.reason, t), t)
+                pending.append((t + lag_s, c.vehicle_id, c.airspeed_m_s))
+        if not arrived:
+            a, b = (team.members[v].schedule.path.pose_at(s[v]) for v in ids)
+            closest = min(closest, math.hypot(a.east_m - b.east_m, a.north_m - b.north_m))
+    return closest, said, arrived
+
+
+def test_two_aircraft_scheduled_to_meet_are_kept_apart_in_flight_and_still_arrive_on_time() -> None:
+    """With the resolution off (``resolve_horizon_s=0``) the same flight brings them within
+    the separation: what the resolution prevents is there."""
+    team = _crossing_team()
+    d_s = team.scenario.separation_m
+    closest, said, arrived = _fly(team)
+    resolved = [r for r in said if (r.payload or {}).get("resolution") == "speed"]
+    released = [r for r in said if (r.payload or {}).get("resolution") == "released"]
+    assert len(resolved) == 1 and len(released) == 1, [r.reason for r in said]
+    assert resolved[0].reason.startswith(f"flies {resolved[0].payload['airspeed_m_s']:g} m/s")
+    assert closest >= d_s, f"{closest:.0f} m"
+    for vid, m in team.members.items():
+        assert arrived[vid] == pytest.approx(m.target_s, abs=1.0), vid
+
+    off = _crossing_team()
+    off.config = FlightConfig(resolve_horizon_s=0.0)
+    closest, said, arrived = _fly(off)
+    assert not [r for r in said if (r.payload or {}).get("resolution")]
+    assert closest < d_s
