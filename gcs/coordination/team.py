@@ -36,7 +36,7 @@ from gcs.coordination.arrival import ArrivalController, Decision, SpeedLimits
 from gcs.coordination.config import FlightConfig
 from gcs.coordination.events import EventKind
 from gcs.coordination.member import Lost, LostCause, Member, path_en, route_track
-from gcs.coordination.resolution import Ahead, Resolution, resolve
+from gcs.coordination.resolution import Ahead, Forecasts, Resolution, resolve
 from gcs.coordination.separation import Position, SeparationWatch
 from gcs.coordination.teamtime import TeamTime, TeamTimeRefused
 from gcs.coordination.tracks import TruthSample, closest_approach
@@ -141,6 +141,8 @@ class TeamController(ZoneGuard, TeamTime):
         """Mission time the flight ends at, failed, if it has not before (never moves)."""
         self.separation = SeparationWatch(scenario.separation_m)
         """Every fix against the other flying vehicles' (an alarm below the separation)."""
+        self.forecasts = Forecasts(self.config.resolve_horizon_s, self.config.resolve_response_s)
+        """Each vehicle's flight ahead along its route, for resolving conflicts."""
         for vs in schedule.vehicles:
             v = scenario.vehicle(vs.vehicle_id)
             limits = SpeedLimits(v.speed_min_m_s, v.speed_max_m_s, schedule.step_m_s)
@@ -535,20 +537,23 @@ class TeamController(ZoneGuard, TeamTime):
         if cfg.resolve_horizon_s <= 0.0 or t < m.next_resolve_s:
             return
         m.next_resolve_s = t + cfg.resolve_period_s
+        forecasts = self.forecasts
+        if (forecasts.look_ahead_s, forecasts.response_s) != (
+            cfg.resolve_horizon_s,
+            cfg.resolve_response_s,
+        ):
+            forecasts = self.forecasts = Forecasts(cfg.resolve_horizon_s, cfg.resolve_response_s)
         mine = self._ahead(m)
-        if mine is None or m.east_m is None or m.north_m is None:
+        if mine is None:
+            forecasts.drop(m.vehicle_id)
             return
+        forecasts.update(mine, t)
         d_s = self.scenario.separation_m
-        for x in self.members.values():
-            if x is m or x.resolving is not None or x.east_m is None or x.north_m is None:
+        for other in forecasts.near(m.vehicle_id, d_s, t):
+            x = self.members[other]
+            if x.resolving is not None or x.over:
                 continue
-            # Beyond what both could close at top speed over a resolution's window: apart.
-            reach_m = (m.groundspeed_m_s + x.groundspeed_m_s + 10.0) * 2.0 * cfg.resolve_horizon_s
-            if math.hypot(x.east_m - m.east_m, x.north_m - m.north_m) > reach_m + d_s:
-                continue
-            theirs = self._ahead(x)
-            if theirs is None or t - theirs.t_s > self.separation.stale_s:
-                continue
+            theirs = forecasts.ahead[other]
             res = resolve(
                 mine, theirs, now_s=t, separation_m=d_s, look_ahead_s=cfg.resolve_horizon_s,
                 response_s=cfg.resolve_response_s,

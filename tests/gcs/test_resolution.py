@@ -16,7 +16,7 @@ import pytest
 from gcs.coordination import actions as act
 from gcs.coordination.config import FlightConfig
 from gcs.coordination.events import EventKind
-from gcs.coordination.resolution import Ahead, resolve
+from gcs.coordination.resolution import Ahead, Forecasts, resolve
 from gcs.coordination.team import TeamController
 from planner.deconflict import pair_separation
 from planner.plan import build_world, plan
@@ -194,3 +194,32 @@ def test_two_aircraft_scheduled_to_meet_are_kept_apart_in_flight_and_still_arriv
     closest, said, arrived = _fly(off)
     assert not [r for r in said if (r.payload or {}).get("resolution")]
     assert closest < d_s
+
+
+def test_the_forecast_screen_finds_the_pairs_a_pair_by_pair_prediction_finds() -> None:
+    """Forecasts made at different moments (aligned on whole seconds) against each pair's own
+    prediction at the time of the screen: the same vehicles under the separation, and none
+    from a forecast gone stale."""
+    rng = np.random.default_rng(7)
+    forecasts = Forecasts(look_ahead_s=90.0, response_s=5.0)
+    aheads = []
+    for k in range(40):
+        start = tuple(rng.uniform(-2500.0, 2500.0, 2))
+        a = _straight(f"V{k}", start, float(rng.uniform(0, 360)), t_s=float(rng.uniform(0, 3)))
+        forecasts.update(a, a.t_s)
+        aheads.append(a)
+    now = 3.0
+    me = _straight("ME", (0.0, 0.0), 45.0, t_s=now)
+    forecasts.update(me, now)
+    t = np.arange(3.0, 94.0, 1.0)  # the whole seconds both forecasts cover
+    mine = me.positions(t, 25.0, 5.0)
+    expected = []
+    for a in aheads:
+        theirs = a.positions(t, 25.0, 5.0)
+        ok = t <= math.ceil(a.t_s) + 90.0  # what its forecast covers
+        d = np.hypot(*(theirs[ok] - mine[ok]).T).min()
+        if d < 300.0:
+            expected.append((d, a.vehicle))
+    assert expected, "the draw puts some pair under the separation"
+    assert forecasts.near("ME", 300.0, now) == [v for _, v in sorted(expected)]
+    assert forecasts.near("ME", 300.0, now + 10.0) == []  # every other forecast stale
