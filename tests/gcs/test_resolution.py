@@ -23,7 +23,7 @@ from planner.plan import build_world, plan
 from planner.retime import build_schedule, retime_on_path
 from planner.scenario import parse_scenario
 from tests.gcs.test_team import START_UTC, airborne, fix, of, reports
-from tests.planner.conftest import small_scenario
+from tests.planner.conftest import crossing_scenario
 
 
 def _straight(vid: str, start: tuple[float, float], heading_deg: float, **kw: Any) -> Ahead:
@@ -102,16 +102,7 @@ def _crossing_team() -> TeamController:
     schedule's separation by timing undone (each re-timed at its own cruise speed for the
     same arrival), so that the controller must resolve in flight what a late vehicle or a
     re-plan could cause."""
-    data = small_scenario(threats=[], arrival={"kind": "simultaneous", "required_s": 1500})
-    a, b = data["vehicles"]
-    a["start"], a["goal"] = (
-        {"east_m": 2000, "north_m": 20000, "alt_m": 500},
-        {"east_m": 38000, "north_m": 20000, "alt_m": 500},
-    )
-    b["start"], b["goal"] = (
-        {"east_m": 20000, "north_m": 2000, "alt_m": 500},
-        {"east_m": 20000, "north_m": 38000, "alt_m": 500},
-    )
+    data = crossing_scenario(arrival={"kind": "simultaneous", "required_s": 1500})
     scenario = parse_scenario(data)
     world = build_world(scenario)
     schedule = build_schedule(scenario, plan(scenario, "astar", world=world), world=world)

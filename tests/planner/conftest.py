@@ -60,6 +60,22 @@ def small_scenario(**overrides: Any) -> dict[str, Any]:
     return out
 
 
+def crossing_scenario(**overrides: Any) -> dict[str, Any]:
+    """:func:`small_scenario` without threats, A flying east and B north across the middle of
+    the map, 36 km each: timed alike they cross the middle at the same moment."""
+    data = small_scenario(**({"threats": []} | overrides))
+    a, b = data["vehicles"]
+    a["start"], a["goal"] = (
+        {"east_m": 2000, "north_m": 20000, "alt_m": 500},
+        {"east_m": 38000, "north_m": 20000, "alt_m": 500},
+    )
+    b["start"], b["goal"] = (
+        {"east_m": 20000, "north_m": 2000, "alt_m": 500},
+        {"east_m": 20000, "north_m": 38000, "alt_m": 500},
+    )
+    return data
+
+
 @pytest.fixture
 def small() -> dict[str, Any]:
     return small_scenario()

@@ -26,7 +26,7 @@ from planner.retime import (
 )
 from planner.scenario import load_scenario, parse_scenario
 from planner.schedule import Leg, Schedule, VehicleSchedule
-from tests.planner.conftest import small_scenario
+from tests.planner.conftest import crossing_scenario, small_scenario
 
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -297,16 +297,7 @@ def test_routes_that_cross_at_the_same_time_are_separated_by_a_takeoff_and_speed
     of them is flown at another cruise speed, taking off earlier or later for the same
     arrival, and the schedule says so; the pair's closest approach, searched on its own,
     keeps d_s."""
-    data = small_scenario(threats=[], arrival={"kind": "simultaneous", "required_s": 1500})
-    a, b = data["vehicles"]
-    a["start"], a["goal"] = (
-        {"east_m": 2000, "north_m": 20000, "alt_m": 500},
-        {"east_m": 38000, "north_m": 20000, "alt_m": 500},
-    )
-    b["start"], b["goal"] = (
-        {"east_m": 20000, "north_m": 2000, "alt_m": 500},
-        {"east_m": 20000, "north_m": 38000, "alt_m": 500},
-    )
+    data = crossing_scenario(arrival={"kind": "simultaneous", "required_s": 1500})
     scenario = parse_scenario(data)
     s = build_schedule(scenario, plan(scenario, "astar"))
     (said,) = [e for e in s.events if e.kind == "separation"]

@@ -23,7 +23,7 @@ from planner.plan import build_world, plan
 from planner.retime import build_schedule, check_feasible
 from planner.scenario import parse_scenario
 from planner.schedule import Schedule
-from tests.planner.conftest import small_scenario
+from tests.planner.conftest import crossing_scenario, small_scenario
 
 ROOT = Path(__file__).resolve().parents[2]
 sys.path.insert(0, str(ROOT / "bench"))
@@ -104,17 +104,8 @@ def test_assigned_goals_are_refused_with_landing_slots() -> None:
 def _crossing(**arrival: Any) -> dict[str, Any]:
     """A flies east and B north, 36 km each, crossing in the middle; both may take off in
     [0, 600] s."""
-    data = small_scenario(threats=[], arrival={"kind": "simultaneous", **arrival})
-    a, b = data["vehicles"]
-    a["start"], a["goal"] = (
-        {"east_m": 2000, "north_m": 20000, "alt_m": 500},
-        {"east_m": 38000, "north_m": 20000, "alt_m": 500},
-    )
-    b["start"], b["goal"] = (
-        {"east_m": 20000, "north_m": 2000, "alt_m": 500},
-        {"east_m": 20000, "north_m": 38000, "alt_m": 500},
-    )
-    for v in (a, b):
+    data = crossing_scenario(arrival={"kind": "simultaneous", **arrival})
+    for v in data["vehicles"]:
         v["takeoff_window_s"] = [0, 600]
     return data
 
