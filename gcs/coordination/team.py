@@ -387,8 +387,9 @@ class TeamController(ZoneGuard, TeamTime):
         if m.phase != "route":
             return
         seq_changed = seq != m.last_seq
+        item_speed = False
         if seq_changed and seq is not None:
-            self._passed_items(m, m.last_seq, seq)
+            item_speed = self._passed_items(m, m.last_seq, seq)
             m.last_seq = seq
             if m.in_loiter():
                 m.loiter_entered_s, m.loiter_flown_m = t, 0.0
@@ -422,6 +423,8 @@ class TeamController(ZoneGuard, TeamTime):
         if not seq_changed and t < m.next_decision_s:
             return
         if m.track.length_m - s < self.config.final_m:
+            if item_speed:
+                self._keep_commanded_speed(m, t, out)
             return
         self._decide(m, t, s, fix, out)
 
@@ -696,14 +699,37 @@ class TeamController(ZoneGuard, TeamTime):
         elif policy == "abort":
             out.extend(self.abort(None, "rtl", now)[1])
 
-    def _passed_items(self, m: Member, old: int | None, new: int) -> None:
-        """DO_CHANGE_SPEED items the vehicle ran set the airspeed it flies."""
+    def _passed_items(self, m: Member, old: int | None, new: int) -> bool:
+        """DO_CHANGE_SPEED items the vehicle ran set the airspeed it flies (True: one did)."""
         lo = m.mission.first_route_seq if old is None else old
+        ran = False
         for k in range(lo, min(new, len(m.mission.items))):
             it = m.mission.items[k]
             if it.command == MAV_CMD_DO_CHANGE_SPEED and it.param2 > 0:
                 m.level_m_s = float(it.param2)
                 m.next_decision_s = -math.inf
+                ran = True
+        return ran
+
+    def _keep_commanded_speed(self, m: Member, t: float, out: list[act.Action]) -> None:
+        """A DO_CHANGE_SPEED item run inside the final stretch, where no speed is decided: the
+        airspeed last commanded is commanded again. The item carries the plan's speed for a
+        short last leg (its final trim), which the closed loop has long since replaced."""
+        if not m.commanded or m.busy_command:
+            return
+        level = float(m.commanded[-1][1])
+        if level == m.level_m_s:
+            return
+        m.busy_command = True
+        out.append(
+            act.CommandSpeed(
+                m.vehicle_id,
+                level,
+                f"its mission set {m.level_m_s:g} m/s inside the final {self.config.final_m:g} m: "
+                f"back to the {level:g} m/s commanded",
+                t,
+            )
+        )
 
     def _wind(self, m: Member, fix: act.Fix) -> Wind:
         """The wind to time with: the vehicle's estimate plus the error learnt in flight."""

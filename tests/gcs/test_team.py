@@ -25,12 +25,17 @@ from gcs.coordination.separation import Position, SeparationWatch
 from gcs.coordination.team import TeamController, TeamTimeRefused
 from gcs.errors import GcsError
 from planner.flightpath import FlightPath
-from planner.mission import MAV_CMD_NAV_LOITER_TURNS, MAV_CMD_NAV_WAYPOINT
+from planner.mission import (
+    MAV_CMD_DO_CHANGE_SPEED,
+    MAV_CMD_NAV_LOITER_TURNS,
+    MAV_CMD_NAV_WAYPOINT,
+)
 from planner.plan import World, build_world, plan
 from planner.popup import popup_zones
 from planner.retime import build_schedule
 from planner.scenario import Scenario, Threat, parse_scenario
 from planner.schedule import Schedule
+from planner.schedulefile import PathMission
 from planner.threats import build_threats
 
 START_UTC = 1_800_000_000.0
@@ -187,6 +192,50 @@ def test_speed_is_commanded_only_when_the_required_level_changes(team: TeamContr
     assert up.airspeed_m_s >= level + step
     need = (m.track.length_m - s) / (m.target_s - t) / tas_per_eas
     assert abs(up.airspeed_m_s - need) <= step / 2 + 1e-6
+
+
+def test_a_speed_item_the_mission_runs_inside_the_final_stretch_does_not_set_the_arrival(
+    team: TeamController,
+) -> None:
+    """A re-timed mission may end with a short leg at a speed of its own (the planner's last
+    0.5 m/s trim): its DO_CHANGE_SPEED runs when the aircraft is already inside the final
+    stretch, where no speed is decided. The airspeed the coordinator last commanded is
+    commanded again rather than flown to the goal at the plan's stale speed (in the 30-vehicle
+    pop-up rehearsal, 18 m/s for the last 160 m instead of 22.5: a second late)."""
+    vid = "UAV1"
+    m, _ = flying(team, vid, 0.0)
+    final_m = team.config.final_m
+    pm, length = m.mission, m.track.length_m
+    goal = next(k for k, s_k in enumerate(pm.item_s_m) if s_k is not None and s_k >= length)
+    assert pm.items[goal].command == MAV_CMD_NAV_WAYPOINT
+    # A waypoint inside the final stretch and a DO_CHANGE_SPEED to 16 m/s for the leg after it.
+    s_pre = length - 0.8 * final_m
+    pose = m.schedule.path.pose_at(s_pre)
+    lat, lon = team.frame.to_geodetic(pose.east_m, pose.north_m)
+    pre = replace(pm.items[goal], x=round(float(lat) * 1e7), y=round(float(lon) * 1e7))
+    speed = replace(
+        pm.items[goal], frame=2, command=MAV_CMD_DO_CHANGE_SPEED, param1=0.0, param2=16.0,
+        param3=-1.0, param4=0.0, x=0, y=0, z=0.0,
+    )  # fmt: skip
+    items = [*pm.items[:goal], pre, speed, *pm.items[goal:]]
+    m.mission = PathMission(
+        tuple(replace(it, seq=k) for k, it in enumerate(items)),
+        (*pm.item_s_m[:goal], s_pre, s_pre, *pm.item_s_m[goal:]),
+    )
+    # Commanded 24 m/s short of the stretch, then past the new waypoint inside it.
+    tas = 24.0 * m.schedule.tas_per_eas(length)
+    t1 = m.target_s - 2.0 * final_m / tas
+    team.handle(fix(team, vid, length - 2.0 * final_m, t1, 24.0), t1)
+    team.handle(act.SpeedCommanded(vid, 24.0, "on time", t1), t1)
+    assert m.last_seq == goal  # flying to the new waypoint
+    t2 = t1 + (1.2 * final_m) / tas
+    out = team.handle(fix(team, vid, s_pre + 10.0, t2, 16.0), t2)
+    assert m.last_seq == goal + 2  # past the waypoint and the speed item: to the goal
+    assert [c.airspeed_m_s for c in of(out, act.CommandSpeed)] == [24.0]
+    # Once back at it, nothing more (the stretch is the autopilot's).
+    team.handle(act.SpeedCommanded(vid, 24.0, "kept", t2), t2)
+    out = team.handle(fix(team, vid, s_pre + 40.0, t2 + 1.3, 24.0), t2 + 1.3)
+    assert of(out, act.CommandSpeed) == []
 
 
 def test_a_failed_speed_command_is_reported_and_decided_again(team: TeamController) -> None:
