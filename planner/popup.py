@@ -14,9 +14,12 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
+from planner.deconflict import TeamTracks
+from planner.errors import InfeasibleError
 from planner.flightpath import FlightPath, Segment
 from planner.plan import Method, World, build_problem, build_world, solve_and_finish
 from planner.retime import (
+    Retimed,
     anchored_state,
     arrival_targets,
     arrival_window,
@@ -238,30 +241,49 @@ def apply_popup(
         v_need = (vs.path.length_m - s0) / vs.tas_per_eas(s0) / max(targets[v.id] - dep, 1e-9)
         need[v.id] = (*past, *cut, SpeedSpan(dep, targets[v.id], v_need, "required"))
     stages.append(Stage(f"{zone.id} at {at_s:.0f} s: re-planned, required speed", at_s, need))
-    retimed: list[VehicleSchedule] = []
-    for v in scenario.vehicles:
-        vs = staged.vehicle(v.id)
+    # The re-routed first, then the rest: each one's loiter turns kept clear of every place
+    # the others will fly from its re-timing on, as re-timed so far (the new routes' and
+    # their turns included), as the loiters decided in flight are.
+    final = {vs.vehicle_id: vs for vs in staged.vehicles}
+    required = scenario.separation_m
+    for vid in [*affected, *(v.id for v in scenario.vehicles if v.id not in affected)]:
+        v = scenario.vehicle(vid)
+        vs = final[vid]
         same_time = abs(targets.get(v.id, vs.arrival_s) - vs.arrival_s) < 0.05
         if v.id not in targets or (v.id not in affected and same_time):
-            retimed.append(vs)
             continue
         anchor = anchors.get(v.id)
-        r = retime_on_path(
-            scenario,
-            v,
-            vs,
-            now_s=t_at[v.id],
-            target_s=targets[v.id],
-            step_m_s=current.step_m_s,
-            threats=threats,
-            at=(anchor.s_m, anchor.speed_m_s)
-            if where[v.id][0] == "leg" and anchor is not None
-            else None,
-            loiter_margin_m_s=loiter_margin_m_s,
-            terrain=world.terrain,
-        )
-        retimed.append(r.schedule)
+        tracks = TeamTracks.of([x for k, x in final.items() if k != vid], t_at[vid])
+
+        def keep_clear(e: float, n: float, radius_m: float, tracks: TeamTracks = tracks) -> bool:
+            return tracks.clearance(e, n, radius_m)[0] >= required
+
+        at = (anchor.s_m, anchor.speed_m_s) if where[vid][0] == "leg" and anchor else None
+        r: Retimed | None = None
+        for check in (keep_clear, None):  # where they fit when nowhere keeps clear
+            try:
+                r = retime_on_path(
+                    scenario, v, vs, now_s=t_at[vid], target_s=targets[vid],
+                    step_m_s=current.step_m_s, threats=threats, at=at,
+                    loiter_margin_m_s=loiter_margin_m_s, terrain=world.terrain, keep_clear=check,
+                )  # fmt: skip
+                break
+            except InfeasibleError:
+                if check is None:
+                    raise
+        assert r is not None
+        if check is None and any(lo.t_end_s > t_at[vid] for lo in r.schedule.loiters):
+            events.append(
+                Event(
+                    at_s,
+                    "separation",
+                    f"{vid}: no place for its loiter turns keeps {required:g} m from the "
+                    "team's tracks; they are flown where they fit",
+                )
+            )
+        final[vid] = r.schedule
         adjustments.extend(r.adjustments)
+    retimed = [final[v.id] for v in scenario.vehicles]
     stages.append(speed_stage(f"after {zone.id}: final", at_s, retimed))
     out = replace(
         current,
