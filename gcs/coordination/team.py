@@ -56,6 +56,9 @@ PROGRESS_M = 1.0
 STOPPED_FIXES = 8
 """Fixes in a row, over ``stopped_bound_s``, that find a vehicle where it was."""
 SPEED_REFUSALS_ALARM = 3
+GOAL_ALONG_SLACK_M = 500.0
+"""A fix counts towards the arrival only when the route left (as last located) is within
+the arrival radius and this much more (a fix or two of travel)."""
 """Speed commands refused in a row that make an alarm: the speed is not under control."""
 
 
@@ -880,8 +883,15 @@ class TeamController(ZoneGuard, TeamTime):
     def _watch_goal(
         self, m: Member, fix: act.Fix, e: float, n: float, out: list[act.Action]
     ) -> None:
+        radius = self.config.arrival_radius_m
         d = math.hypot(e - m.goal_en_m[0], n - m.goal_en_m[1])
-        if d > self.config.arrival_radius_m:
+        # Near its goal along its route too (as last located): a route that passes near its
+        # own goal on the way round (a re-plan around a zone) is not arriving there.
+        along_m = math.inf if m.s_m is None else m.track.length_m - m.s_m
+        if along_m > radius + GOAL_ALONG_SLACK_M:
+            m.near_goal.clear()
+            return
+        if d > radius:
             if m.near_goal:
                 self._arrive(m, out)
             return

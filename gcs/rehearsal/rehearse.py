@@ -51,6 +51,8 @@ from planner.scenario import Scenario
 from planner.schedulefile import schedule_json
 
 FLIGHT_FORMAT = "tcgcs-flight/1"
+TRUTH_ARRIVAL_WINDOW_S = 30.0
+"""The simulator's goal passage is looked for from this long before the one telemetry saw."""
 
 
 @dataclass(frozen=True)
@@ -570,7 +572,11 @@ def flight_record(
         source = "simulator" if samples else "telemetry"
         if samples:
             glat, glon = frame.to_geodetic(*m.goal_en_m)
+            # The passage the coordinator saw (within half a minute of it), not an earlier one
+            # of a route that comes near its own goal on the way round.
             after = launched
+            if telemetry_arrival is not None and launched is not None:
+                after = max(launched, telemetry_arrival - TRUTH_ARRIVAL_WINDOW_S)
             ca = closest_approach(
                 samples, float(glat), float(glon), coord.config.arrival_radius_m, after_utc_s=after
             )

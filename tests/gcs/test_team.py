@@ -1129,3 +1129,42 @@ def test_a_vehicle_in_its_loiter_turns_is_timed_and_a_late_one_moves_the_team_ti
     assert moved.value == pytest.approx(t2 + 2.0 + left_m / tas_max, rel=0.05)
     (cmd,) = of(out, act.CommandSpeed)
     assert cmd.airspeed_m_s == m.limits.airspeed_max_m_s
+
+
+def test_passing_near_its_goal_on_the_way_round_is_not_the_arrival(team: TeamController) -> None:
+    """A route re-planned round a zone may come within the arrival radius of its own goal
+    long before it ends there: a fix 300 m from the goal while the vehicle is 20 km along a
+    route much longer than that is no arrival; the passage at the route's end is, at the time
+    the fixes put it there (worked out here from the fixes' own times)."""
+    vid = "UAV1"
+    m, t0 = flying(team, vid, 600.0)
+    length = m.track.length_m
+    team.handle(fix(team, vid, 20_000.0, t0, 25.0), t0)
+    ge, gn = m.goal_en_m
+    lat, lon = team.frame.to_geodetic(ge + 300.0, gn)
+    near = dataclasses.replace(
+        fix(team, vid, 20_010.0, t0 + 1.0, 25.0), lat_deg=float(lat), lon_deg=float(lon)
+    )
+    said = reports(team.handle(near, t0 + 1.0), EventKind.ARRIVED)
+    said += reports(
+        team.handle(fix(team, vid, 20_050.0, t0 + 2.0, 25.0), t0 + 2.0), EventKind.ARRIVED
+    )
+    assert said == [] and m.phase == "route"
+    # Then along the route to its end, a fix every 20 m, and on past it out of the radius.
+    gs = 25.0 * m.schedule.tas_per_eas(length)
+    t_end = t0 + 100.0 + 1500.0 / gs  # at the goal
+    for s in np.arange(length - 1500.0, length + 1.0, 20.0):
+        t = t0 + 100.0 + (s - (length - 1500.0)) / gs
+        said += reports(team.handle(fix(team, vid, float(s), t, 25.0), t), EventKind.ARRIVED)
+    assert said == []
+    end = m.schedule.path.pose_at(length)
+    lat, lon = team.frame.to_geodetic(
+        end.east_m + 1200.0 * math.sin(end.heading_rad),
+        end.north_m + 1200.0 * math.cos(end.heading_rad),
+    )
+    t = t_end + 1200.0 / gs
+    past = dataclasses.replace(
+        fix(team, vid, length, t, 25.0), lat_deg=float(lat), lon_deg=float(lon)
+    )
+    said += reports(team.handle(past, t), EventKind.ARRIVED)
+    assert len(said) == 1 and m.arrival_s == pytest.approx(t_end, abs=1.0)
