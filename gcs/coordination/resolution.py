@@ -156,57 +156,88 @@ def resolve(
 @dataclass
 class Forecasts:
     """Each vehicle's positions ahead along its route on whole seconds of mission time, from
-    its last :meth:`update`: one vehicle's pairs are screened against all the others at once
-    (array arithmetic, a hundred vehicles a few tens of microseconds), and only a pair
-    screened under the separation is resolved (:func:`resolve`)."""
+    its last :meth:`update`, in one array: one vehicle's pairs are screened against all the
+    others at once (array arithmetic: a hundred vehicles in tens of microseconds), and only
+    a pair screened under the separation is resolved (:func:`resolve`)."""
 
     look_ahead_s: float
     response_s: float
     stale_s: float = 5.0
     """A forecast made longer ago than this is not compared (the vehicle's link is silent)."""
     ahead: dict[str, Ahead] = field(default_factory=dict)
-    _start_s: dict[str, float] = field(default_factory=dict)
-    _positions: dict[str, FloatArray] = field(default_factory=dict)
+    _row: dict[str, int] = field(default_factory=dict)
+    _positions: FloatArray = field(default_factory=lambda: np.empty((0, 0, 2)))
+    """(vehicle row, whole second from its start, east/north), NaN where not forecast."""
+    _start_s: FloatArray = field(default_factory=lambda: np.empty(0))
+    _fix_s: FloatArray = field(default_factory=lambda: np.empty(0))
+    _alt_m: FloatArray = field(default_factory=lambda: np.empty(0))
+
+    @property
+    def steps(self) -> int:
+        return int(math.ceil(self.look_ahead_s)) + 1
 
     def update(self, a: Ahead, now_s: float) -> None:
         """Forecast ``a`` from the next whole second on, ``look_ahead_s`` ahead."""
+        row = self._row.get(a.vehicle)
+        if row is None:
+            row = self._row[a.vehicle] = len(self._row)
+            grow = max(2 * len(self._start_s), 8) if row >= len(self._start_s) else 0
+            if grow:
+                pos = np.full((grow, self.steps, 2), np.nan)
+                if len(self._positions):
+                    pos[: len(self._positions)] = self._positions
+                self._positions = pos
+                self._start_s = np.resize(self._start_s, grow)
+                self._fix_s = np.concatenate(
+                    [self._fix_s, np.full(grow - len(self._fix_s), -np.inf)]
+                )
+                self._alt_m = np.resize(self._alt_m, grow)
         start = float(math.ceil(now_s))
-        t = start + np.arange(int(math.ceil(self.look_ahead_s)) + 1, dtype=np.float64)
+        t = start + np.arange(self.steps, dtype=np.float64)
         self.ahead[a.vehicle] = a
-        self._start_s[a.vehicle] = start
-        self._positions[a.vehicle] = a.positions(t, a.airspeed_m_s, self.response_s)
+        self._positions[row] = a.positions(t, a.airspeed_m_s, self.response_s)
+        self._start_s[row] = start
+        self._fix_s[row] = a.t_s
+        self._alt_m[row] = a.alt_m
 
     def drop(self, vehicle: str) -> None:
         """No forecast for the vehicle (not on its route, say) until its next update."""
         self.ahead.pop(vehicle, None)
-        self._start_s.pop(vehicle, None)
-        self._positions.pop(vehicle, None)
+        row = self._row.get(vehicle)
+        if row is not None:
+            self._fix_s[row] = -np.inf
 
     def near(self, vehicle: str, separation_m: float, now_s: float) -> list[str]:
         """The others forecast to come under ``separation_m`` of ``vehicle`` (3-D, their
         present heights) in the time both forecasts cover, nearest first."""
-        mine = self._positions.get(vehicle)
-        if mine is None:
+        me = self._row.get(vehicle)
+        if me is None or vehicle not in self.ahead:
             return []
-        start = self._start_s[vehicle]
-        alt = self.ahead[vehicle].alt_m
-        k = len(mine)
-        ids, rows, dz = [], [], []
-        for other, pos in self._positions.items():
-            if other == vehicle or now_s - self.ahead[other].t_s > self.stale_s:
+        n, k = len(self._row), self.steps
+        live = now_s - self._fix_s[:n] <= self.stale_s
+        live[me] = False
+        rows = np.flatnonzero(live)
+        if not rows.size:
+            return []
+        # Their forecast's second that is my forecast's first (theirs started earlier): a
+        # few distinct values (the forecasts are a second or two apart), each one slice.
+        shift = np.rint(self._start_s[me] - self._start_s[rows]).astype(np.int64)
+        mine = self._positions[me]
+        least2 = np.full(len(rows), np.inf)
+        for sh in np.unique(shift):
+            if abs(sh) >= k:
                 continue
-            shift = int(round(start - self._start_s[other]))  # theirs started earlier
-            row = np.full((k, 2), np.nan)
-            if 0 <= shift < len(pos):
-                part = pos[shift : shift + k]
-                row[: len(part)] = part
-            ids.append(other)
-            rows.append(row)
-            dz.append(self.ahead[other].alt_m - alt)
-        if not ids:
-            return []
-        theirs = np.stack(rows)  # (other, time, east/north)
-        d2 = ((theirs - mine[None]) ** 2).sum(axis=2) + np.asarray(dz)[:, None] ** 2
-        least = np.sqrt(np.nanmin(np.where(np.isnan(d2), np.inf, d2), axis=1))
+            sel = shift == sh
+            theirs = (
+                self._positions[rows[sel], sh:] if sh >= 0 else self._positions[rows[sel], : k + sh]
+            )
+            ours = mine[: k - sh] if sh >= 0 else mine[-sh:]
+            de = theirs[:, :, 0] - ours[:, 0]
+            dn = theirs[:, :, 1] - ours[:, 1]
+            d2 = de * de + dn * dn
+            least2[sel] = np.where(np.isnan(d2), np.inf, d2).min(axis=1)
+        dz = self._alt_m[rows] - self._alt_m[me]
+        least = np.sqrt(least2 + dz * dz)
         close = np.flatnonzero(least < separation_m)
-        return [ids[i] for i in close[np.argsort(least[close])]]
+        ids = list(self._row)
+        return [ids[rows[i]] for i in close[np.argsort(least[close])]]
