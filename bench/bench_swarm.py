@@ -114,6 +114,18 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
         "error_max_s": max(errors, default=None),
         "min_separation_m": record.get("min_separation_m"),
         "separation_m": record.get("separation_m"),
+        # Conflicts said in flight (the record keeps the events' text): predicted in straight
+        # flight, and resolved ahead of time by speed.
+        "conflicts_predicted": sum(
+            1
+            for e in record["events"]
+            if e["kind"] == "conflict" and e["reason"].startswith("predicted")
+        ),
+        "conflicts_resolved": sum(
+            1
+            for e in record["events"]
+            if e["kind"] == "conflict" and e["reason"].startswith("flies")
+        ),
         "coordinator_core_share": coordinator.core_share(),
         "coordinator_peak_rss_mib": round(coordinator.peak_rss_mib, 1),
         "simulator_core_share": None if simulator is None else simulator.core_share(),

@@ -57,7 +57,10 @@ class EventKind(enum.StrEnum):
     CONFLICT = "conflict"
     """Two flying vehicles predicted to come under the separation within the look-ahead at
     their present velocities (``payload``: ``other``, ``distance_m``, ``at_s``); an alarm
-    follows if they do."""
+    follows if they do. Also a pair predicted along their routes resolved ahead of time
+    (``payload``: ``resolution`` ``speed``, ``other``, ``airspeed_m_s``, ``until_s``,
+    ``distance_m``, ``resolved_m``, ``at_s``) and the resolution over (``resolution``
+    ``released``, ``other``)."""
     ALARM = "alarm"
     """A vehicle said something critical (STATUSTEXT at MAV_SEVERITY_CRITICAL or worse;
     ``payload``: ``severity``, ``text``), or its route enters a forbidden zone that appeared
