@@ -64,14 +64,16 @@ class _Process:
 
 
 def run(args: argparse.Namespace) -> dict[str, Any]:
-    with tempfile.TemporaryDirectory() as tmp:
+    with tempfile.TemporaryDirectory() as scratch:
+        tmp = args.keep or scratch
+        Path(tmp).mkdir(parents=True, exist_ok=True)
         scenario = Path(tmp) / f"arc{args.vehicles}.yaml"
         scenario.write_text(yaml.safe_dump(arc_team(args.vehicles)), encoding="utf-8")
         record_path = Path(tmp) / "record.json"
         cmd = [
             sys.executable, "-m", "gcs", "rehearse", str(scenario),
             "--speedup", str(args.speedup), "--seed", str(args.seed), "--quiet",
-            "--json", str(record_path),
+            "--json", str(record_path), "--truth", str(Path(tmp) / "truth.jsonl"),
         ]  # fmt: skip
         if args.wind:
             cmd += ["--wind", f"{args.wind},270"]
@@ -139,6 +141,9 @@ def main() -> None:
     parser.add_argument("--speedup", type=float, default=50.0)
     parser.add_argument("--seed", type=int, default=0, help="planner and simulator seed")
     parser.add_argument("--wind", type=float, default=5.0, help="m/s from the west (0: none)")
+    parser.add_argument(
+        "--keep", metavar="DIR", help="keep the scenario, flight record and truth log there"
+    )
     result = run(parser.parse_args())
     print(json.dumps(result, indent=1))
 
