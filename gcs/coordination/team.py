@@ -56,10 +56,10 @@ PROGRESS_M = 1.0
 STOPPED_FIXES = 8
 """Fixes in a row, over ``stopped_bound_s``, that find a vehicle where it was."""
 SPEED_REFUSALS_ALARM = 3
+"""Speed commands refused in a row that make an alarm: the speed is not under control."""
 GOAL_ALONG_SLACK_M = 500.0
 """A fix counts towards the arrival only when the route left (as last located) is within
 the arrival radius and this much more (a fix or two of travel)."""
-"""Speed commands refused in a row that make an alarm: the speed is not under control."""
 
 
 LANDING_MARGIN_S = 120.0
