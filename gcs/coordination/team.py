@@ -536,9 +536,8 @@ class TeamController(ZoneGuard, TeamTime):
                         payload={"other": r.other, "resolution": "released"},
                     )
                 )
-            elif m.level_m_s != r.airspeed_m_s and not m.busy_command:
-                m.busy_command = True
-                out.append(act.CommandSpeed(m.vehicle_id, r.airspeed_m_s, _resolving(r), t))
+            else:
+                self._fly_resolution(m, t, out)
             return
         if cfg.resolve_horizon_s <= 0.0 or t < m.next_resolve_s:
             return
@@ -586,10 +585,17 @@ class TeamController(ZoneGuard, TeamTime):
                     },
                 )
             )
-            if not mover.busy_command:
-                mover.busy_command = True
-                out.append(act.CommandSpeed(mover.vehicle_id, res.airspeed_m_s, _resolving(res), t))
+            self._fly_resolution(mover, t, out)
             return
+
+    @staticmethod
+    def _fly_resolution(m: Member, t: float, out: list[act.Action]) -> None:
+        """Command the speed of the resolution the member flies, unless it flies it already or
+        a command is on its way (then at a later fix)."""
+        r = m.resolving
+        if r is not None and m.level_m_s != r.airspeed_m_s and not m.busy_command:
+            m.busy_command = True
+            out.append(act.CommandSpeed(m.vehicle_id, r.airspeed_m_s, _resolving(r), t))
 
     def _watch_progress(self, m: Member, t: float, s: float, out: list[act.Action]) -> None:
         """Lose a vehicle that stops (moves less than ``stopped_m`` in ``stopped_bound_s``), or
