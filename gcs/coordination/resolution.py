@@ -17,7 +17,8 @@ its speed range recovers over the rest of a route).
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from collections.abc import Sequence
+from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import NDArray
@@ -153,24 +154,31 @@ def resolve(
     return Resolution(vid, other, speed, until, d, as_flown, at)
 
 
-@dataclass
 class Forecasts:
     """Each vehicle's positions ahead along its route on whole seconds of mission time, from
-    its last :meth:`update`, in one array: one vehicle's pairs are screened against all the
-    others at once (array arithmetic: a hundred vehicles in tens of microseconds), and only
-    a pair screened under the separation is resolved (:func:`resolve`)."""
+    its last :meth:`update`, in one array (a row per vehicle of the team): one vehicle's pairs
+    are screened against all the others at once (array arithmetic: a hundred vehicles in tens
+    of microseconds), and only a pair screened under the separation is resolved
+    (:func:`resolve`)."""
 
-    look_ahead_s: float
-    response_s: float
-    stale_s: float = 5.0
-    """A forecast made longer ago than this is not compared (the vehicle's link is silent)."""
-    ahead: dict[str, Ahead] = field(default_factory=dict)
-    _row: dict[str, int] = field(default_factory=dict)
-    _positions: FloatArray = field(default_factory=lambda: np.empty((0, 0, 2)))
-    """(vehicle row, whole second from its start, east/north), NaN where not forecast."""
-    _start_s: FloatArray = field(default_factory=lambda: np.empty(0))
-    _fix_s: FloatArray = field(default_factory=lambda: np.empty(0))
-    _alt_m: FloatArray = field(default_factory=lambda: np.empty(0))
+    def __init__(
+        self, vehicles: Sequence[str], look_ahead_s: float, response_s: float, stale_s: float = 5.0
+    ) -> None:
+        self.look_ahead_s = look_ahead_s
+        self.response_s = response_s
+        self.stale_s = stale_s
+        """A forecast made longer ago than this is not compared (the vehicle's link is
+        silent)."""
+        self.ahead: dict[str, Ahead] = {}
+        self._ids = list(vehicles)
+        self._row = {vid: k for k, vid in enumerate(self._ids)}
+        n = len(self._ids)
+        self._positions = np.full((n, self.steps, 2), np.nan)
+        """(vehicle row, whole second from its start, east/north), NaN where not forecast."""
+        self._start_s = np.zeros(n)
+        self._fix_s = np.full(n, -np.inf)
+        """When each row was forecast from (-inf: never, or dropped)."""
+        self._alt_m = np.zeros(n)
 
     @property
     def steps(self) -> int:
@@ -178,20 +186,7 @@ class Forecasts:
 
     def update(self, a: Ahead, now_s: float) -> None:
         """Forecast ``a`` from the next whole second on, ``look_ahead_s`` ahead."""
-        row = self._row.get(a.vehicle)
-        if row is None:
-            row = self._row[a.vehicle] = len(self._row)
-            grow = max(2 * len(self._start_s), 8) if row >= len(self._start_s) else 0
-            if grow:
-                pos = np.full((grow, self.steps, 2), np.nan)
-                if len(self._positions):
-                    pos[: len(self._positions)] = self._positions
-                self._positions = pos
-                self._start_s = np.resize(self._start_s, grow)
-                self._fix_s = np.concatenate(
-                    [self._fix_s, np.full(grow - len(self._fix_s), -np.inf)]
-                )
-                self._alt_m = np.resize(self._alt_m, grow)
+        row = self._row[a.vehicle]
         start = float(math.ceil(now_s))
         t = start + np.arange(self.steps, dtype=np.float64)
         self.ahead[a.vehicle] = a
@@ -213,8 +208,8 @@ class Forecasts:
         me = self._row.get(vehicle)
         if me is None or vehicle not in self.ahead:
             return []
-        n, k = len(self._row), self.steps
-        live = now_s - self._fix_s[:n] <= self.stale_s
+        k = self.steps
+        live = now_s - self._fix_s <= self.stale_s
         live[me] = False
         rows = np.flatnonzero(live)
         if not rows.size:
@@ -239,5 +234,4 @@ class Forecasts:
         dz = self._alt_m[rows] - self._alt_m[me]
         least = np.sqrt(least2 + dz * dz)
         close = np.flatnonzero(least < separation_m)
-        ids = list(self._row)
-        return [ids[rows[i]] for i in close[np.argsort(least[close])]]
+        return [self._ids[rows[i]] for i in close[np.argsort(least[close])]]

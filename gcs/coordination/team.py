@@ -144,7 +144,11 @@ class TeamController(ZoneGuard, TeamTime):
         """Mission time the flight ends at, failed, if it has not before (never moves)."""
         self.separation = SeparationWatch(scenario.separation_m)
         """Every fix against the other flying vehicles' (an alarm below the separation)."""
-        self.forecasts = Forecasts(self.config.resolve_horizon_s, self.config.resolve_response_s)
+        self.forecasts = Forecasts(
+            [vs.vehicle_id for vs in schedule.vehicles],
+            self.config.resolve_horizon_s,
+            self.config.resolve_response_s,
+        )
         """Each vehicle's flight ahead along its route, for resolving conflicts."""
         for vs in schedule.vehicles:
             v = scenario.vehicle(vs.vehicle_id)
@@ -547,7 +551,9 @@ class TeamController(ZoneGuard, TeamTime):
             cfg.resolve_horizon_s,
             cfg.resolve_response_s,
         ):
-            forecasts = self.forecasts = Forecasts(cfg.resolve_horizon_s, cfg.resolve_response_s)
+            forecasts = self.forecasts = Forecasts(
+                list(self.members), cfg.resolve_horizon_s, cfg.resolve_response_s
+            )
         mine = self._ahead(m)
         if mine is None:
             forecasts.drop(m.vehicle_id)

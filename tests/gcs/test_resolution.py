@@ -192,7 +192,7 @@ def test_the_forecast_screen_finds_the_pairs_a_pair_by_pair_prediction_finds() -
     prediction at the time of the screen: the same vehicles under the separation, and none
     from a forecast gone stale."""
     rng = np.random.default_rng(7)
-    forecasts = Forecasts(look_ahead_s=90.0, response_s=5.0)
+    forecasts = Forecasts([f"V{k}" for k in range(40)] + ["ME"], look_ahead_s=90.0, response_s=5.0)
     aheads = []
     for k in range(40):
         start = tuple(rng.uniform(-2500.0, 2500.0, 2))
