@@ -25,6 +25,7 @@ from pydantic import (
     BaseModel,
     ConfigDict,
     Field,
+    TypeAdapter,
     ValidationError,
     field_validator,
     model_validator,
@@ -36,6 +37,7 @@ from planner.goals import assign_goals
 from planner.wind import CALM, Wind
 
 PositiveM = Annotated[float, Field(gt=0.0)]
+_FLAG: TypeAdapter[bool] = TypeAdapter(bool)
 PositiveSpeed = Annotated[float, Field(gt=0.0, le=400.0)]
 MissionTimeS = Annotated[float, Field(ge=0.0)]
 
@@ -422,7 +424,13 @@ class Scenario(_Model):
     def _share_out_goals(cls, data: Any) -> Any:
         """With ``assign_goals``, each vehicle's goal replaced by the one assigned to it
         (:func:`planner.goals.assign_goals`) before the fields are validated."""
-        if not isinstance(data, dict) or data.get("assign_goals") is not True:
+        if not isinstance(data, dict):
+            return data
+        try:  # read as the field reads it ("true", 1 and yes are true too)
+            assigned = _FLAG.validate_python(data.get("assign_goals", False))
+        except ValidationError:
+            return data  # the field's own validation says what is wrong
+        if not assigned:
             return data
         vehicles = data.get("vehicles")
         if not isinstance(vehicles, list) or not all(isinstance(v, dict) for v in vehicles):

@@ -89,6 +89,12 @@ def test_a_scenario_with_assigned_goals_plans_the_goals_shared_out_the_same_on_r
     assert [v.goal for v in again.vehicles] == [v.goal for v in scenario.vehicles]
     fixed = parse_scenario(team_scenario(12, seed=3, assign_goals=False))
     assert [(v.goal.east_m, v.goal.north_m) for v in fixed.vehicles] == drawn
+    # The flag as the field reads it: "true" or 1 share the goals out as true does.
+    for flag in ("true", 1):
+        loose = parse_scenario(team_scenario(12, seed=3) | {"assign_goals": flag})
+        assert loose.assign_goals and [v.goal for v in loose.vehicles] == [
+            v.goal for v in scenario.vehicles
+        ]
 
 
 def test_assigned_goals_are_refused_with_landing_slots() -> None:
