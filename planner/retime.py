@@ -666,7 +666,7 @@ def build_schedule(
         # team is refused after two timings, not six); else the least delay that does.
         pairs = len(team.separation.conflicts)
         delays = [d for d in SEPARATION_DELAYS_S if ref + d <= bounds.latest_s]
-        found: tuple[float, _TeamTiming] | None = None
+        found: tuple[float, dict[str, float], _TeamTiming] | None = None
         for delay_s in delays[-1:] + delays[:-1]:
             later = {vid: t + delay_s for vid, t in targets.items()}
             attempt = _time_team(scenario, base, windows, later, step_m_s, threats)
@@ -674,12 +674,11 @@ def build_schedule(
                 if found is None:
                     break  # not even the latest
                 continue
-            found = (delay_s, attempt)
+            found = (delay_s, later, attempt)
             if delay_s != delays[-1]:
                 break  # the least that separates them
         if found is not None:
-            delay_s, team = found
-            targets = {vid: t + delay_s for vid, t in targets.items()}
+            delay_s, targets, team = found
             reason = (
                 f"{reason}; moved {delay_s:g} s later to keep the "
                 f"{scenario.separation_m:g} m separation ({pairs} pair"
