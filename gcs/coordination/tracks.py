@@ -81,7 +81,8 @@ def closest_approach(
     point once the track is within ``radius_m`` (considering only times at or after
     ``after_utc_s``): on its chord the point is projected onto the chord and the time
     interpolated linearly. A track that starts inside the radius and only moves away gives its
-    first sample (or ``after_utc_s``). None if the track never comes within the radius.
+    first sample (or ``after_utc_s``). None if the track never comes within the radius, or if
+    it is still closing on the point where it ends (a log read before the pass was written).
     """
     if not (math.isfinite(radius_m) and radius_m >= 0):
         raise ValueError(f"radius_m must be >= 0, got {radius_m!r}")
@@ -123,6 +124,8 @@ def closest_approach(
     last = len(t) - 1
     while k < last and t[k] >= 1.0:
         k += 1
+    if k == last and t[k] >= 1.0:
+        return None  # still closing where the track ends: the pass is not in it yet
     when = float(utc[k] + t[k] * (utc[k + 1] - utc[k]))
     return when, float(dist[k])
 

@@ -17,8 +17,6 @@ import contextlib
 import json
 import logging
 import math
-import os
-import signal
 import time
 import uuid
 from collections.abc import Mapping, Sequence
@@ -42,7 +40,7 @@ from gcs.rehearsal.rehearse import RehearsalOptions, flight_record, stub_args
 from gcs.rehearsal.report import write_report
 from gcs.service.fleet import Fleet, FleetVehicle, VehicleBusy
 from gcs.service.mapview import flight_map, terrain_png
-from gcs.service.stubs import StubProcess, follow_lockstep
+from gcs.service.stubs import StubProcess, follow_lockstep, stop_pid
 from gcs.store.repository import FlightKeeper, Store, StoreNotFound
 from planner.errors import InfeasibleError, PlannerError
 from planner.missionfile import to_qgc_plan, to_wpl
@@ -221,6 +219,9 @@ class FlightHandle:
     truth_path: Path | None = None
     pacer: asyncio.Task[None] | None = None
     """Lock step with the flight's bundled simulator (:func:`follow_lockstep`)."""
+    simulator_stopped: bool = False
+    """The bundled simulator has been stopped (its pid, were it another process's, may be
+    another program's by now)."""
     upload_task: asyncio.Task[None] | None = None
     task: asyncio.Task[None] | None = None
     keeper: FlightKeeper | None = None
@@ -697,9 +698,11 @@ class Engine:
     async def _finish(self, handle: FlightHandle) -> None:
         """The record and the report, the writers flushed, the vehicles released."""
         runner = handle.runner
+        if handle.truth_path is not None:
+            # The simulator stopped first: its truth log is then whole (closed) when the
+            # record reads it, however far behind the writing a busy machine has left it.
+            await self._stop_simulator(handle)
         try:
-            if handle.stub is not None and handle.truth_path is not None:
-                await asyncio.sleep(1.5)  # the simulator flushes its truth log each second
             flight_dir = self.data_dir / "flights" / handle.id
             conns = None if handle.stub is not None else list(handle.connections.values())
             opts = self._options(handle.schedule, handle.rehearsal, flight_dir, conns)
@@ -730,13 +733,16 @@ class Engine:
     async def _stop_simulator(self, handle: FlightHandle) -> None:
         """The flight's bundled simulator: ours, or one an earlier process started for it
         (its pid kept beside the flight's files)."""
+        if handle.simulator_stopped:
+            return
+        handle.simulator_stopped = True
         if handle.stub is not None:
             await handle.stub.stop()
             return
         pid_file = self.data_dir / "flights" / handle.id / "stub.pid"
         if pid_file.exists():
             with contextlib.suppress(ValueError, OSError):
-                os.kill(int(pid_file.read_text()), signal.SIGINT)
+                await stop_pid(int(pid_file.read_text()))
 
     async def _stop_writers(self, handle: FlightHandle) -> None:
         handle.runner.on_checkpoint = None

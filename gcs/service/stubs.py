@@ -9,10 +9,12 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import os
 import signal
 import socket
 import subprocess
 import sys
+import time
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -120,6 +122,35 @@ class StubProcess:
             except TimeoutError:
                 proc.kill()
                 await proc.wait()
+
+
+async def stop_pid(pid: int, timeout_s: float = 10.0) -> None:
+    """Interrupt a simulator this process did not start (one an earlier service process
+    left flying, known by its pid) and wait until it has gone, its files closed; kill it if
+    it has not stopped within ``timeout_s`` (wall)."""
+    with contextlib.suppress(ProcessLookupError, PermissionError):
+        os.kill(pid, signal.SIGINT)
+        deadline = time.monotonic() + timeout_s
+        while _running(pid):
+            if time.monotonic() > deadline:
+                os.kill(pid, signal.SIGKILL)
+                return
+            await asyncio.sleep(0.02)
+
+
+def _running(pid: int) -> bool:
+    """Whether ``pid`` runs: it exists and is not a zombie left for its parent to reap."""
+    try:
+        stat = Path(f"/proc/{pid}/stat").read_text()
+    except FileNotFoundError:
+        return False
+    except OSError:  # no /proc: ask the kernel
+        try:
+            os.kill(pid, 0)
+        except ProcessLookupError:
+            return False
+        return True
+    return stat.rsplit(")", 1)[-1].split()[0] != "Z"
 
 
 def follow_lockstep(path: Path, clock: MissionClock) -> asyncio.Task[None]:

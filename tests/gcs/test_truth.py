@@ -118,6 +118,18 @@ def test_after_utc_s_inside_the_pass_and_a_track_leaving_the_point() -> None:
         closest_approach(samples, LAT0, LON0, radius_m=-1.0)
 
 
+def test_a_log_that_ends_before_the_pass_gives_none_not_its_last_sample() -> None:
+    # A truth log read while the simulator still held the pass in its buffer: the track is
+    # inside the radius and still closing where it ends, so the pass is not in it.
+    samples = straight(20.0, 50.0, 0.0)
+    cut = [s for s in samples if s.utc_s < UTC0 + 48.0]
+    assert closest_approach(cut, LAT0, LON0, radius_m=100.0) is None
+    # One sample past the pass is enough to find it.
+    upto = [s for s in samples if s.utc_s <= UTC0 + 50.5]
+    got = closest_approach(upto, LAT0, LON0, radius_m=100.0)
+    assert got is not None and got[0] == pytest.approx(UTC0 + 50.0, abs=1e-3)
+
+
 def test_local_metres_per_degree_match_geodesic_distance() -> None:
     m_north, m_east = metres_per_degree(LAT0)
     d_north = geodesic_distance_m(LAT0, LON0, LAT0 + 0.01, LON0)
