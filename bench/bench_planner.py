@@ -35,14 +35,21 @@ ROOT = Path(__file__).resolve().parents[1]
 PAPER = ROOT / "scenarios" / "paper_three_uav.yaml"
 
 
-def team_scenario(n: int, seed: int = 0, *, assign_goals: bool = True) -> dict[str, Any]:
+def team_scenario(
+    n: int,
+    seed: int = 0,
+    *,
+    assign_goals: bool = True,
+    altitude_layers_m: tuple[float, ...] = (600.0,),
+) -> dict[str, Any]:
     """The paper's map and static threats with ``n`` vehicles from the west and south edges.
 
     Goals sit on rings 3-15 km around the target at (200, 200) km, at least 800 m apart (for
     more than 100 vehicles, 800 m x sqrt(100 / n) apart: the ring holds about 260 goals 800 m
     apart, and a team that large is a planning load, not one the airspace could hold). They
     are approach points any vehicle may take (``assign_goals``); ``assign_goals=False``
-    keeps each vehicle on the point drawn for it.
+    keeps each vehicle on the point drawn for it. The airspace allows a layer 600 m above the
+    planned profiles, under the paper vehicles' 1,600 m ceiling (``altitude_layers_m``).
     """
     spacing_m = 800.0 * min(1.0, math.sqrt(100.0 / n))
     base = load_scenario(PAPER).model_dump(mode="json", exclude_none=True)
@@ -74,6 +81,7 @@ def team_scenario(n: int, seed: int = 0, *, assign_goals: bool = True) -> dict[s
     base["vehicles"] = vehicles
     base["buffers"] = []
     base["assign_goals"] = assign_goals
+    base["altitude_layers_m"] = list(altitude_layers_m)
     return base
 
 

@@ -3,9 +3,12 @@
 
 Positions come from :meth:`planner.schedule.VehicleSchedule.position_at`: legs at their
 speeds along the exact path, loiter circles as flown; a vehicle counts only while airborne
-(from takeoff to arrival). Separation is horizontal (the team flies at similar altitudes).
-The sampling step keeps the relative motion between samples below a tenth of ``d_s``; the
-closest sample of each pair is then refined on a finer grid.
+(from takeoff to arrival), at its profile's altitude there (the climb-out's and the loiters'
+at the profile's too). Separation is the 3-D distance, as the flight's truth measures it:
+vehicles on different altitude layers (:mod:`planner.layers`) may share a corridor. The
+places a loiter keeps clear of (:class:`TeamTracks`) are horizontal. The sampling step
+keeps the relative motion between samples below a tenth of ``d_s``; the closest sample of
+each pair is then refined on a finer grid.
 """
 
 from __future__ import annotations
@@ -61,19 +64,21 @@ class Separation:
 
 
 def _positions(vs: VehicleSchedule, t: FloatArray) -> FloatArray:
-    """``vs.position_at`` at every time of ``t`` (NaN rows where it does not fly): the same
-    arithmetic on arrays, the path's poses looked up at once (:meth:`FlightPath.poses_at`)."""
+    """``vs.position_at`` at every time of ``t``, with the profile's altitude there as a third
+    column (NaN rows where it does not fly): the same arithmetic on arrays, the path's poses
+    looked up at once (:meth:`FlightPath.poses_at`)."""
     t = np.asarray(t, dtype=np.float64)
-    out = np.full((len(t), 2), np.nan)
+    out = np.full((len(t), 3), np.nan)
     flying = (t >= vs.takeoff_s) & (t <= vs.arrival_s)
     s = np.full(len(t), np.nan)
     loitering = np.zeros(len(t), dtype=bool)
     for lo in vs.loiters:
         inside = flying & ~loitering & (t >= lo.t_start_s) & (t < lo.t_end_s)
         for k in np.flatnonzero(inside):
-            out[k] = loiter_position(
+            out[k, :2] = loiter_position(
                 lo, (float(t[k]) - lo.t_start_s) * lo.speed_m_s * lo.tas_per_eas
             )
+        out[inside, 2] = vs.alt_at(lo.s_m)
         loitering |= inside
     rest = flying & ~loitering
     if not vs.airborne_start:
@@ -87,12 +92,30 @@ def _positions(vs: VehicleSchedule, t: FloatArray) -> FloatArray:
         s[on] = leg.s_start_m + (t[on] - leg.t_start_s) * leg.groundspeed_m_s
     end = rest & np.isnan(s)
     if end.any():
-        out[end] = (vs.path.end.east_m, vs.path.end.north_m)
+        out[end] = (vs.path.end.east_m, vs.path.end.north_m, vs.alt_at(vs.path.length_m))
     along = rest & ~end
     if along.any():
-        poses = vs.path.poses_at(np.minimum(np.maximum(s[along], 0.0), vs.path.length_m))
-        out[along] = poses[:, :2]
+        s_along = np.minimum(np.maximum(s[along], 0.0), vs.path.length_m)
+        out[along, :2] = vs.path.poses_at(s_along)[:, :2]
+        out[along, 2] = np.interp(s_along, vs.wp_s_m, vs.wp_alt_m)
     return out
+
+
+def _distance_m(a: FloatArray, b: FloatArray) -> FloatArray:
+    """3-D distances between positions (east, north, altitude in the last axis)."""
+    d: FloatArray = np.sqrt(((a - b) ** 2).sum(axis=-1))
+    return d
+
+
+def _squared_gaps_m2(planes: FloatArray, mine: FloatArray) -> FloatArray:
+    """Squared 3-D distances (vehicle, time) from the tracks ``planes`` (east, north and
+    altitude planes of (vehicle, time) each) to one track (3, time); inf where either does
+    not fly. Plane by plane, without a root: the hundred-vehicle team's hot loop."""
+    d2: FloatArray = (planes[0] - mine[0]) ** 2
+    d2 += (planes[1] - mine[1]) ** 2
+    d2 += (planes[2] - mine[2]) ** 2
+    d2[np.isnan(d2)] = np.inf
+    return d2
 
 
 def _closest(
@@ -101,7 +124,7 @@ def _closest(
     n = max(2, int(math.ceil((t1 - t0) / step_s)) + 1)
     t = np.linspace(t0, t1, n)
     pa, pb = _positions(a, t), _positions(b, t)
-    d = np.hypot(pa[:, 0] - pb[:, 0], pa[:, 1] - pb[:, 1])
+    d = _distance_m(pa, pb)
     if np.isnan(d).all():
         return math.inf, math.nan, pa[0], pb[0]
     k = int(np.nanargmin(d))
@@ -120,7 +143,7 @@ def pair_separation(a: VehicleSchedule, b: VehicleSchedule, *, step_s: float) ->
         d2, t2, pa2, pb2 = _closest(a, b, lo, hi, step_s / 50.0)
         if d2 < d:
             d, t, pa, pb = d2, t2, pa2, pb2
-    mid = 0.5 * (pa + pb)
+    mid = 0.5 * (pa[:2] + pb[:2])
     return PairSeparation(a.vehicle_id, b.vehicle_id, d, t, float(mid[0]), float(mid[1]))
 
 
@@ -156,7 +179,13 @@ class TeamSamples:
         self.ids = [v.vehicle_id for v in vehicles]
         # A timing that takes off before the team's first takeoff is alone in the air there.
         self.t_s = _grid_s(vehicles, _team_step_s(vehicles, required_m))
-        self.positions = np.stack([_positions(v, self.t_s) for v in vehicles])
+        self.planes = np.ascontiguousarray(
+            np.stack([_positions(v, self.t_s) for v in vehicles]).transpose(2, 0, 1)
+        )
+        """East, north and altitude, each (vehicle, time), m."""
+
+    def _track(self, vs: VehicleSchedule) -> FloatArray:
+        return np.ascontiguousarray(_positions(vs, self.t_s).T)
 
     def nearest(
         self, vs: VehicleSchedule, among: Sequence[str] | None = None
@@ -164,41 +193,55 @@ class TeamSamples:
         """How close ``vs`` comes to any other vehicle of the team (or of ``among``) (on the
         grid: at most a twentieth of ``d_s`` more than the exact search finds, off the grid's
         span not compared), and to whom; ``(inf, None)`` when they never fly together."""
-        mine = _positions(vs, self.t_s)
+        best, who, _ = self.closest(vs, among)
+        return best, who
+
+    def closest(
+        self, vs: VehicleSchedule, among: Sequence[str] | None = None
+    ) -> tuple[float, str | None, float]:
+        """:meth:`nearest`, and when (s; NaN when they never fly together)."""
         others = [
             k
             for k, vid in enumerate(self.ids)
             if vid != vs.vehicle_id and (among is None or vid in among)
         ]
         if not others:
-            return math.inf, None
-        pos = self.positions[others]
-        d = np.hypot(pos[:, :, 0] - mine[:, 0], pos[:, :, 1] - mine[:, 1])
-        d = np.where(np.isnan(d), np.inf, d)
-        k = np.unravel_index(int(d.argmin()), d.shape)
-        best = float(d[k])
-        return (best, self.ids[others[k[0]]]) if math.isfinite(best) else (math.inf, None)
+            return math.inf, None, math.nan
+        d2 = _squared_gaps_m2(self.planes[:, others], self._track(vs))
+        k = np.unravel_index(int(d2.argmin()), d2.shape)
+        best = math.sqrt(float(d2[k]))
+        if not math.isfinite(best):
+            return math.inf, None, math.nan
+        return best, self.ids[others[k[0]]], float(self.t_s[k[1]])
+
+    def too_close(self, vs: VehicleSchedule, below_m: float) -> frozenset[str]:
+        """The others of the team ``vs`` comes within ``below_m`` of (on the grid)."""
+        d2 = _squared_gaps_m2(self.planes, self._track(vs)).min(axis=1)
+        me = vs.vehicle_id
+        return frozenset(
+            vid for vid, dk in zip(self.ids, d2, strict=True) if dk < below_m**2 and vid != me
+        )
 
     def replace(self, vs: VehicleSchedule) -> None:
         """Take ``vs`` as its vehicle's schedule from now on."""
-        self.positions[self.ids.index(vs.vehicle_id)] = _positions(vs, self.t_s)
+        self.planes[:, self.ids.index(vs.vehicle_id)] = self._track(vs)
 
 
 def _coarse_pairs(samples: TeamSamples) -> list[tuple[int, int, float, float, FloatArray]]:
     """Every pair's least distance on the samples' time grid, compared with array arithmetic:
     ``(i, j, distance_m, time_s, midpoint)``; inf and NaN for a pair never airborne together."""
-    t, pos = samples.t_s, samples.positions  # (vehicle, time, east/north)
+    t, planes = samples.t_s, samples.planes  # (east/north/altitude, vehicle, time)
     out = []
-    for i in range(len(pos) - 1):
-        d = np.hypot(pos[i + 1 :, :, 0] - pos[i, :, 0], pos[i + 1 :, :, 1] - pos[i, :, 1])
-        together = ~np.isnan(d)
-        best = np.where(together, d, np.inf).argmin(axis=1)
+    for i in range(planes.shape[1] - 1):
+        d2 = _squared_gaps_m2(planes[:, i + 1 :], planes[:, i])
+        best = d2.argmin(axis=1)
         for row, k in enumerate(best):
             j = i + 1 + row
-            if not together[row, k]:
+            if not math.isfinite(float(d2[row, k])):
                 out.append((i, j, math.inf, math.nan, np.full(2, np.nan)))
                 continue
-            out.append((i, j, float(d[row, k]), float(t[k]), 0.5 * (pos[i, k] + pos[j, k])))
+            mid = 0.5 * (planes[:2, i, k] + planes[:2, j, k])
+            out.append((i, j, math.sqrt(float(d2[row, k])), float(t[k]), mid))
     return out
 
 

@@ -32,6 +32,7 @@ from planner.deconflict import (
 from planner.dubins import Pose
 from planner.errors import ArrivalTimeError, InfeasibleError
 from planner.flightpath import FlightPath
+from planner.layers import lift_team
 from planner.plan import Plan, World, build_world, required_arrival_s
 from planner.scenario import Scenario, Spaced, Vehicle, Waves, Windows
 from planner.schedule import (
@@ -739,7 +740,8 @@ def _time_team(
     threats: Sequence[ThreatZone],
 ) -> _TeamTiming:
     """Every vehicle timed for its target, then the team separated by timing
-    (:func:`planner.sequencing.sequence_team`)."""
+    (:func:`planner.sequencing.sequence_team`) and, where the scenario allows them, altitude
+    layers (:func:`planner.layers.lift_team`) for the pairs timing leaves in conflict."""
     timed: list[VehicleSchedule] = []
     adjustments: list[Adjustment] = []
     for v, vs in zip(scenario.vehicles, base, strict=True):
@@ -752,6 +754,26 @@ def _time_team(
     required = scenario.separation_m
     by_id = {vs.vehicle_id: vs for vs in base}
 
+    slack = {
+        v.id: 0.0
+        if v.airborne
+        else max(0.0, min(targets[v.id] - w.t_min_s, w.t_max_s - targets[v.id]))
+        for v, w in zip(scenario.vehicles, windows, strict=True)
+    }
+
+    cruise_now = {v.id: v.cruise_m_s for v in scenario.vehicles}
+
+    def timed_at(vid: str, vs: VehicleSchedule, cruise: float) -> Retimed | None:
+        """``vs`` timed for the same arrival at ``cruise`` (its takeoff moved), or None."""
+        other = scenario.vehicle(vid).model_copy(update={"cruise_speed_m_s": cruise})
+        try:
+            return retime_on_path(
+                scenario, other, vs, now_s=0.0, target_s=targets[vid], step_m_s=step_m_s,
+                threats=threats,
+            )  # fmt: skip
+        except InfeasibleError:
+            return None
+
     def other_cruises(vid: str) -> Iterator[tuple[VehicleSchedule, tuple[Retimed, float]]]:
         """The vehicle at each other cruise speed, nearest its own first, for the same
         arrival (its takeoff moved)."""
@@ -761,39 +783,52 @@ def _time_team(
             (c for c in levels if abs(c - v.cruise_m_s) > 1e-9),
             key=lambda c: (abs(c - v.cruise_m_s), c),
         ):
-            other = v.model_copy(update={"cruise_speed_m_s": cruise})
-            try:
-                r = retime_on_path(
-                    scenario, other, by_id[vid], now_s=0.0, target_s=targets[vid],
-                    step_m_s=step_m_s, threats=threats,
-                )  # fmt: skip
-            except InfeasibleError:
-                continue
-            yield r.schedule, (r, cruise)
+            r = timed_at(vid, by_id[vid], cruise)
+            if r is not None:
+                yield r.schedule, (r, cruise)
 
-    slack = {
-        v.id: 0.0
-        if v.airborne
-        else max(0.0, min(targets[v.id] - w.t_min_s, w.t_max_s - targets[v.id]))
-        for v, w in zip(scenario.vehicles, windows, strict=True)
-    }
-    moved, sep = sequence_team(timed, required, slack_s=slack, alternatives=other_cruises)
     said: list[str] = []
+    changed: dict[str, Retimed] = {}
+    vehicles = {v.id: v for v in scenario.vehicles}
+
+    def retime_lifted(vs: VehicleSchedule) -> tuple[VehicleSchedule, Retimed] | None:
+        r = timed_at(vs.vehicle_id, vs, cruise_now[vs.vehicle_id])
+        return None if r is None else (r.schedule, r)
+
+    moved, sep = sequence_team(timed, required, slack_s=slack, alternatives=other_cruises)
     for vid, m in moved.items():
-        retimed, cruise = m.chosen
+        changed[vid], cruise_now[vid] = m.chosen
         other = m.conflict.b if m.conflict.a == vid else m.conflict.a
-        why = (
-            f"{vid} cruises at {cruise:g} m/s instead of {scenario.vehicle(vid).cruise_m_s:g} "
-            f"m/s (takeoff at {m.schedule.takeoff_s:.1f} s): it came "
-            f"{m.conflict.distance_m:.0f} m from {other} at {m.conflict.time_s:.0f} s, under "
-            f"the {required:g} m separation"
+        said.append(
+            f"{vid} cruises at {cruise_now[vid]:g} m/s instead of "
+            f"{vehicles[vid].cruise_m_s:g} m/s (takeoff at {m.schedule.takeoff_s:.1f} "
+            f"s): it came {m.conflict.distance_m:.0f} m from {other} at "
+            f"{m.conflict.time_s:.0f} s, under the {required:g} m separation"
         )
-        said.append(why)
         timed = [m.schedule if x.vehicle_id == vid else x for x in timed]
+    if sep.conflicts and scenario.altitude_layers_m:
+        lifted, sep = lift_team(
+            timed, by_id, vehicles, scenario.altitude_layers_m, required, retime_lifted
+        )
+        for vid, up in lifted.items():
+            changed[vid] = up.chosen
+            said.append(
+                f"{vid} flies "
+                + ", ".join(
+                    f"{h:g} m above its profile from {a / 1000:.1f} to {b / 1000:.1f} km "
+                    f"(it came {d:.0f} m from {o} at {t:.0f} s)"
+                    for h, a, b, o, d, t in up.spans
+                )
+                + f", under the {required:g} m separation; takeoff at "
+                f"{up.schedule.takeoff_s:.1f} s"
+            )
+            timed = [up.schedule if x.vehicle_id == vid else x for x in timed]
+    for vid, r in changed.items():
+        why = "; ".join(w for w in said if w.startswith(f"{vid} "))
         # Said in flight with the takeoff.
         adjustments = [a for a in adjustments if a.vehicle != vid] + [
             replace(a, reason=f"{a.reason}; {why}") if a.strategy == "takeoff_delay" else a
-            for a in retimed.adjustments
+            for a in r.adjustments
         ]
     return _TeamTiming(tuple(timed), tuple(adjustments), tuple(said), sep)
 

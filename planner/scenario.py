@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import json
 import math
+from itertools import pairwise
 from pathlib import Path
 from typing import Annotated, Any, Literal, Self
 
@@ -413,6 +414,16 @@ class Scenario(_Model):
         ),
     )
 
+    altitude_layers_m: list[PositiveM] = Field(
+        default_factory=list,
+        max_length=8,
+        description=(
+            "heights above its planned profile (m) at which a vehicle may fly to keep the "
+            "separation from vehicles sharing its corridor, where its alt_max_m allows "
+            "(planner.layers); none by default: every vehicle flies its profile"
+        ),
+    )
+
     def forecast_wind(self) -> Wind:
         """The forecast wind as the air mass's velocity (still air without one)."""
         if self.wind is None:
@@ -470,6 +481,14 @@ class Scenario(_Model):
             raise ValueError(
                 "assign_goals: not with landing slots (each vehicle's slot is given in order)"
             )
+        if self.altitude_layers_m and self.landing is not None:
+            raise ValueError(
+                "altitude_layers_m: not with landing slots (each slot's final is flown at "
+                "its fix's altitude)"
+            )
+        layers = self.altitude_layers_m
+        if any(b <= a for a, b in pairwise(layers)):
+            raise ValueError(f"altitude_layers_m: {layers} must rise, each height once")
         threat_ids: set[str] = set()
         for t in self.threats:
             if t.id in threat_ids:

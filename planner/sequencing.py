@@ -8,7 +8,8 @@ conflict are placed as they are; the others follow, those with the least room to
 (airborne, then by their timing slack), each keeping its timing if it is clear of every
 vehicle placed so far, else taking the first of its other timings (its caller's order:
 nearest its own cruise speed first) that is. A vehicle none of whose timings is clear keeps
-its own, and the conflict is left for :func:`planner.retime.check_feasible` to refuse.
+its own, and the conflict is left to altitude layers where the scenario allows them
+(:func:`planner.layers.lift_team`), else for :func:`planner.retime.check_feasible` to refuse.
 
 Each placement compares one vehicle with the team on the grid of
 :class:`~planner.deconflict.TeamSamples` (the team sampled once): a hundred vehicles, each

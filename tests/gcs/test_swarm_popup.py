@@ -12,12 +12,10 @@ import math
 from pathlib import Path
 
 import pytest
-import yaml
 
 from gcs.coordination.config import FlightConfig
-from gcs.rehearsal.rehearse import RehearsalOptions, rehearse
-from planner.scenario import load_scenario
 from tests.flightstory import story
+from tests.rehearsing import rehearse_data
 from tests.teams import ring_team
 
 pytestmark = pytest.mark.slow  # about 40 s of wall time
@@ -37,20 +35,8 @@ async def test_thirty_aircraft_keep_out_of_a_pop_up_zone_whatever_the_re_plan_la
             "radius_m": POP["radius_m"], "appears": {"at_s": POP["at_s"]},
         }
     )  # fmt: skip
-    path = tmp_path / "team30.yaml"
-    path.write_text(yaml.safe_dump(data))
-    scenario = load_scenario(path)
-    truth = tmp_path / "truth.jsonl"
-    record = await rehearse(
-        RehearsalOptions(
-            scenario_path=path,
-            scenario=scenario,
-            speedup=100.0,
-            seed=0,
-            truth=truth,
-            quiet=True,
-            config=FlightConfig(seed=0, replan_delay_wall_s=10.0),
-        )
+    record, scenario, truth = await rehearse_data(
+        data, tmp_path, config=FlightConfig(seed=0, replan_delay_wall_s=10.0)
     )
     events = story(record["events"])
     assert record["state"] == "completed", f"{record['state_reason']}\n{events}"

@@ -35,13 +35,11 @@ from typing import Any
 
 import numpy as np
 import pytest
-import yaml
 
-from gcs.coordination.config import FlightConfig
-from gcs.rehearsal.rehearse import RehearsalOptions, rehearse
 from gcs.rehearsal.truth import TruthSample, closest_approach, read_truth
-from planner.scenario import Scenario, load_scenario
+from planner.scenario import Scenario
 from tests.flightstory import story
+from tests.rehearsing import rehearse_data
 from tests.teams import ring_team
 
 pytestmark = pytest.mark.slow  # one rehearsal for the module: about 25 s of wall time
@@ -80,24 +78,7 @@ def flight(tmp_path_factory: pytest.TempPathFactory) -> Flight:
             "radius_m": RADIUS_M, "appears": {"at_s": APPEARS_S},
         }
     )  # fmt: skip
-    path = directory / "team30.yaml"
-    path.write_text(yaml.safe_dump(data), encoding="utf-8")
-    scenario = load_scenario(path)
-    truth = directory / "truth.jsonl"
-    record = asyncio.run(
-        rehearse(
-            RehearsalOptions(
-                scenario_path=path,
-                scenario=scenario,
-                speedup=100.0,
-                seed=0,
-                truth=truth,
-                json_out=directory / "flight.json",  # kept for a failure's post-mortem
-                quiet=True,
-                config=FlightConfig(seed=0),
-            )
-        )
-    )
+    record, scenario, truth = asyncio.run(rehearse_data(data, directory))
     by_sysid = read_truth(truth)
     samples = {v["id"]: by_sysid.get(v["system_id"], []) for v in record["vehicles"]}
     return Flight(record, scenario, samples)

@@ -132,7 +132,8 @@ def test_the_team_separation_matches_every_pair_searched_on_its_own() -> None:
 
 def test_positions_sampled_at_once_are_the_schedule_s_own_at_every_time() -> None:
     """The team's tracks are sampled on arrays: the same positions as the schedule's own
-    ``position_at``, time by time, through the climb-out, the legs, a loiter and the end."""
+    ``position_at``, time by time, through the climb-out, the legs, a loiter and the end, at
+    the profile's altitude where the schedule has it (``state_at``)."""
     scenario = parse_scenario(small_scenario(arrival={"kind": "simultaneous", "required_s": 2600}))
     s = build_schedule(scenario, plan(scenario, "astar"), world=build_world(scenario))
     assert all(vs.climb is not None for vs in s.vehicles)
@@ -144,4 +145,6 @@ def test_positions_sampled_at_once_are_the_schedule_s_own_at_every_time() -> Non
             if want is None:
                 assert np.isnan(got[k]).all(), (vs.vehicle_id, tk)
             else:
-                assert tuple(got[k]) == want, (vs.vehicle_id, tk, got[k], want)
+                assert tuple(got[k, :2]) == want, (vs.vehicle_id, tk, got[k], want)
+                alt = vs.alt_at(vs.state_at(float(tk))[1])
+                assert got[k, 2] == pytest.approx(alt, abs=1e-6), (vs.vehicle_id, tk)
