@@ -40,6 +40,12 @@ T = TypeVar("T")
 
 GRID_M = 100.0
 """Spacing of the grid the layer's switches are found on, m."""
+LIFT_HALF_SPANS_M = (5_000.0, 20_000.0, 60_000.0)
+"""A vehicle lifted to an altitude layer flies it this far either side of where it came too
+close (plus the climb to it and the descent from it), the shortest that helps; else all its
+path."""
+LIFT_ROUNDS = 8
+"""Passes over the team's conflicts at most (each lowers their number, or the search ends)."""
 
 
 def layer_profile(
@@ -200,11 +206,3 @@ def lift_team(
         if not progress:
             break
     return lifted, separation([current[vs.vehicle_id] for vs in team], required_m, samples)
-
-
-LIFT_HALF_SPANS_M = (5_000.0, 20_000.0, 60_000.0)
-"""A vehicle lifted to an altitude layer flies it this far either side of where it came too
-close (plus the climb to it and the descent from it), the shortest that helps; else all its
-path."""
-LIFT_ROUNDS = 8
-"""Passes over the team's conflicts at most (each lowers their number, or the search ends)."""

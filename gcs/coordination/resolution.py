@@ -1,7 +1,7 @@
 """Predicted losses of separation resolved ahead of time, by speed (pure: no clock, no I/O).
 
 Each vehicle's next seconds are predicted along its own route (not in a straight line: the
-routes turn) from its last fix at its present ground speed. A pair predicted to come closer
+routes turn), its loiter turns included, from its last fix at its present ground speed. A pair predicted to come closer
 than the separation within the look-ahead is resolved by one of the two flying the slowest or
 the fastest airspeed of its range until their closest approach has passed: of the four
 choices, the one predicted to keep them farthest apart (the smaller change of speed between
@@ -33,7 +33,7 @@ class Ahead:
     vehicle: str
     t_s: float
     s_m: float
-    """Along its route at the fix, m."""
+    """Along its flight at the fix (``route_s_m``'s axis), m."""
     groundspeed_m_s: float
     airspeed_m_s: float
     """The airspeed it flies (commanded), m/s."""
@@ -44,7 +44,9 @@ class Ahead:
     airspeed_max_m_s: float
     alt_m: float
     route_s_m: FloatArray
-    """The route's samples: along-track distance (increasing), east and north, m."""
+    """The flight's samples (its route, with the loiter turns it has still to fly spliced in:
+    :meth:`~gcs.coordination.routetrack.RouteTrack.flight_samples`): along-track distance
+    (not decreasing), east and north, m."""
     route_east_m: FloatArray
     route_north_m: FloatArray
     horizon_s: float

@@ -188,6 +188,7 @@ class RouteTrack:
         self._build_samples()
         self._build_pieces()
         self._loiter_pieces = [self._loiter_circle(loiter) for loiter in self.loiters]
+        self._flight_cache: dict[int, tuple[FloatArray, FloatArray, FloatArray]] = {}
 
     def __reduce__(self) -> tuple[Any, ...]:
         """Pickled as what it is built from (its samples are 20 times that and are built
@@ -407,6 +408,55 @@ class RouteTrack:
         t = min(max((de_m * ce + dn_m * cn) * float(self._chord_inv2[index]), 0.0), 1.0)
         s_m = float(self._s_m[index]) + t * float(self._chord_s_m[index])
         return math.hypot(de_m - t * ce, dn_m - t * cn), s_m
+
+    def flight_samples(self, loiters_done: int = 0) -> tuple[FloatArray, FloatArray, FloatArray]:
+        """The flight still to come as one polyline: ``(along_m, east_m, north_m)`` of the
+        route's samples with the turns of every loiter from ``loiters_done`` on spliced in
+        where the route reaches it (every 5 degrees, from where the route meets the circle,
+        the loiter's way round; a detour as a stop at that point for its length).
+
+        ``along_m`` is the distance flown along it: the route's own ``s_m`` up to the first
+        of those loiters (a vehicle on its route before it is at its ``s_m``), then that
+        plus the loiters' lengths; a vehicle in loiter ``loiters_done`` that has flown
+        ``f`` m of it is at the loiter's ``s_m + f``."""
+        loiters = self.loiters[max(loiters_done, 0) :]
+        if not loiters:
+            return self._s_m, self._east_m, self._north_m
+        key = len(loiters)
+        if key not in self._flight_cache:  # asked at every conflict check: built once
+            self._flight_cache[key] = self._splice(loiters)
+        return self._flight_cache[key]
+
+    def _splice(self, loiters: Sequence[LoiterSpec]) -> tuple[FloatArray, FloatArray, FloatArray]:
+        along, east, north = [], [], []
+        shift_m, done = 0.0, 0
+        for loiter in loiters:
+            at_m = min(max(loiter.s_m, 0.0), self._length_m)
+            k = int(np.searchsorted(self._s_m, at_m, side="right"))
+            along.append(self._s_m[done:k] + shift_m)
+            east.append(self._east_m[done:k])
+            north.append(self._north_m[done:k])
+            done = k
+            entry = self.path.pose_at(at_m)
+            bearing = math.atan2(
+                entry.east_m - loiter.centre_east_m, entry.north_m - loiter.centre_north_m
+            )
+            sign = 1.0 if loiter.clockwise else -1.0
+            n = max(1, math.ceil(loiter.circle_m / (ARC_PIECE_RAD * loiter.radius_m)))
+            u = np.linspace(0.0, loiter.circle_m, n + 1)
+            angle = bearing + sign * u / loiter.radius_m
+            along.append(at_m + shift_m + np.append(u, loiter.circle_m + loiter.detour_m))
+            east.append(
+                np.append(loiter.centre_east_m + loiter.radius_m * np.sin(angle), entry.east_m)
+            )
+            north.append(
+                np.append(loiter.centre_north_m + loiter.radius_m * np.cos(angle), entry.north_m)
+            )
+            shift_m += loiter.length_m
+        along.append(self._s_m[done:] + shift_m)
+        east.append(self._east_m[done:])
+        north.append(self._north_m[done:])
+        return np.concatenate(along), np.concatenate(east), np.concatenate(north)
 
     def remaining_m(self, s_m: float, loiters_done: int = 0, loiter_flown_m: float = 0.0) -> float:
         """Distance still to fly from ``s_m``, m: the path after it plus the loiters not done."""

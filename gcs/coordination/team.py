@@ -486,8 +486,9 @@ class TeamController(ZoneGuard, TeamTime):
 
     def _ahead(self, m: Member) -> Ahead | None:
         """The member's flight ahead for resolving conflicts, if it is predictable: on its
-        route, joined, timed (not in or before a loiter, holding or being re-planned), with a
-        fresh fix; movable unless on its final approach."""
+        route, joined, timed (not holding or being re-planned), with a fresh fix, its loiter
+        turns still to fly on the way (:meth:`RouteTrack.flight_samples`); movable unless in
+        its turns or on its final approach."""
         if (
             m.phase != "route"
             or m.over
@@ -499,26 +500,33 @@ class TeamController(ZoneGuard, TeamTime):
             or m.alt_amsl_m is None
             or m.hold_zone is not None
             or m.busy_mission
-            or m.in_loiter()
-            or m.loiter_turns_left() > 0.0
         ):
             return None
         track = m.track
+        done = m.loiters_done()
+        along_m, east_m, north_m = track.flight_samples(done)
+        turning = m.in_loiter() and done < len(track.loiters)
+        at_m = m.s_m
+        if turning:
+            lo = track.loiters[done]
+            at_m = lo.s_m + min(m.loiter_flown_m, lo.length_m)
         return Ahead(
             m.vehicle_id,
             m.last_fix_s,
-            m.s_m,
+            at_m,
             m.groundspeed_m_s,
             m.level_m_s,
             m.tas_per_eas(m.s_m),
             m.limits.airspeed_min_m_s,
             m.limits.airspeed_max_m_s,
             m.alt_amsl_m,
-            track.sample_s_m,
-            track.sample_east_m,
-            track.sample_north_m,
+            along_m,
+            east_m,
+            north_m,
             horizon_s=max(m.target_s - m.last_fix_s, 0.0),
-            movable=track.length_m - m.s_m >= self.config.final_m and m.resolving is None,
+            movable=not turning
+            and track.length_m - m.s_m >= self.config.final_m
+            and m.resolving is None,
         )
 
     def _resolve_conflicts(self, m: Member, t: float, out: list[act.Action]) -> None:

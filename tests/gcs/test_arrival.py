@@ -598,3 +598,42 @@ def test_closed_loop_arrives_on_time_with_a_loiter() -> None:
     )
     assert target_s > latest_s  # only the loiter makes this target
     assert fly(looped, target_s) == pytest.approx(target_s, abs=0.3)
+
+
+# -- the flight ahead, loiters spliced in (for the in-flight conflict forecasts) -------------
+
+
+def test_flight_samples_splice_each_loiter_s_turns_into_the_route() -> None:
+    # North 10 km; 2 turns of 300 m clockwise entered at 3 km (centre 300 m east of the
+    # route), 1 turn of 200 m anticlockwise with a 400 m detour at 7 km (centre to the west).
+    first = LoiterSpec(3_000.0, 300.0, 3_000.0, 300.0, 2, clockwise=True)
+    second = LoiterSpec(7_000.0, -200.0, 7_000.0, 200.0, 1, clockwise=False, detour_m=400.0)
+    track = RouteTrack(straight(0.0, 0.0, 0.0, 10_000.0), (first, second), step_m=25.0)
+    along, east, north = track.flight_samples(0)
+    assert (np.diff(along) >= 0.0).all()
+    assert along[-1] == pytest.approx(10_000.0 + first.length_m + second.length_m)
+    # Before the first loiter the flight is the route; after both, the route shifted by them.
+    before = along <= 3_000.0 - 1e-6
+    assert np.allclose(east[before], 0.0) and np.allclose(north[before], along[before])
+    after = along >= 7_000.0 + first.length_m + second.length_m + 1e-6
+    assert np.allclose(north[after], along[after] - first.length_m - second.length_m)
+    # In the first loiter's stretch every point is on its circle, going round clockwise
+    # (compass bearing from the centre increasing) from the route's point west of the centre.
+    u = along - 3_000.0
+    on_first = (u >= 0.0) & (u <= first.circle_m)
+    assert np.allclose(np.hypot(east[on_first] - 300.0, north[on_first] - 3_000.0), 300.0)
+    bearing = np.unwrap(np.arctan2(east[on_first] - 300.0, north[on_first] - 3_000.0))
+    assert bearing[0] == pytest.approx(-0.5 * math.pi)
+    assert np.allclose(bearing - bearing[0], u[on_first] / 300.0)
+    # The second loiter, anticlockwise, then its detour as a stop at the entry point.
+    v = along - (7_000.0 + first.length_m)
+    on_second = (v >= 0.0) & (v <= second.circle_m)
+    angles = np.unwrap(np.arctan2(east[on_second] + 200.0, north[on_second] - 7_000.0))
+    assert np.allclose(angles[0] - angles, v[on_second] / 200.0)
+    dwell = (v > second.circle_m) & (v <= second.length_m)
+    assert np.allclose(east[dwell], 0.0) and np.allclose(north[dwell], 7_000.0)
+    # With the first loiter flown, the flight starts its axis at the route's own distance.
+    along1, _, north1 = track.flight_samples(1)
+    assert along1[-1] == pytest.approx(10_000.0 + second.length_m)
+    assert np.allclose(north1[along1 <= 7_000.0], along1[along1 <= 7_000.0])
+    assert track.flight_samples(2)[0] is track.sample_s_m

@@ -17,8 +17,10 @@ from gcs.coordination import actions as act
 from gcs.coordination.config import FlightConfig
 from gcs.coordination.events import EventKind
 from gcs.coordination.resolution import Ahead, Forecasts, resolve
+from gcs.coordination.routetrack import LoiterSpec, RouteTrack
 from gcs.coordination.team import TeamController
 from planner.deconflict import pair_separation
+from planner.flightpath import straight
 from planner.plan import build_world, plan
 from planner.retime import build_schedule, retime_on_path
 from planner.scenario import parse_scenario
@@ -95,6 +97,40 @@ def test_no_resolution_for_a_pair_apart_none_possible_or_only_the_movable_one_mo
         )
         is None
     )
+
+
+def test_a_vehicle_in_its_loiter_turns_is_predicted_round_them_and_the_other_one_moves() -> None:
+    """L flies 8 turns of 150 m round (0, 0), clockwise, entered at the circle's west point
+    from its north-bound route, at 25 m/s (37.7 s a turn): it is at the north point at 9.4 s
+    and 47.1 s. M, east bound along y = 400 m, is 47.1 s (1,178 m) west of x = 0: they come
+    250 m apart there. L in its turns is not moved; M is, and the test's own circle and line
+    keep them apart at that speed."""
+    radius, quarter_s = 150.0, 0.25 * 2.0 * math.pi * 150.0 / 25.0
+    loiter = LoiterSpec(2_000.0, 0.0, 0.0, radius, 8, clockwise=True)
+    track = RouteTrack(straight(-radius, -2_000.0, -radius, 10_000.0), (loiter,))
+    along, east, north = track.flight_samples(0)
+    lo = _straight(
+        "L", (0.0, 0.0), 0.0, s_m=2_000.0, route_s_m=along, route_east_m=east,
+        route_north_m=north, movable=False,
+    )  # fmt: skip
+    meet_s = quarter_s + 4.0 * quarter_s
+    m = _straight("M", (-25.0 * meet_s, 400.0), 90.0)
+    r = resolve(lo, m, now_s=0.0, separation_m=300.0)
+    assert r is not None and r.vehicle == "M"
+    assert r.unresolved_m == pytest.approx(250.0, abs=10.0)
+    assert r.at_s == pytest.approx(meet_s, abs=2.0)
+
+    def apart_m(m_speed: float) -> float:
+        best = math.inf
+        for t in np.arange(0.0, 180.0, 0.05):
+            a = math.pi - 25.0 * t / radius  # from the west point, clockwise
+            s = 25.0 * min(t, 5.0) + m_speed * max(t - 5.0, 0.0)
+            here = (radius * math.cos(a), radius * math.sin(a))
+            best = min(best, math.dist(here, (-25.0 * meet_s + s, 400.0)))
+        return best
+
+    assert apart_m(25.0) < 260.0
+    assert apart_m(r.airspeed_m_s) >= 300.0 - 1.0
 
 
 def _crossing_team() -> TeamController:
