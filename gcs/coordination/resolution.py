@@ -1,13 +1,13 @@
 """Predicted losses of separation resolved ahead of time, by speed (pure: no clock, no I/O).
 
 Each vehicle's next seconds are predicted along its own route (not in a straight line: the
-routes turn), its loiter turns included, from its last fix at its present ground speed. A pair predicted to come closer
-than the separation within the look-ahead is resolved by one of the two flying the slowest or
-the fastest airspeed of its range until their closest approach has passed: of the four
-choices, the one predicted to keep them farthest apart (the smaller change of speed between
-two that keep the separation equally well). A new speed is reached in ``response_s`` (the
-prediction holds the old one until then). When no choice keeps the separation, none is
-taken: the conflict event and, if it comes true, the alarm say so.
+routes turn), its loiter turns included, from its last fix at its present ground speed. A
+pair predicted to come closer than the separation within the look-ahead is resolved by one of
+the two flying the slowest or the fastest airspeed of its range until their closest approach
+has passed: of the four choices, the one predicted to keep them farthest apart (the smaller
+change of speed between two that keep the separation equally well). A new speed is reached in
+``response_s`` (the prediction holds the old one until then). When no choice keeps the
+separation, none is taken: the conflict event and, if it comes true, the alarm say so.
 
 A vehicle flying a resolution is not timed for its slot meanwhile; once released, its arrival
 controller makes up the time (the seconds a minute at another speed costs are well inside what
