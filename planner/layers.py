@@ -198,7 +198,8 @@ def lift_team(
         progress = False
         closest = {vid: samples.closest(vs) for vid, vs in current.items()}
         for vid in sorted(closest, key=lambda k: closest[k][0]):
-            near, who, when_s = samples.closest(current[vid])
+            # Looked up again only once a lift this round may have changed it.
+            near, who, when_s = samples.closest(current[vid]) if progress else closest[vid]
             if near >= enough or who is None:
                 continue
             if try_lift(vid, who, near, when_s) or try_lift(who, vid, near, when_s):
