@@ -86,11 +86,21 @@ def team_scenario(
 
 
 def run(
-    n: int, seed: int, workers: int = 1, ray_address: str | None = None, schedule: bool = True
+    n: int,
+    seed: int,
+    workers: int = 1,
+    ray_address: str | None = None,
+    schedule: bool = True,
+    layers_m: tuple[float, ...] = (600.0,),
 ) -> dict[str, Any]:
     """Plan one team (in this process) and return the figures. With ``ray_address`` the routes
-    are finished on Ray (``"local"``: a Ray started here, its start-up not timed)."""
-    scenario = parse_scenario(team_scenario(n, seed)) if n != 3 else load_scenario(PAPER)
+    are finished on Ray (``"local"``: a Ray started here, its start-up not timed);
+    ``layers_m``: the generated teams' altitude layers."""
+    scenario = (
+        parse_scenario(team_scenario(n, seed, altitude_layers_m=layers_m))
+        if n != 3
+        else load_scenario(PAPER)
+    )
     backend: Backend | None = None
     if ray_address is not None:
         backend = RayBackend(None if ray_address == "local" else ray_address)
@@ -146,18 +156,32 @@ def main() -> None:
     parser.add_argument(
         "--no-schedule", action="store_true", help="plan only (no schedule, no separation search)"
     )
+    parser.add_argument(
+        "--layers",
+        type=float,
+        nargs="*",
+        default=[600.0],
+        metavar="M",
+        help="the generated teams' altitude layers, m above the profiles (default 600; "
+        "none given: no layers)",
+    )
     parser.add_argument("--one", type=int, help=argparse.SUPPRESS)
     args = parser.parse_args()
     if args.one is not None:
         # Peak memory of this process and all it starts (Ray's processes included).
         with TreeMemory() as memory:
-            figures = run(args.one, args.seed, args.workers, args.ray, not args.no_schedule)
+            figures = run(
+                args.one, args.seed, args.workers, args.ray, not args.no_schedule,
+                tuple(args.layers),
+            )  # fmt: skip
         print(json.dumps(figures | {"tree_peak_rss_mib": memory.peak_mib}))
         return
     print(
         f"machine: {platform.machine()}, {os.cpu_count()} cores, "
         f"{platform.python_implementation()} {platform.python_version()}, numpy {np.__version__}, "
-        f"{args.workers} worker(s)" + (f", routes finished on Ray ({args.ray})" if args.ray else "")
+        f"{args.workers} worker(s)"
+        + (f", routes finished on Ray ({args.ray})" if args.ray else "")
+        + f", altitude layers {args.layers or 'none'}"
     )
     print(
         "| UAVs | wall (s) | ACO iterations | cost / optimal, max | mean "
@@ -179,6 +203,8 @@ def main() -> None:
                 str(args.workers),
                 *(["--ray", args.ray] if args.ray else []),
                 *(["--no-schedule"] if args.no_schedule else []),
+                "--layers",
+                *(str(h) for h in args.layers),
             ],
             capture_output=True,
             text=True,
