@@ -606,9 +606,11 @@ async def serve(
                 team.schedule_blackout(b.vehicle_index, b.start_sim_s, b.duration_s)
             if args.lockstep:
                 team.server.lockstep = Lockstep(
-                    Path(args.lockstep), create=True, speedup=args.speedup
+                    Path(args.lockstep),
+                    create=True,
+                    speedup=args.speedup,
+                    lead_s=args.lockstep_lead,
                 )
-                team.server.lockstep_lead_s = args.lockstep_lead
             for i, port in enumerate(team.ports):
                 log.info("vehicle %d: sysid %d on tcp:%s:%d", i, i + 1, args.host, port)
             print(f"sitl_stub: {len(homes)} vehicle(s) ready, ports {team.ports}", flush=True)

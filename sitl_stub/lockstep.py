@@ -17,9 +17,12 @@ station keep one clock, the *pace clock*: the simulator's flight time divided by
 - an acknowledgement older than :data:`STALE_WALL_S` of wall time (no ground station, or one
   that stopped) does not hold the simulator back: the flight goes on, as a real one would.
 
-The file is 32 bytes: four native float64 (pace time, acknowledged pace time, the wall time
-of the acknowledgement on the machine's monotonic clock, and the speed-up), each written in
-one aligned store. Both processes map it; nothing else is exchanged.
+The file is 40 bytes: five native float64 (pace time, acknowledged pace time, the wall time
+of the acknowledgement on the machine's monotonic clock, the speed-up and the lead), each
+written in one aligned store. Both processes map it; nothing else is exchanged. The ground
+station reads the lead too: a report it reads may be up to that much flight older than the
+pace clock says, and its mission clock takes no difference that small between two vehicles'
+clocks for an offset (:meth:`gcs.coordination.missionclock.MissionClock.follow`).
 """
 
 from __future__ import annotations
@@ -36,14 +39,21 @@ STALE_WALL_S = 1.0
 """An acknowledgement older than this (monotonic wall seconds) holds nothing back."""
 DEFAULT_LEAD_S = 1.0
 """How far (flight seconds) the simulator may run ahead of what the ground station has seen."""
-_SIZE = 32
-_PACE, _ACK, _ACK_WALL, _SPEEDUP = range(4)
+_SIZE = 40
+_PACE, _ACK, _ACK_WALL, _SPEEDUP, _LEAD = range(5)
 
 
 class Lockstep:
     """The shared clock file (see the module docstring)."""
 
-    def __init__(self, path: Path, *, create: bool = False, speedup: float = 1.0) -> None:
+    def __init__(
+        self,
+        path: Path,
+        *,
+        create: bool = False,
+        speedup: float = 1.0,
+        lead_s: float = DEFAULT_LEAD_S,
+    ) -> None:
         self.path = Path(path)
         flags = os.O_RDWR | (os.O_CREAT if create else 0)
         fd = os.open(self.path, flags, 0o600)
@@ -55,15 +65,22 @@ class Lockstep:
             self._map = mmap.mmap(fd, _SIZE)
         finally:
             os.close(fd)
-        self._slots = np.frombuffer(self._map, dtype=np.float64, count=4)
+        self._slots = np.frombuffer(self._map, dtype=np.float64, count=5)
         if create:
             if not (math.isfinite(speedup) and speedup > 0.0):
                 raise ValueError(f"speedup must be a positive number, got {speedup!r}")
-            self._slots[:] = (0.0, -math.inf, -math.inf, speedup)
+            if not (math.isfinite(lead_s) and lead_s > 0.0):
+                raise ValueError(f"lead_s must be a positive number of seconds, got {lead_s!r}")
+            self._slots[:] = (0.0, -math.inf, -math.inf, speedup, lead_s)
 
     @property
     def speedup(self) -> float:
         return float(self._slots[_SPEEDUP])
+
+    @property
+    def lead_s(self) -> float:
+        """How far (flight s) the simulator may run ahead of the acknowledged pace time."""
+        return float(self._slots[_LEAD])
 
     # -- the simulator -------------------------------------------------------------------------
 
@@ -71,14 +88,14 @@ class Lockstep:
         """The simulator has flown ``sim_s`` seconds."""
         self._slots[_PACE] = sim_s / self.speedup
 
-    def limit_s(self, lead_s: float = DEFAULT_LEAD_S, wall_s: float | None = None) -> float:
+    def limit_s(self, wall_s: float | None = None) -> float:
         """The flight time (s) the simulator may step to now: the acknowledged pace time's
-        plus ``lead_s``, or infinity while no ground station acknowledges (none yet, or its
+        plus the lead, or infinity while no ground station acknowledges (none yet, or its
         last acknowledgement is :data:`STALE_WALL_S` old)."""
         wall = time.monotonic() if wall_s is None else wall_s
         if wall - float(self._slots[_ACK_WALL]) > STALE_WALL_S:
             return math.inf
-        return float(self._slots[_ACK]) * self.speedup + lead_s
+        return float(self._slots[_ACK]) * self.speedup + self.lead_s
 
     # -- the ground station --------------------------------------------------------------------
 

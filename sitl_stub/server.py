@@ -35,7 +35,7 @@ from pymavlink.dialects.v20 import ardupilotmega as mavlink2
 
 from sitl_stub.clock import SimClock
 from sitl_stub.link import DelayQueue
-from sitl_stub.lockstep import DEFAULT_LEAD_S, Lockstep
+from sitl_stub.lockstep import Lockstep
 from sitl_stub.mission_server import LinkId
 from sitl_stub.vehicle import Vehicle
 
@@ -321,7 +321,6 @@ class TeamServer:
         self._step_listeners: list[Any] = []
         self.lockstep: Lockstep | None = None
         """With it, the steps wait for the ground station (:mod:`sitl_stub.lockstep`)."""
-        self.lockstep_lead_s = DEFAULT_LEAD_S
 
     async def open(self) -> None:
         try:
@@ -361,7 +360,7 @@ class TeamServer:
             due = clock.steps_due(loop.time())
             paced = self.lockstep
             if paced is not None:
-                limit_s = paced.limit_s(self.lockstep_lead_s)
+                limit_s = paced.limit_s()
                 if limit_s < math.inf:
                     due = min(due, max(int((limit_s - clock.sim_time_s) / clock.step_s), 0))
             for k in range(due):

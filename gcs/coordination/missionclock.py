@@ -71,6 +71,10 @@ times the rate (5 ms live, 1 s at 200x) is no evidence of a wrong clock and is n
 One simulator's vehicles, on one clock, read as up to a second apart at 200x (each vehicle's
 messages leave and are read at their own moment of the tick), and every such offset moved
 that vehicle's arrival by as much; a clock set wrong by hand is off by seconds."""
+PACED_OFFSET_LEADS = 1.5
+"""On a pace clock, an offset within this many lock-step leads is not applied (:meth:`follow`):
+a report is dated up to a lead late, and the reference it is compared with up to a lead late
+too; a clock set wrong by hand is off by seconds."""
 OFFSET_FLOOR_S = 0.05
 """The smallest offset applied at any rate, s."""
 OFFSET_CONFIRM_WALL_S = 2.0
@@ -142,11 +146,19 @@ class MissionClock:
         self.backlogged = 0  # reports that came out of a backlog (not used for dating)
         self.paced = False
         """Its monotonic clock is the simulator's pace clock (:meth:`follow`)."""
+        self._paced_lead_s = 0.0
 
-    def follow(self, pace_s: Callable[[], float]) -> None:
+    def follow(self, pace_s: Callable[[], float], lead_s: float = 0.0) -> None:
         """Read the simulator's pace clock (flight time / speed-up, :mod:`sitl_stub.lockstep`)
         as the monotonic clock, and date each report when it is handled: a report handled
         late then reads as one sent late, not as a clock behind.
+
+        ``lead_s`` is how far (flight s) the simulator may run ahead of what this process has
+        acknowledged: a report may be dated up to about that much late, whatever the rate, so
+        an offset between two vehicles within :data:`PACED_OFFSET_LEADS` leads is no evidence
+        of a wrong clock and is not applied. On a loaded machine at 100x one simulator's
+        vehicles otherwise read as 0.5-0.8 s apart near the end of a flight, and each such
+        offset moved that vehicle's arrival by as much.
 
         Raises
         ------
@@ -155,8 +167,11 @@ class MissionClock:
         """
         if self._vehicles:
             raise GcsError("mission clock: follow() after the first SYSTEM_TIME")
+        if not (math.isfinite(lead_s) and lead_s >= 0.0):
+            raise ValueError(f"lead_s must be a number of seconds >= 0, got {lead_s!r}")
         self._monotonic = pace_s
         self.paced = True
+        self._paced_lead_s = lead_s
 
     def monotonic(self) -> float:
         """The clock's monotonic time now (the pace clock when :attr:`paced`)."""
@@ -322,8 +337,11 @@ class MissionClock:
 
     def _applied(self, vc: _VehicleClock) -> float:
         """The offset a vehicle's times are mapped by: none while it is within what reception
-        jitter makes of a clock at this rate (:data:`OFFSET_JITTER_WALL_S`)."""
-        floor = max(OFFSET_FLOOR_S, OFFSET_JITTER_WALL_S * self._rate)
+        jitter makes of a clock at this rate (:data:`OFFSET_JITTER_WALL_S`), or on a pace
+        clock within what the lock step's lead makes of it (:data:`PACED_OFFSET_LEADS`)."""
+        floor = max(
+            OFFSET_FLOOR_S, OFFSET_JITTER_WALL_S * self._rate, PACED_OFFSET_LEADS * self._paced_lead_s
+        )
         return vc.offset_s if abs(vc.offset_s) > floor else 0.0
 
     def _fit(self, vc: _VehicleClock) -> None:

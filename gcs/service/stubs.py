@@ -159,7 +159,7 @@ def follow_lockstep(path: Path, clock: MissionClock) -> asyncio.Task[None]:
     loop turns, every millisecond of wall time, so the simulator waits for this process
     (cancel the task to let it run on by itself)."""
     pace = Lockstep(path)
-    clock.follow(pace.pace_s)
+    clock.follow(pace.pace_s, pace.lead_s)
     return asyncio.create_task(_acknowledge(pace))
 
 

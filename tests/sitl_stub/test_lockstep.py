@@ -9,6 +9,7 @@ import math
 import time
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from gcs.coordination.missionclock import MissionClock
@@ -22,18 +23,18 @@ HOME = (46.0, 8.0, 500.0)
 def test_the_clock_file_is_shared_and_an_old_acknowledgement_holds_nothing(
     tmp_path: Path,
 ) -> None:
-    sim = Lockstep(tmp_path / "pace", create=True, speedup=200.0)
+    sim = Lockstep(tmp_path / "pace", create=True, speedup=200.0, lead_s=0.5)
     ground = Lockstep(tmp_path / "pace")
-    assert ground.speedup == 200.0
-    assert sim.limit_s(0.5) == math.inf  # no ground station yet
+    assert (ground.speedup, ground.lead_s) == (200.0, 0.5)
+    assert sim.limit_s() == math.inf  # no ground station yet
     sim.publish(40.0)
     assert ground.pace_s() == pytest.approx(0.2)
     ground.acknowledge()
     now = time.monotonic()
-    assert sim.limit_s(0.5, now) == pytest.approx(40.5)
-    assert sim.limit_s(0.5, now + STALE_WALL_S + 0.1) == math.inf
+    assert sim.limit_s(now) == pytest.approx(40.5)
+    assert sim.limit_s(now + STALE_WALL_S + 0.1) == math.inf
     ground.release()
-    assert sim.limit_s(0.5, now) == math.inf
+    assert sim.limit_s(now) == math.inf
     ground.close()
     assert ground.pace_s() == pytest.approx(0.2)  # reads on as it last was
     sim.close()
@@ -46,8 +47,9 @@ async def test_the_simulation_waits_for_the_ground_station_then_runs_on_without_
     tmp_path: Path,
 ) -> None:
     async with SimTeam.start(homes=[HOME], tcp_base=0, speedup=200.0) as team:
-        team.server.lockstep = Lockstep(tmp_path / "pace", create=True, speedup=200.0)
-        team.server.lockstep_lead_s = 0.5
+        team.server.lockstep = Lockstep(
+            tmp_path / "pace", create=True, speedup=200.0, lead_s=0.5
+        )
         ground = Lockstep(tmp_path / "pace")
         await asyncio.sleep(0.05)
         ground.acknowledge()  # once, then silent: the flight may go 0.5 s further
@@ -81,3 +83,47 @@ def test_a_mission_clock_on_the_pace_clock_counts_flight_time_not_wall_time() ->
     assert clock.now_utc_s() == pytest.approx(1_031.0, abs=1e-6)
     with pytest.raises(GcsError, match="follow"):
         clock.follow(lambda: 0.0)
+
+
+def _paced_team(lead_s: float, true_offsets_s: dict[int, float]) -> MissionClock:
+    """Five vehicles' SYSTEM_TIME at 100x on a pace clock, read the way a loaded machine
+    reads them in lock step: vehicles 1 and 2 each time they are sent, vehicles 3-5 always
+    late by 0.6-0.8 s of flight (within the 1 s lead: the simulator ran on while the loop
+    was busy elsewhere). ``true_offsets_s``: clocks set apart on purpose."""
+    pace = [0.0]
+    clock = MissionClock()
+    clock.follow(lambda: pace[0], lead_s)
+    rng = np.random.default_rng(5)
+    reads = sorted(
+        (flight_s + (0.0 if sysid <= 2 else float(rng.uniform(0.6, 0.8))), sysid, flight_s)
+        for flight_s in 0.25 * np.arange(400)
+        for sysid in range(1, 6)
+    )
+    for read_flight_s, sysid, flight_s in reads:
+        pace[0] = read_flight_s / 100.0
+        utc = 1_000.0 + flight_s + true_offsets_s.get(sysid, 0.0)
+        clock.observe(sysid, utc, flight_s, pace[0])
+    return clock
+
+
+def test_one_simulators_vehicles_read_late_within_the_lead_keep_one_clock() -> None:
+    """Dated on the pace clock, vehicles read 0.6-0.8 s of flight late look that much behind
+    the others; at 100x that is more than what wall-time jitter covers (0.5 s), and such an
+    offset moved a vehicle's arrival by as much. Within 1.5 leads it is not applied: every
+    vehicle's stamps map to its own UTC. A clock really set 4 s apart still is mapped."""
+    clock = _paced_team(1.0, {})
+    for sysid in range(1, 6):
+        assert clock.offset_s(sysid) == 0.0, sysid
+        assert clock.utc_of_boot(sysid, 50.0) == pytest.approx(1_050.0, abs=1e-9)
+    # Without the lead the same reports read as offsets, and the stamps move.
+    unled = _paced_team(0.0, {})
+    assert max(abs(unled.offset_s(s) or 0.0) for s in range(1, 6)) > 0.5
+    # A clock 4 s ahead is mapped to the team's, lead or not.
+    apart = _paced_team(1.0, {4: 4.0})
+    assert apart.offset_s(4) == pytest.approx(4.0, abs=0.85)
+    assert apart.utc_of_boot(4, 50.0) == pytest.approx(1_050.0, abs=0.85)
+
+
+def test_the_lead_must_be_a_number_of_seconds() -> None:
+    with pytest.raises(ValueError, match="lead_s"):
+        MissionClock().follow(lambda: 0.0, math.nan)
