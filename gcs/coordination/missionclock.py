@@ -340,7 +340,9 @@ class MissionClock:
         jitter makes of a clock at this rate (:data:`OFFSET_JITTER_WALL_S`), or on a pace
         clock within what the lock step's lead makes of it (:data:`PACED_OFFSET_LEADS`)."""
         floor = max(
-            OFFSET_FLOOR_S, OFFSET_JITTER_WALL_S * self._rate, PACED_OFFSET_LEADS * self._paced_lead_s
+            OFFSET_FLOOR_S,
+            OFFSET_JITTER_WALL_S * self._rate,
+            PACED_OFFSET_LEADS * self._paced_lead_s,
         )
         return vc.offset_s if abs(vc.offset_s) > floor else 0.0
 

@@ -47,9 +47,7 @@ async def test_the_simulation_waits_for_the_ground_station_then_runs_on_without_
     tmp_path: Path,
 ) -> None:
     async with SimTeam.start(homes=[HOME], tcp_base=0, speedup=200.0) as team:
-        team.server.lockstep = Lockstep(
-            tmp_path / "pace", create=True, speedup=200.0, lead_s=0.5
-        )
+        team.server.lockstep = Lockstep(tmp_path / "pace", create=True, speedup=200.0, lead_s=0.5)
         ground = Lockstep(tmp_path / "pace")
         await asyncio.sleep(0.05)
         ground.acknowledge()  # once, then silent: the flight may go 0.5 s further
