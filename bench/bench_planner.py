@@ -4,8 +4,9 @@ For each team size: wall time of the full plan (world, grid, exact search, ACO, 
 profiles, checks), the worst and mean ACO cost ratio to the exact optimum on the same graph,
 and the peak traced memory; then the schedule's (takeoffs and speeds, pairs separated by
 timing) wall time and its minimum separation with every pair searched. Run:
-``.venv/bin/python bench/bench_planner.py [--sizes 3 10]``; ``--workers 2`` finishes the
-routes in two forked processes (the same plans).
+``.venv/bin/python bench/bench_planner.py [--sizes 3 10]``. The per-vehicle work (cost-to-go
+fields, route finishing) runs where ``plan()`` puts it by default: every core from 20
+vehicles on, one process below; ``--workers 1`` keeps it in one process (the same plans).
 """
 
 from __future__ import annotations
@@ -88,7 +89,7 @@ def team_scenario(
 def run(
     n: int,
     seed: int,
-    workers: int = 1,
+    workers: int | None = None,
     ray_address: str | None = None,
     schedule: bool = True,
     layers_m: tuple[float, ...] = (600.0,),
@@ -146,7 +147,10 @@ def main() -> None:
     parser.add_argument("--sizes", type=int, nargs="*", default=[3, 10, 30, 100])
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument(
-        "--workers", type=int, default=1, help="processes that finish the routes (default 1)"
+        "--workers",
+        type=int,
+        help="processes for the per-vehicle work (default: plan()'s, every core from 20 "
+        "vehicles on)",
     )
     parser.add_argument(
         "--ray",
@@ -179,7 +183,7 @@ def main() -> None:
     print(
         f"machine: {platform.machine()}, {os.cpu_count()} cores, "
         f"{platform.python_implementation()} {platform.python_version()}, numpy {np.__version__}, "
-        f"{args.workers} worker(s)"
+        + (f"{args.workers} worker(s)" if args.workers else "plan()'s default workers")
         + (f", routes finished on Ray ({args.ray})" if args.ray else "")
         + f", altitude layers {args.layers or 'none'}"
     )
@@ -199,8 +203,7 @@ def main() -> None:
                 str(n),
                 "--seed",
                 str(args.seed),
-                "--workers",
-                str(args.workers),
+                *(["--workers", str(args.workers)] if args.workers else []),
                 *(["--ray", args.ray] if args.ray else []),
                 *(["--no-schedule"] if args.no_schedule else []),
                 "--layers",

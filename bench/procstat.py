@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import os
+import subprocess
+import sys
 import threading
 from pathlib import Path
 
@@ -47,24 +49,43 @@ def tree(pid: int) -> list[int]:
 
 
 class TreeMemory:
-    """The peak of the summed resident memory of a process tree, sampled in a thread."""
+    """The peak of the summed resident memory of a process tree, sampled by a separate
+    process (a sampling thread here would keep the planner from forking its workers: it
+    forks only while it runs alone)."""
 
     def __init__(self, pid: int | None = None, period_s: float = 0.25) -> None:
         self.pid = os.getpid() if pid is None else pid
         self.period_s = period_s
         self.peak_mib = 0.0
-        self._stop = threading.Event()
-        self._thread = threading.Thread(target=self._run, daemon=True)
+        self._sampler: subprocess.Popen[str] | None = None
 
     def __enter__(self) -> TreeMemory:
-        self._thread.start()
+        self._sampler = subprocess.Popen(
+            [sys.executable, __file__, str(self.pid), str(self.period_s)],
+            stdin=subprocess.PIPE,
+            stdout=subprocess.PIPE,
+            text=True,
+        )
         return self
 
     def __exit__(self, *exc: object) -> None:
-        self._stop.set()
-        self._thread.join()
+        assert self._sampler is not None
+        out, _ = self._sampler.communicate("")  # closing its input stops it
+        self.peak_mib = float(out)
 
-    def _run(self) -> None:
-        while not self._stop.wait(self.period_s):
-            total = sum(rss_mib(p) or 0.0 for p in tree(self.pid))
-            self.peak_mib = max(self.peak_mib, total)
+
+def _sample(pid: int, period_s: float) -> None:
+    """Sample the tree of ``pid`` (less this process) until standard input closes; print
+    the peak (MiB)."""
+    peak = 0.0
+    done = threading.Event()
+    threading.Thread(target=lambda: (sys.stdin.read(), done.set()), daemon=True).start()
+    me = os.getpid()
+    while not done.wait(period_s):
+        peak = max(peak, sum(rss_mib(p) or 0.0 for p in tree(pid) if p != me))
+    peak = max(peak, sum(rss_mib(p) or 0.0 for p in tree(pid) if p != me))
+    print(peak)
+
+
+if __name__ == "__main__":
+    _sample(int(sys.argv[1]), float(sys.argv[2]))

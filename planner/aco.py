@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import itertools
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -104,48 +105,72 @@ class _Colonies:
         self.max_steps = int(opts.max_steps_factor * max(hops)) + 20
 
     def walk(self, colonies: IntArray) -> tuple[IntArray, list[IntArray | None]]:
-        """All ants of the given colonies walk once; returns each ant's colony and nodes."""
+        """All ants of the given colonies walk once; returns each ant's colony and nodes.
+
+        One step of every walking ant is a few dozen numpy calls, whatever the number of
+        ants, so a small team's walk is all call overhead: the fields are read through flat
+        views (one gather each), a move off the grid or towards an unreachable node weighs
+        nothing because its regret is infinite, and ``alpha`` 1 and ``beta`` 4 are products
+        rather than powers.
+        """
         o = self.o
         col = np.repeat(colonies, o.ants)
         n_ants = len(col)
+        n_nodes = self.h.shape[1]
+        h = self.h.reshape(-1)
+        tau = self.tau.reshape(-1)
+        edge = self.edge.reshape(-1, self.neighbors.shape[1])
+        field_base = col * n_nodes  # the ant's colony's row of h and tau, flat
+        edge_base = self.cls[col] * n_nodes  # the ant's cost map's rows of edge, flat
         pos = self.start[col].copy()
         goal = self.goal[col]
         trail = np.full((n_ants, self.max_steps + 1), -1, dtype=np.int64)
         trail[:, 0] = pos
         recent = np.full((n_ants, o.tabu), -1, dtype=np.int64)
         recent[:, 0] = pos
-        alive = np.ones(n_ants, dtype=bool)
         arrived = pos == goal
+        walking = ~arrived
         length = np.zeros(n_ants, dtype=np.int64)
+        moves = self.neighbors.shape[1]
         for step in range(1, self.max_steps + 1):
-            act = np.flatnonzero(alive & ~arrived)
+            act = np.flatnonzero(walking)
             if act.size == 0:
                 break
             u = pos[act]
-            c = col[act]
+            base = field_base[act]
             nb = self.neighbors[u]
             safe = self.safe_neighbors[u]
-            ec = self.edge[self.cls[c], u]
-            regret = ec + self.h[c[:, None], safe] - self.h[c, u][:, None]
-            valid = np.isfinite(regret)
-            valid &= ~_in_rows(nb, recent[act])
-            eta = 1.0 / (1.0 + np.where(valid, regret, 0.0) / self.step_cost)
-            w = self.tau[c[:, None], safe] ** o.alpha * eta**o.beta
-            w = np.where(valid, w, 0.0)
+            # regret = edge + h(next) - h(here): infinite off the grid or where no route goes.
+            regret = edge[edge_base[act] + u]
+            regret += h[base[:, None] + safe]
+            regret -= h[base + u][:, None]
+            eta = 1.0 / (1.0 + regret / self.step_cost)
+            w = tau[base[:, None] + safe]
+            if o.alpha != 1.0:
+                w **= o.alpha
+            if o.beta == 4.0:
+                eta *= eta
+                w *= eta * eta
+            else:
+                w *= eta**o.beta
+            w[_in_rows(nb, recent[act])] = 0.0  # tabu
             total = w.sum(axis=1)
             ok = total > 0.0
-            alive[act[~ok]] = False
             greedy = self.rng.random(act.size) < o.q0
             r = self.rng.random(act.size) * total
-            k_roulette = np.minimum(_count_true(np.cumsum(w, axis=1) < r[:, None]), 7)
+            k_roulette = np.minimum(_count_true(np.cumsum(w, axis=1) < r[:, None]), moves - 1)
             k = np.where(greedy, np.argmax(w, axis=1), k_roulette)
-            nxt = nb[np.arange(act.size), k]
-            act, nxt = act[ok], nxt[ok]
+            nxt = nb.reshape(-1)[np.arange(act.size) * moves + k]
+            if not ok.all():
+                walking[act[~ok]] = False  # stuck: every move tabu or closed
+                act, nxt = act[ok], nxt[ok]
             pos[act] = nxt
             trail[act, step] = nxt
             recent[act, step % o.tabu] = nxt
             length[act] = step
-            arrived[act] = nxt == goal[act]
+            there = act[nxt == goal[act]]
+            arrived[there] = True
+            walking[there] = False
         routes: list[IntArray | None] = []
         for a in range(n_ants):
             if not arrived[a]:
@@ -312,42 +337,54 @@ class _Shared:
         team[:, index] = lengths_m
         return window_gap_s(team, self.limit_arrays, self.problem.required_arrival_s)
 
-    def separation_shortfall(self, index: int, points: FloatArray, length_m: float) -> float:
-        """Summed shortfall (m) below ``d_s`` against every other vehicle's best route."""
+    def separation_shortfalls(
+        self, index: int, candidates: Sequence[tuple[FloatArray, float]]
+    ) -> FloatArray:
+        """Per candidate route ``(points, length_m)`` of vehicle ``index``: the summed
+        shortfall (m) below ``d_s`` against every other vehicle's best route."""
         if len(self.lengths) < 2:
-            return 0.0
-        takeoff, speed = self.candidate_timing(index, length_m)
-        # The airborne steps, takeoff <= t <= landing, are one run: the time grid is sorted.
-        first = int(np.searchsorted(self.times, takeoff, side="left"))
-        stop = max(
-            int(np.searchsorted(self.times, takeoff + length_m / speed, side="right")), first
-        )
-        mine = positions_at(points, takeoff, speed, self.times[first:stop])
-        shortfall = self.tracks.shortfalls_m(mine, first, self.problem.separation_m, skip=index)
+            return np.zeros(len(candidates))
+        tracks: list[tuple[FloatArray, int]] = []
+        for points, length_m in candidates:
+            takeoff, speed = self.candidate_timing(index, length_m)
+            # The airborne steps, takeoff <= t <= landing, are one run: the grid is sorted.
+            first = int(np.searchsorted(self.times, takeoff, side="left"))
+            stop = max(
+                int(np.searchsorted(self.times, takeoff + length_m / speed, side="right")), first
+            )
+            tracks.append((positions_at(points, takeoff, speed, self.times[first:stop]), first))
+        shortfall = self.tracks.shortfalls_many(tracks, self.problem.separation_m, skip=index)
         # Summed over the others in vehicle order, as a plain loop over them would.
-        return float(np.delete(shortfall, index).sum())
+        return np.asarray(np.delete(shortfall, index, axis=1).sum(axis=1), dtype=np.float64)
 
 
-def _score(
+def _scores(
     shared: _Shared | None,
     index: int,
-    cost: float,
-    points: FloatArray,
-    length: float,
+    routes: Sequence[_Best | tuple[FloatArray, float, float]],
     o: AcoOptions,
-    gap_s: float | None = None,
-) -> tuple[float, float, float]:
-    """Comprehensive cost, time miss (s) and separation shortfall (m) of one route.
+    gaps_s: Sequence[float] | None = None,
+) -> list[tuple[float, float, float]]:
+    """Comprehensive cost, time miss (s) and separation shortfall (m) of routes of one
+    vehicle: a :class:`_Best`, or ``(points, cost, length_m)``.
 
-    ``gap_s`` is the route's time miss when it is already known (``shared.time_gap``).
+    ``gaps_s`` are the routes' time misses when already known (``shared.time_gap``).
     """
+    figures = [(r.points, r.cost, r.length_m) if isinstance(r, _Best) else r for r in routes]
     if shared is None:
-        return cost, 0.0, 0.0
-    gap = float(shared.time_gap(index, np.array([length]))[0]) if gap_s is None else gap_s
-    short = shared.separation_shortfall(index, points, length)
-    # Any loss of separation costs at least a full d_s, so a small shortfall is never cheap.
-    sep_cost = o.separation_penalty * (short + (shared.problem.separation_m if short > 0 else 0.0))
-    return cost + o.time_penalty_m_per_s * gap + sep_cost, gap, short
+        return [(cost, 0.0, 0.0) for _, cost, _ in figures]
+    if gaps_s is None:
+        lengths_m = np.array([length for *_, length in figures])
+        gaps_s = shared.time_gap(index, lengths_m).tolist()
+    shorts = shared.separation_shortfalls(index, [(p, length) for p, _, length in figures])
+    d_s = shared.problem.separation_m
+    out = []
+    for (_, cost, _), gap, short in zip(figures, gaps_s, shorts.tolist(), strict=True):
+        # Any loss of separation costs at least a full d_s, so a small shortfall is never
+        # cheap.
+        sep_cost = o.separation_penalty * (short + (d_s if short > 0 else 0.0))
+        out.append((cost + o.time_penalty_m_per_s * gap + sep_cost, gap, short))
+    return out
 
 
 def solve_aco(
@@ -382,8 +419,6 @@ def solve_aco(
             iter_best: dict[int, _Best] = {}
             for c in running.tolist():
                 best = bests[c]
-                if best is not None and shared is not None:
-                    best.score, _, _ = _score(shared, c, best.cost, best.points, best.length_m, o)
                 seen: set[bytes] = set()
                 new_walks: list[IntArray] = []
                 for a in np.flatnonzero(col == c).tolist():
@@ -402,12 +437,24 @@ def solve_aco(
                     quick = [
                         q + o.time_penalty_m_per_s * m for q, m in zip(quick, miss_s, strict=True)
                     ]
-                for k in sorted(range(len(figures)), key=quick.__getitem__)[: o.candidates]:
-                    nodes = new_walks[k]
+                top = sorted(range(len(figures)), key=quick.__getitem__)[: o.candidates]
+                if best is not None and shared is not None:
+                    # The best route is scored again against the others' routes as they are
+                    # now, with this iteration's candidates.
+                    gap_s = float(shared.time_gap(c, np.array([best.length_m]))[0])
+                    scored = _scores(
+                        shared, c, [best, *(figures[k] for k in top)], o,
+                        [gap_s, *(miss_s[k] for k in top)],
+                    )  # fmt: skip
+                    best.score = scored.pop(0)[0]
+                else:
+                    scored = _scores(
+                        shared, c, [figures[k] for k in top], o, [miss_s[k] for k in top]
+                    )
+                for k, (score, _, _) in zip(top, scored, strict=True):
                     pts, cost, length = figures[k]
-                    score, _, _ = _score(shared, c, cost, pts, length, o, miss_s[k])
                     if c not in iter_best or score < iter_best[c].score:
-                        iter_best[c] = _Best(nodes, pts, cost, length, score)
+                        iter_best[c] = _Best(new_walks[k], pts, cost, length, score)
                 cand = iter_best.get(c)
                 if cand is not None and (best is None or cand.score < best.score * (1 - o.tol)):
                     bests[c] = cand
@@ -438,7 +485,7 @@ def solve_aco(
         shared = _Shared(problem, found, o)
         total = 0.0
         for c, b in enumerate(found):
-            b.score, gaps[c], shorts[c] = _score(shared, c, b.cost, b.points, b.length_m, o)
+            b.score, gaps[c], shorts[c] = _scores(shared, c, [b], o)[0]
             total += b.score
         if abs(previous_total - total) <= o.tol * total:
             break

@@ -5,7 +5,9 @@ tracks) and runs where :func:`planner.plan.plan` is called. What follows it is o
 vehicle and pure: the route is shortened, smoothed into a flyable path, given its altitude
 profile and checked against the zones and the terrain (:func:`planner.plan.finish_route`).
 A backend runs those jobs and returns the routes in job order; the routes do not depend on
-where they were finished, so every backend gives the same plan for the same seed.
+where they were finished, so every backend gives the same plan for the same seed. Before the
+search a backend also computes each vehicle's cost-to-go field (one Dijkstra search from its
+goal, the search's heuristic), the other per-vehicle part of a plan.
 
 - :class:`LocalBackend`: here, or in ``workers`` forked processes sharing the world's memory
   (:func:`planner.plan.finish_routes`). The default.
@@ -36,7 +38,12 @@ machine (on the loopback address, as on Windows and macOS): "0" is one machine."
 
 
 class Backend(Protocol):
-    """Runs the route-finishing jobs of a plan; the routes come back in job order."""
+    """Runs a plan's per-vehicle work: the cost-to-go fields before the search, and the
+    route-finishing jobs after it (the routes come back in job order)."""
+
+    def fill_fields(self, problem: Problem) -> None:
+        """Compute the problem's missing cost-to-go fields and keep them in it (or leave
+        them to be computed as the search asks for them)."""
 
     def finish_routes(
         self,
@@ -54,6 +61,11 @@ class LocalBackend:
 
     workers: int = 1
 
+    def fill_fields(self, problem: Problem) -> None:
+        from planner.plan import fill_fields
+
+        fill_fields(problem, self.workers)
+
     def finish_routes(
         self,
         world: World,
@@ -65,6 +77,13 @@ class LocalBackend:
         from planner.plan import finish_routes
 
         return finish_routes(world, problem, jobs, threats=threats, workers=self.workers)
+
+
+def _fields(problem: Problem, indices: list[int]) -> Any:
+    """Cost-to-go fields of some tasks, in a Ray worker (the problem from the object store)."""
+    from planner.problem import task_fields
+
+    return task_fields(problem, indices)
 
 
 def _finish_one(shared: Any, job: FinishJob) -> Any:
@@ -112,6 +131,17 @@ class RayBackend:
             ray.init(**options)
             self._started = True
         self._task = ray.remote(_finish_one)
+        self._fields = ray.remote(_fields)
+
+    def fill_fields(self, problem: Problem) -> None:
+        from planner.plan import FIELDS_PER_CHUNK
+
+        todo = problem.fields_missing()
+        chunks = [todo[k : k + FIELDS_PER_CHUNK] for k in range(0, len(todo), FIELDS_PER_CHUNK)]
+        shared = self._ray.put(problem)
+        got = self._ray.get([self._fields.remote(shared, chunk) for chunk in chunks])
+        for chunk, fields in zip(chunks, got, strict=True):
+            problem.put_fields(chunk, fields)
 
     def finish_routes(
         self,

@@ -236,56 +236,78 @@ class GridTracks:
         separation_m : the separation ``d_s`` (m).
         skip : a vehicle not compared (the candidate's own); its shortfall is 0.
         """
+        many = self.shortfalls_many([(positions_m, first)], separation_m, skip=skip)
+        return np.asarray(many[0], dtype=np.float64)
+
+    def shortfalls_many(
+        self,
+        candidates: Sequence[tuple[FloatArray, int]],
+        separation_m: float,
+        *,
+        skip: int,
+    ) -> FloatArray:
+        """:meth:`shortfalls_m` of several candidate tracks of one vehicle at once, (C, N).
+
+        Each candidate is ``(positions_m, first)``. The candidates are laid on one span of
+        blocks, so the numpy calls are shared: the ACO scores a colony's best routes
+        together, and one candidate at a time was mostly call overhead.
+        """
         n_vehicles = self.east_m.shape[0]
-        shortfall = np.zeros(n_vehicles)
-        if len(positions_m) == 0:
+        shortfall = np.zeros((len(candidates), n_vehicles))
+        flying = [(k, p, f) for k, (p, f) in enumerate(candidates) if len(p)]
+        if not flying:
             return shortfall
-        b_first = first // TRACK_BLOCK_STEPS
-        offset = first - b_first * TRACK_BLOCK_STEPS
-        n_blocks = -(-(offset + len(positions_m)) // TRACK_BLOCK_STEPS)
-        mine_east = np.full((n_blocks, TRACK_BLOCK_STEPS), np.nan)
-        mine_north = np.full((n_blocks, TRACK_BLOCK_STEPS), np.nan)
-        mine_east.reshape(-1)[offset : offset + len(positions_m)] = positions_m[:, 0]
-        mine_north.reshape(-1)[offset : offset + len(positions_m)] = positions_m[:, 1]
-        vehicle, block = self._near_blocks(
-            _block_boxes(mine_east, mine_north), b_first, separation_m + _BOX_MARGIN_M
-        )
+        b_first = min(f for _, _, f in flying) // TRACK_BLOCK_STEPS
+        start = b_first * TRACK_BLOCK_STEPS
+        n_blocks = max(-(-(f - start + len(p)) // TRACK_BLOCK_STEPS) for _, p, f in flying)
+        mine_east = np.full((len(candidates), n_blocks * TRACK_BLOCK_STEPS), np.nan)
+        mine_north = np.full((len(candidates), n_blocks * TRACK_BLOCK_STEPS), np.nan)
+        for k, positions_m, first in flying:
+            mine_east[k, first - start : first - start + len(positions_m)] = positions_m[:, 0]
+            mine_north[k, first - start : first - start + len(positions_m)] = positions_m[:, 1]
+        mine_east = mine_east.reshape(-1, TRACK_BLOCK_STEPS)  # (C * blocks, steps)
+        mine_north = mine_north.reshape(-1, TRACK_BLOCK_STEPS)
+        boxes = _block_boxes(mine_east, mine_north).reshape(4, len(candidates), n_blocks)
+        cand, vehicle, block = self._near_blocks(boxes, b_first, separation_m + _BOX_MARGIN_M)
         other = vehicle != skip
-        vehicle, block = vehicle[other], block[other]
+        cand, vehicle, block = cand[other], vehicle[other], block[other]
         if vehicle.size == 0:
             return shortfall
-        d_east = self.east_m[vehicle, b_first + block] - mine_east[block]
-        d_north = self.north_m[vehicle, b_first + block] - mine_north[block]
+        mine = cand * n_blocks + block
+        d_east = self.east_m[vehicle, b_first + block] - mine_east[mine]
+        d_north = self.north_m[vehicle, b_first + block] - mine_north[mine]
         # Squared distances screen the blocks cheaply; the distances that decide a shortfall
         # are then taken exactly as the plain comparison takes them (hypot).
         within_m = separation_m + _BOX_MARGIN_M
         close = np.fmin.reduce(d_east * d_east + d_north * d_north, axis=1) <= within_m**2
         if not close.any():
             return shortfall
-        vehicle = vehicle[close]
+        pair = cand[close] * n_vehicles + vehicle[close]  # sorted: (candidate, vehicle)
         d = np.hypot(d_east[close], d_north[close])
         block_min = np.fmin.reduce(d, axis=1)  # NaN: never both airborne in the block
-        first_of_vehicle = np.flatnonzero(np.diff(vehicle, prepend=-1))
-        closest = np.fmin.reduceat(block_min, first_of_vehicle)
+        first_of_pair = np.flatnonzero(np.diff(pair, prepend=-1))
+        closest = np.fmin.reduceat(block_min, first_of_pair)
         closest = np.where(np.isnan(closest), np.inf, closest)
-        shortfall[vehicle[first_of_vehicle]] = np.maximum(separation_m - closest, 0.0)
+        shortfall.reshape(-1)[pair[first_of_pair]] = np.maximum(separation_m - closest, 0.0)
         return shortfall
 
     def _near_blocks(
-        self, mine_box: FloatArray, b_first: int, within_m: float
-    ) -> tuple[IntArray, IntArray]:
-        """(vehicle, block) pairs whose boxes come within ``within_m`` (vehicle-sorted).
+        self, mine_boxes: FloatArray, b_first: int, within_m: float
+    ) -> tuple[IntArray, IntArray, IntArray]:
+        """(candidate, vehicle, block) triples whose boxes come within ``within_m``, sorted.
 
-        The test is on each axis separately (the boxes grown by ``within_m`` overlap), a
-        cheap superset of the pairs within that distance; NaN boxes never pass.
+        ``mine_boxes`` is (4, candidates, blocks). The test is on each axis separately (the
+        boxes grown by ``within_m`` overlap), a cheap superset of the pairs within that
+        distance; NaN boxes never pass.
         """
-        theirs = self.boxes_m[:, :, b_first : b_first + mine_box.shape[1]]
-        near = theirs[0] <= mine_box[1] + within_m
-        near &= theirs[1] >= mine_box[0] - within_m
-        near &= theirs[2] <= mine_box[3] + within_m
-        near &= theirs[3] >= mine_box[2] - within_m
-        vehicle, block = np.nonzero(near)
-        return vehicle.astype(np.int64), block.astype(np.int64)
+        theirs = self.boxes_m[:, None, :, b_first : b_first + mine_boxes.shape[2]]
+        mine = mine_boxes[:, :, None, :]
+        near = theirs[0] <= mine[1] + within_m
+        near &= theirs[1] >= mine[0] - within_m
+        near &= theirs[2] <= mine[3] + within_m
+        near &= theirs[3] >= mine[2] - within_m
+        cand, vehicle, block = np.nonzero(near)
+        return cand.astype(np.int64), vehicle.astype(np.int64), block.astype(np.int64)
 
 
 def _block_boxes(east_m: FloatArray, north_m: FloatArray) -> FloatArray:

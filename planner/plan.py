@@ -11,10 +11,7 @@ error naming the vehicle; it is never returned as a plan.
 from __future__ import annotations
 
 import math
-import multiprocessing as mp
-import threading
 from collections.abc import Iterator, Mapping, Sequence
-from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Literal
@@ -31,7 +28,8 @@ from planner.flightpath import FlightPath, Violation, check_polyline, smooth_pol
 from planner.geo import LocalFrame
 from planner.grid import CostMap, Grid, VehicleClass, build_cost_map
 from planner.landing import check_glide, final_m
-from planner.problem import Problem, SolveResult, Status, VehicleTask
+from planner.pool import default_workers, forked_map
+from planner.problem import Problem, SolveResult, Status, VehicleTask, task_fields
 from planner.scenario import (
     FlatTerrain,
     Scenario,
@@ -867,16 +865,21 @@ def solve_and_finish(
     rng: np.random.Generator | None = None,
     options: AcoOptions | None = None,
     airborne: Mapping[str, tuple[float, float]] | None = None,
-    workers: int = 1,
+    workers: int | None = None,
     backend: Backend | None = None,
 ) -> tuple[SolveResult, list[PlannedRoute]]:
     """Solve on the grid, refuse an infeasible result, and finish every route.
 
     ``airborne`` gives, per vehicle id, the altitude (m AMSL) and compass heading (rad) of a
     vehicle re-planned in flight; the others start from their scenario start. ``workers`` > 1
-    finishes the routes in that many forked processes (see :func:`finish_routes`); a
-    ``backend`` (:mod:`planner.backend`, e.g. Ray) finishes them instead.
+    computes the cost-to-go fields and finishes the routes in that many forked processes
+    (:func:`fill_fields`, :func:`finish_routes`; None: :func:`planner.pool.default_workers`);
+    a ``backend`` (:mod:`planner.backend`, e.g. Ray) does that work instead.
     """
+    if workers is None:
+        workers = default_workers(len(problem.tasks))
+    worker = backend if backend is not None else LocalBackend(workers)
+    worker.fill_fields(problem)
     result = solve(problem, method, rng=rng, options=options)
     if result.status is Status.INFEASIBLE or not all(result.routes):
         raise InfeasibleError(result.message)
@@ -885,8 +888,7 @@ def solve_and_finish(
         assert r is not None
         alt, heading = (airborne or {}).get(r.vehicle_id, (None, None))
         jobs.append(FinishJob(i, r.nodes, r.cost, alt, heading))
-    finisher = backend if backend is not None else LocalBackend(workers)
-    return result, finisher.finish_routes(world, problem, jobs, threats=threats)
+    return result, worker.finish_routes(world, problem, jobs, threats=threats)
 
 
 @dataclass(frozen=True)
@@ -898,16 +900,6 @@ class FinishJob:
     cost: float
     start_alt_m: float | None
     start_heading_rad: float | None
-
-
-_FORKED: tuple[World, Problem, Sequence[ThreatZone]] | None = None
-# What forked workers of finish_routes read: inherited with the parent's memory, never pickled.
-
-
-def _finish_forked(job: FinishJob) -> PlannedRoute:
-    assert _FORKED is not None
-    world, problem, threats = _FORKED
-    return finish_job(world, problem, threats, job)
 
 
 def finish_job(
@@ -934,26 +926,41 @@ def finish_routes(
     threats: Sequence[ThreatZone],
     workers: int = 1,
 ) -> list[PlannedRoute]:
-    """:func:`finish_route` for every job, in order, optionally in forked worker processes.
+    """:func:`finish_route` for every job, in order, optionally in forked worker processes
+    (:func:`planner.pool.forked_map`).
 
     Each route is finished on its own (pure code), so workers give the same routes as one
-    process. They are forked so that the world and the problem (with its cost-to-go fields,
-    tens of MB for a large team) are shared rather than pickled; a process that runs other
-    threads is not forked (a forked child can deadlock on a lock another thread held), nor
-    where fork is unavailable: the routes are then finished here. The first failing route
-    (in job order) raises its ``InfeasibleError``, as without workers.
+    process. The first failing route (in job order) raises its ``InfeasibleError``, as
+    without workers.
     """
-    pool_size = min(workers, len(jobs))
-    if pool_size < 2 or threading.active_count() > 1 or "fork" not in mp.get_all_start_methods():
+    shared = (world, problem, tuple(threats))
+    routes = forked_map(_finish_shared, shared, jobs, workers)
+    if routes is None:
         return [finish_job(world, problem, threats, job) for job in jobs]
-    global _FORKED
-    _FORKED = (world, problem, threats)
-    try:
-        with ProcessPoolExecutor(pool_size, mp_context=mp.get_context("fork")) as pool:
-            chunk = max(1, len(jobs) // (4 * pool_size))
-            return list(pool.map(_finish_forked, jobs, chunksize=chunk))
-    finally:
-        _FORKED = None
+    return routes
+
+
+def _finish_shared(
+    shared: tuple[World, Problem, Sequence[ThreatZone]], job: FinishJob
+) -> PlannedRoute:
+    return finish_job(*shared, job)
+
+
+FIELDS_PER_CHUNK = 8
+"""Cost-to-go fields a worker computes per task it is given (:func:`fill_fields`)."""
+
+
+def fill_fields(problem: Problem, workers: int = 1) -> None:
+    """Compute every task's cost-to-go field now, in forked workers when ``workers`` > 1
+    (:func:`planner.pool.forked_map`); with one worker they are left to be computed as they
+    are asked for (:meth:`planner.problem.Problem.cost_to_go`). The fields are the same."""
+    todo = problem.fields_missing()
+    chunks = [todo[k : k + FIELDS_PER_CHUNK] for k in range(0, len(todo), FIELDS_PER_CHUNK)]
+    fields = forked_map(task_fields, problem, chunks, workers)
+    if fields is None:
+        return
+    for chunk, got in zip(chunks, fields, strict=True):
+        problem.put_fields(chunk, got)
 
 
 def plan(
@@ -963,15 +970,17 @@ def plan(
     rng: np.random.Generator | None = None,
     options: AcoOptions | None = None,
     world: World | None = None,
-    workers: int = 1,
+    workers: int | None = None,
     backend: Backend | None = None,
 ) -> Plan:
     """Plan every vehicle's flyable route for the static threats of a scenario.
 
-    ``workers`` > 1 finishes the routes (simplify, smooth, profile, check) in that many
-    forked processes: the same plan, sooner on a multi-core machine for a large team. A
-    ``backend`` (:mod:`planner.backend`: Ray, on this machine or a cluster) finishes them
-    instead; the plan is the same for the same seed wherever its routes are finished.
+    ``workers`` > 1 computes the vehicles' cost-to-go fields and finishes the routes
+    (simplify, smooth, profile, check) in that many forked processes: the same plan, sooner on
+    a multi-core machine for a large team. None (the default) uses every core for a team of
+    :data:`planner.pool.PARALLEL_MIN_VEHICLES` or more, one process below. A ``backend``
+    (:mod:`planner.backend`: Ray, on this machine or a cluster) does that work instead; the
+    plan is the same for the same seed wherever its work is done.
 
     Raises
     ------

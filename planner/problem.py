@@ -62,17 +62,19 @@ class Problem:
         """
         if index not in self._cost_to_go:
             task = self.tasks[index]
-            dist, pred = csgraph.dijkstra(  # type: ignore[call-overload]
-                task.cost_map.graph(),
-                directed=True,
-                indices=task.goal_node,
-                return_predecessors=True,
-            )
-            self._cost_to_go[index] = (
-                np.asarray(dist, dtype=np.float64),
-                np.asarray(pred, dtype=np.int64),
-            )
+            (self._cost_to_go[index],) = goal_fields(task.cost_map, [task.goal_node])
         return self._cost_to_go[index]
+
+    def fields_missing(self) -> list[int]:
+        """The tasks whose cost-to-go field is not computed yet."""
+        return [i for i in range(len(self.tasks)) if i not in self._cost_to_go]
+
+    def put_fields(
+        self, indices: Sequence[int], fields: Sequence[tuple[FloatArray, IntArray]]
+    ) -> None:
+        """Keep cost-to-go fields computed elsewhere (:func:`task_fields`, in another process)."""
+        for index, field_ in zip(indices, fields, strict=True):
+            self._cost_to_go[index] = field_
 
     def route_points(self, index: int, nodes: Sequence[int] | IntArray) -> FloatArray:
         """Polyline (K, 2) in metres: the exact start, the grid nodes, the exact goal (and the
@@ -87,6 +89,37 @@ class Problem:
             goal = goal[:0]
         tail = np.array(task.tail_m, dtype=np.float64).reshape(-1, 2)
         return np.concatenate([start, pts, goal, tail])
+
+
+def goal_fields(cost_map: CostMap, goal_nodes: Sequence[int]) -> list[tuple[FloatArray, IntArray]]:
+    """Cost-to-go field and predecessors towards each goal node on one cost map.
+
+    The graph is symmetric, so Dijkstra from the goal gives every node's cost to reach it; one
+    call searches from every goal (each search is its own, as if alone).
+    """
+    dist, pred = csgraph.dijkstra(
+        cost_map.graph(), directed=True, indices=list(goal_nodes), return_predecessors=True
+    )
+    return [
+        (np.asarray(d, dtype=np.float64), np.asarray(p, dtype=np.int64))
+        for d, p in zip(np.atleast_2d(dist), np.atleast_2d(pred), strict=True)
+    ]
+
+
+def task_fields(problem: Problem, indices: Sequence[int]) -> list[tuple[FloatArray, IntArray]]:
+    """The cost-to-go fields of tasks ``indices`` (in that order), one search per cost map
+    for all of its goals: what :meth:`Problem.cost_to_go` computes for each, without keeping
+    them (a worker computes them; the planning problem keeps them: :meth:`Problem.put_fields`).
+    """
+    out: dict[int, tuple[FloatArray, IntArray]] = {}
+    by_map: dict[int, list[int]] = {}
+    for i in indices:
+        by_map.setdefault(id(problem.tasks[i].cost_map), []).append(i)
+    for group in by_map.values():
+        cost_map = problem.tasks[group[0]].cost_map
+        fields = goal_fields(cost_map, [problem.tasks[i].goal_node for i in group])
+        out.update(zip(group, fields, strict=True))
+    return [out[i] for i in indices]
 
 
 def allclose_2d(point_m: FloatArray | Sequence[float], other_m: tuple[float, float]) -> bool:
