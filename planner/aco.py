@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import itertools
 import math
+import mmap
 from collections.abc import Sequence
 from dataclasses import dataclass
 
@@ -29,6 +30,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from planner.coupling import GridTracks, LimitArrays, positions_at, team_timing, window_gap_s
+from planner.pool import PARALLEL_MIN_VEHICLES, ForkedWorkers
 from planner.problem import Problem, Route, SolveResult, Status, allclose_2d
 from planner.search import solve_exact
 
@@ -70,10 +72,9 @@ class _Best:
 class _Colonies:
     """Mutable search state; one instance per solve call."""
 
-    def __init__(self, problem: Problem, opts: AcoOptions, rng: np.random.Generator) -> None:
+    def __init__(self, problem: Problem, opts: AcoOptions) -> None:
         self.p = problem
         self.o = opts
-        self.rng = rng
         tasks = problem.tasks
         grid = tasks[0].cost_map.grid
         self.neighbors = tasks[0].cost_map.neighbors
@@ -94,7 +95,12 @@ class _Colonies:
         self.h = np.stack([problem.cost_to_go(i)[0] for i in range(len(tasks))])
         self.start = np.array([t.start_node for t in tasks], dtype=np.int64)
         self.goal = np.array([t.goal_node for t in tasks], dtype=np.int64)
-        self.tau = np.full((len(tasks), grid.size), opts.tau_max, dtype=np.float64)
+        # The pheromone lives in memory shared with forked walkers (planner.pool): they see
+        # each iteration's update without it being sent.
+        self._tau_map = mmap.mmap(-1, max(len(tasks) * grid.size * 8, 1))
+        self.tau = np.frombuffer(self._tau_map, dtype=np.float64, count=len(tasks) * grid.size)
+        self.tau = self.tau.reshape(len(tasks), grid.size)
+        self.tau[:] = opts.tau_max
         hops = [
             max(
                 abs(int(t.start_node % grid.n_east) - int(t.goal_node % grid.n_east)),
@@ -104,8 +110,11 @@ class _Colonies:
         ]
         self.max_steps = int(opts.max_steps_factor * max(hops)) + 20
 
-    def walk(self, colonies: IntArray) -> tuple[IntArray, list[IntArray | None]]:
-        """All ants of the given colonies walk once; returns each ant's colony and nodes.
+    def walk(
+        self, colonies: IntArray, rng: np.random.Generator
+    ) -> tuple[IntArray, list[IntArray | None]]:
+        """All ants of the given colonies walk once, drawing from ``rng``; returns each ant's
+        colony and nodes.
 
         One step of every walking ant is a few dozen numpy calls, whatever the number of
         ants, so a small team's walk is all call overhead: the fields are read through flat
@@ -156,8 +165,8 @@ class _Colonies:
             w[_in_rows(nb, recent[act])] = 0.0  # tabu
             total = w.sum(axis=1)
             ok = total > 0.0
-            greedy = self.rng.random(act.size) < o.q0
-            r = self.rng.random(act.size) * total
+            greedy = rng.random(act.size) < o.q0
+            r = rng.random(act.size) * total
             k_roulette = np.minimum(_count_true(np.cumsum(w, axis=1) < r[:, None]), moves - 1)
             k = np.where(greedy, np.argmax(w, axis=1), k_roulette)
             nxt = nb.reshape(-1)[np.arange(act.size) * moves + k]
@@ -387,21 +396,87 @@ def _scores(
     return out
 
 
+WALK_BLOCKS = 4
+"""A team of :data:`planner.pool.PARALLEL_MIN_VEHICLES` or more walks its colonies in this
+many blocks, each with a random stream of its own (spawned from the plan's): the blocks may
+walk in forked processes, and the walks, so the plan, do not depend on how many."""
+
+_Walked = dict[int, tuple[list[IntArray], list[tuple[FloatArray, float, float]]]]
+"""Per colony: its ants' distinct routes (in ant order) and their figures (route_figures)."""
+
+
+def _walk_blocks(n: int, rng: np.random.Generator) -> list[tuple[IntArray, np.random.Generator]]:
+    """The colonies' blocks and their random streams (one block, the plan's own stream, for
+    a team under :data:`planner.pool.PARALLEL_MIN_VEHICLES`)."""
+    if n < PARALLEL_MIN_VEHICLES:
+        return [(np.arange(n, dtype=np.int64), rng)]
+    bounds = np.linspace(0, n, WALK_BLOCKS + 1).astype(np.int64)
+    streams = rng.spawn(WALK_BLOCKS)
+    return [
+        (np.arange(bounds[b], bounds[b + 1], dtype=np.int64), streams[b])
+        for b in range(WALK_BLOCKS)
+    ]
+
+
+def _walk_block(
+    state: _Colonies, item: tuple[IntArray, np.random.Generator]
+) -> tuple[_Walked, np.random.Generator]:
+    """One block's running colonies walk once (in a forked walker or here): each colony's
+    distinct routes and their figures, and the block's stream as the walk left it."""
+    colonies, rng = item
+    col, walks = state.walk(colonies, rng)
+    out: _Walked = {}
+    for c in colonies.tolist():
+        seen: set[bytes] = set()
+        new_walks: list[IntArray] = []
+        for a in np.flatnonzero(col == c).tolist():
+            nodes = walks[a]
+            if nodes is None or nodes.tobytes() in seen:
+                continue
+            seen.add(nodes.tobytes())
+            new_walks.append(nodes)
+        out[c] = (new_walks, route_figures(state.p, c, new_walks))
+    return out, rng
+
+
 def solve_aco(
-    problem: Problem, *, rng: np.random.Generator, options: AcoOptions | None = None
+    problem: Problem,
+    *,
+    rng: np.random.Generator,
+    options: AcoOptions | None = None,
+    workers: int = 1,
 ) -> SolveResult:
     """Plan every vehicle's route with the multi-colony ACO.
 
     Returns APPROXIMATE when every colony found a route meeting the team constraints,
     INFEASIBLE when a goal is unreachable, and TIMEOUT when the iteration caps ended the
-    search with routes that still miss the arrival windows or the separation.
+    search with routes that still miss the arrival windows or the separation. ``workers`` > 1
+    walks a large team's blocks of colonies (:data:`WALK_BLOCKS`) in that many forked
+    processes: the same result, sooner.
     """
     o = options or AcoOptions()
     exact = solve_exact(problem)  # cost-to-go fields (visibility) and reachability
     if exact.status is Status.INFEASIBLE:
         return exact
     n = len(problem.tasks)
-    state = _Colonies(problem, o, rng)  # STEP1
+    state = _Colonies(problem, o)  # STEP1
+    blocks = _walk_blocks(n, rng)
+    with ForkedWorkers(_walk_block, state, min(workers, len(blocks))) as walkers:
+        return _search(problem, o, exact, state, blocks, walkers)
+
+
+def _search(
+    problem: Problem,
+    o: AcoOptions,
+    exact: SolveResult,
+    state: _Colonies,
+    blocks: list[tuple[IntArray, np.random.Generator]],
+    walkers: ForkedWorkers[
+        _Colonies, tuple[IntArray, np.random.Generator], tuple[_Walked, np.random.Generator]
+    ],
+) -> SolveResult:
+    """STEP2-STEP6 (:func:`solve_aco`), the colonies walking in ``walkers``."""
+    n = len(problem.tasks)
     bests: list[_Best | None] = [None] * n
     shared: _Shared | None = None
     iterations = 0
@@ -415,19 +490,19 @@ def solve_aco(
             if running.size == 0:
                 break
             iterations += 1
-            col, walks = state.walk(running)
+            todo = [
+                (k, colonies[np.isin(colonies, running)]) for k, (colonies, _) in enumerate(blocks)
+            ]
+            todo = [(k, cols) for k, cols in todo if cols.size]
+            walked: _Walked = {}
+            done = walkers.map([(cols, blocks[k][1]) for k, cols in todo])
+            for (k, _), (block_walked, stream) in zip(todo, done, strict=True):
+                blocks[k] = (blocks[k][0], stream)  # a forked walker returns the stream moved
+                walked.update(block_walked)
             iter_best: dict[int, _Best] = {}
             for c in running.tolist():
                 best = bests[c]
-                seen: set[bytes] = set()
-                new_walks: list[IntArray] = []
-                for a in np.flatnonzero(col == c).tolist():
-                    nodes = walks[a]
-                    if nodes is None or nodes.tobytes() in seen:
-                        continue
-                    seen.add(nodes.tobytes())
-                    new_walks.append(nodes)
-                figures = route_figures(problem, c, new_walks)
+                new_walks, figures = walked[c]
                 quick = [cost for _, cost, _ in figures]
                 miss_s = [0.0] * len(figures)
                 if shared is not None and figures:

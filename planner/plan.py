@@ -263,13 +263,17 @@ def solve(
     *,
     rng: np.random.Generator | None = None,
     options: AcoOptions | None = None,
+    workers: int = 1,
 ) -> SolveResult:
-    """One entry point for both solvers."""
+    """One entry point for both solvers (``workers``: the ACO's walkers, :func:`solve_aco`)."""
     if method == "astar":
         return solve_exact(problem)
     if method == "aco":
         return solve_aco(
-            problem, rng=rng if rng is not None else np.random.default_rng(0), options=options
+            problem,
+            rng=rng if rng is not None else np.random.default_rng(0),
+            options=options,
+            workers=workers,
         )
     raise ValueError(f"method must be 'aco' or 'astar', not {method!r}")
 
@@ -872,15 +876,16 @@ def solve_and_finish(
 
     ``airborne`` gives, per vehicle id, the altitude (m AMSL) and compass heading (rad) of a
     vehicle re-planned in flight; the others start from their scenario start. ``workers`` > 1
-    computes the cost-to-go fields and finishes the routes in that many forked processes
-    (:func:`fill_fields`, :func:`finish_routes`; None: :func:`planner.pool.default_workers`);
-    a ``backend`` (:mod:`planner.backend`, e.g. Ray) does that work instead.
+    computes the cost-to-go fields, walks the ACO's colonies and finishes the routes in that
+    many forked processes (:func:`fill_fields`, :func:`planner.aco.solve_aco`,
+    :func:`finish_routes`; None: :func:`planner.pool.default_workers`); a ``backend``
+    (:mod:`planner.backend`, e.g. Ray) computes the fields and finishes the routes instead.
     """
     if workers is None:
         workers = default_workers(len(problem.tasks))
     worker = backend if backend is not None else LocalBackend(workers)
     worker.fill_fields(problem)
-    result = solve(problem, method, rng=rng, options=options)
+    result = solve(problem, method, rng=rng, options=options, workers=workers)
     if result.status is Status.INFEASIBLE or not all(result.routes):
         raise InfeasibleError(result.message)
     jobs = []

@@ -15,7 +15,7 @@ import os
 import threading
 from collections.abc import Callable, Sequence
 from concurrent.futures import ProcessPoolExecutor
-from typing import Any, TypeVar
+from typing import Any, Generic, TypeVar
 
 S = TypeVar("S")
 T = TypeVar("T")
@@ -46,17 +46,52 @@ def forked_map(
     """``[fn(shared, item) for item in items]`` in up to ``workers`` forked processes, in
     order; the first item that raises raises here. None when it cannot fork (fewer than two
     workers or items, other threads running, no fork): the caller does the work itself."""
-    pool_size = min(workers, len(items))
-    if pool_size < 2 or threading.active_count() > 1 or "fork" not in mp.get_all_start_methods():
-        return None
-    global _SHARED
-    _SHARED = (fn, shared)
-    try:
-        with ProcessPoolExecutor(pool_size, mp_context=mp.get_context("fork")) as pool:
-            chunk = max(1, len(items) // (4 * pool_size))
-            return list(pool.map(_call, items, chunksize=chunk))
-    finally:
-        _SHARED = None
+    with ForkedWorkers(fn, shared, min(workers, len(items))) as pool:
+        return pool.map(items) if pool.forked else None
+
+
+class ForkedWorkers(Generic[S, T, R]):
+    """Forked processes kept for several :meth:`map` calls of one ``fn(shared, item)``.
+
+    ``shared`` is inherited at the fork, never pickled: memory the caller maps shared before
+    (an anonymous ``mmap``) stays shared, so the workers see the caller's later writes to it.
+    Where it cannot fork (fewer than two workers, other threads running, no fork) the items
+    are mapped in this process, with the same results (:attr:`forked` says which).
+    """
+
+    def __init__(self, fn: Callable[[S, T], R], shared: S, workers: int) -> None:
+        self._fn = fn
+        self._shared = shared
+        self.forked = (
+            workers >= 2
+            and threading.active_count() == 1
+            and "fork" in mp.get_all_start_methods()
+            and _SHARED is None  # not inside another pool's worker or map
+        )
+        self._workers = workers
+        self._pool: ProcessPoolExecutor | None = None
+
+    def __enter__(self) -> ForkedWorkers[S, T, R]:
+        global _SHARED
+        if self.forked:
+            _SHARED = (self._fn, self._shared)
+            self._pool = ProcessPoolExecutor(self._workers, mp_context=mp.get_context("fork"))
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        global _SHARED
+        if self._pool is not None:
+            self._pool.shutdown(wait=True, cancel_futures=True)
+            self._pool = None
+            _SHARED = None
+
+    def map(self, items: Sequence[T]) -> list[R]:
+        """``[fn(shared, item) for item in items]``, in order; the first item that raises
+        raises here."""
+        if self._pool is None:
+            return [self._fn(self._shared, item) for item in items]
+        chunk = max(1, len(items) // (4 * self._workers))
+        return list(self._pool.map(_call, items, chunksize=chunk))
 
 
 def _call(item: Any) -> Any:

@@ -107,8 +107,8 @@ def test_route_figures_equal_the_route_by_route_measures(landing: bool) -> None:
     # With landing slots each route ends with the slot's straight final (a tail).
     problem = _problem(landing_scenario(0)[0] if landing else small_scenario())
     assert any(t.tail_m for t in problem.tasks) == landing
-    colonies = _Colonies(problem, AcoOptions(), np.random.default_rng(3))
-    col, walks = colonies.walk(np.arange(len(problem.tasks)))
+    colonies = _Colonies(problem, AcoOptions())
+    col, walks = colonies.walk(np.arange(len(problem.tasks)), np.random.default_rng(3))
     for c in range(len(problem.tasks)):
         mine = [w for w, k in zip(walks, col.tolist(), strict=True) if k == c and w is not None]
         task = problem.tasks[c]
