@@ -6,8 +6,13 @@ pair predicted to come closer than the separation within the look-ahead is resol
 the two flying the slowest or the fastest airspeed of its range until their closest approach
 has passed: of the four choices, the one predicted to keep them farthest apart (the smaller
 change of speed between two that keep the separation equally well). A new speed is reached in
-``response_s`` (the prediction holds the old one until then). When no choice keeps the
-separation, none is taken: the conflict event and, if it comes true, the alarm say so.
+``response_s`` (the prediction holds the old one until then). When no choice keeps the whole
+separation, the one that keeps them farthest apart is still taken if it opens their closest
+approach by :data:`MIN_GAIN_FRACTION` of the separation or more (two aircraft abreast on
+routes that cross at a shallow angle, already a little under the separation, drift to a few
+tens of metres as they fly; one flown faster passes ahead): its event says the separation is
+not kept, as the alarm does if it comes true. A choice that gains less (head-on on one line)
+is not taken.
 
 A vehicle flying a resolution is not timed for its slot meanwhile; once released, its arrival
 controller makes up the time (the seconds a minute at another speed costs are well inside what
@@ -24,6 +29,10 @@ import numpy as np
 from numpy.typing import NDArray
 
 FloatArray = NDArray[np.float64]
+
+MIN_GAIN_FRACTION = 0.1
+"""A choice that keeps less than the whole separation is taken only if it opens the pair's
+closest approach by this fraction of the separation or more (:func:`resolve`)."""
 
 
 @dataclass(frozen=True)
@@ -82,11 +91,14 @@ class Resolution:
     airspeed_m_s: float
     until_s: float
     predicted_m: float
-    """The pair's closest approach so resolved, m."""
+    """The pair's closest approach so resolved, m (under the separation: the best there was,
+    :attr:`keeps_separation` False)."""
     unresolved_m: float
     """Their closest approach as they fly, m."""
     at_s: float
     """When that would be."""
+    keeps_separation: bool = True
+    """Whether :attr:`predicted_m` is the whole separation or more."""
 
 
 def closest_m(
@@ -121,7 +133,8 @@ def resolve(
 ) -> Resolution | None:
     """The speed that keeps ``a`` and ``b`` apart if they are predicted to come closer than
     ``separation_m`` within ``look_ahead_s`` (None if they are not, or if no choice keeps
-    them apart).
+    them apart or, short of that, opens their closest approach by :data:`MIN_GAIN_FRACTION`
+    of the separation).
 
     A choice is judged over twice the look-ahead (so that it does not merely put the meeting
     beyond it) and held until ``release_after_s`` past the closest approach so resolved."""
@@ -150,10 +163,14 @@ def resolve(
         return None
     _, _, vid, speed, d, when = min(choices)
     if d < separation_m:
-        return None
+        # Judged over the same times as the choices (as flown, the closest may lie beyond
+        # the look-ahead).
+        flown_long, _ = closest_m(a, b, t, a.airspeed_m_s, b.airspeed_m_s, response_s)
+        if d < flown_long + MIN_GAIN_FRACTION * separation_m:
+            return None
     other = b.vehicle if vid == a.vehicle else a.vehicle
     until = (when if math.isfinite(when) else at) + release_after_s
-    return Resolution(vid, other, speed, until, d, as_flown, at)
+    return Resolution(vid, other, speed, until, d, as_flown, at, d >= separation_m)
 
 
 class Forecasts:

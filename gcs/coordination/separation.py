@@ -1,11 +1,13 @@
 """Separation in flight: every fix is compared with the other flying vehicles' last fixes
 (moved on to its time along their velocity), in 3-D as the rehearsal's truth check measures
 it. A pair closer than the scenario's ``separation_m`` is a shortfall, said once until the
-pair is apart again by ``clear_factor`` times the separation. Ahead of that, a pair whose
-straight flight at their present velocities brings them under the separation within a look
-ahead (each vehicle's no further than its own slot: its route turns into the goal there) is
-a predicted conflict, said once until the prediction no longer holds (pure: no clock, no
-I/O)."""
+pair is apart again by ``clear_factor`` times the separation, and said again each time it
+comes ``closer_step_fraction`` of the separation closer than when last said (a pair a metre
+under the separation that then drifts to tens of metres is not left at the first word).
+Ahead of that, a pair whose straight flight at their present velocities brings them under
+the separation within a look ahead (each vehicle's no further than its own slot: its route
+turns into the goal there) is a predicted conflict, said once until the prediction no longer
+holds (pure: no clock, no I/O)."""
 
 from __future__ import annotations
 
@@ -34,6 +36,8 @@ class Shortfall:
     other: str
     distance_m: float
     t_s: float
+    previous_m: float | None = None
+    """The distance last said for this encounter (None: its first word)."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -54,17 +58,28 @@ class SeparationWatch:
     stale_s: float = 5.0
     """A fix older than this is not extrapolated (the vehicle's link is silent)."""
     clear_factor: float = 1.2
+    closer_step_fraction: float = 0.2
+    """A pair under the separation is said again each time it is this fraction of the
+    separation closer than when last said."""
     positions: dict[str, Position] = field(default_factory=dict)
     close: dict[tuple[str, str], float] = field(default_factory=dict)
     """Pairs (sorted ids) below the separation now: the least distance seen, m."""
+    said_m: dict[tuple[str, str], float] = field(default_factory=dict)
+    """Pairs below the separation now: the distance last said, m."""
     closest: dict[tuple[str, str], tuple[float, float]] = field(default_factory=dict)
     """Every pair's least distance in flight and when: ``(distance_m, t_s)``."""
     predicted: dict[tuple[str, str], float] = field(default_factory=dict)
     """Pairs (sorted ids) predicted to come under the separation: when, mission s."""
 
+    def __setstate__(self, state: dict[str, object]) -> None:
+        """A watch checkpointed before :attr:`said_m` existed: its close pairs as last said."""
+        self.__dict__.update(state)
+        self.__dict__.setdefault("said_m", dict(self.close))
+
     def update(self, vehicle: str, pos: Position, flying: Iterable[str]) -> list[Shortfall]:
         """The vehicle's new fix; ``flying`` the other vehicles that count (airborne, not
-        arrived). Returns the pairs that have just fallen below the separation."""
+        arrived). Returns the pairs that have just fallen below the separation, or a step
+        closer than when last said."""
         self.positions[vehicle] = pos
         here = (pos.east_m, pos.north_m, pos.alt_m)
         out: list[Shortfall] = []
@@ -81,12 +96,17 @@ class SeparationWatch:
                 self.closest[key] = (d, pos.t_s)
             if d < self.separation_m:
                 if key not in self.close:
-                    self.close[key] = d
+                    self.close[key] = self.said_m[key] = d
                     out.append(Shortfall(vehicle, other, d, pos.t_s))
                 else:
                     self.close[key] = min(self.close[key], d)
+                    said = self.said_m[key]
+                    if d <= said - self.closer_step_fraction * self.separation_m:
+                        self.said_m[key] = d
+                        out.append(Shortfall(vehicle, other, d, pos.t_s, said))
             elif key in self.close and d > self.clear_factor * self.separation_m:
                 del self.close[key]
+                del self.said_m[key]
         return out
 
     def predict(self, vehicle: str, look_ahead_s: Mapping[str, float]) -> list[Conflict]:

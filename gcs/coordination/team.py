@@ -75,10 +75,14 @@ def is_crash_text(text: str) -> bool:
 
 def _resolving(r: Resolution) -> str:
     """What a resolution is, for its event and its speed command."""
+    aim = (
+        f"to keep the separation from {r.other}"
+        if r.keeps_separation
+        else f"to open the distance from {r.other} (no speed keeps the separation)"
+    )
     return (
-        f"flies {r.airspeed_m_s:g} m/s until {r.until_s:.1f} s to keep the separation from "
-        f"{r.other}: predicted {r.unresolved_m:.0f} m apart at {r.at_s:.1f} s as they fly, "
-        f"{r.predicted_m:.0f} m so"
+        f"flies {r.airspeed_m_s:g} m/s until {r.until_s:.1f} s {aim}: predicted "
+        f"{r.unresolved_m:.0f} m apart at {r.at_s:.1f} s as they fly, {r.predicted_m:.0f} m so"
     )
 
 
@@ -439,8 +443,9 @@ class TeamController(ZoneGuard, TeamTime):
 
     def _watch_separation(self, m: Member, t: float, fix: act.Fix, out: list[act.Action]) -> None:
         """An alarm when the vehicle comes closer than the separation to another one flying
-        (once per encounter), and a conflict event when their straight flight is predicted
-        to bring them that close within the look-ahead (:class:`SeparationWatch`)."""
+        (once per encounter, and again each time it comes a step closer), and a conflict
+        event when their straight flight is predicted to bring them that close within the
+        look-ahead (:class:`SeparationWatch`)."""
         if m.launched_s is None or m.east_m is None or m.north_m is None or fix.alt_amsl_m is None:
             return
         watch = self.separation
@@ -472,11 +477,12 @@ class TeamController(ZoneGuard, TeamTime):
                 )
             )
         for sf in shortfalls:
+            closer = "" if sf.previous_m is None else f" (down from {sf.previous_m:.0f} m)"
             out.append(
                 act.Report(
                     EventKind.ALARM,
                     f"separation {sf.distance_m:.0f} m from {sf.other} at {t:.1f} s, below "
-                    f"{watch.separation_m:g} m",
+                    f"{watch.separation_m:g} m{closer}",
                     m.vehicle_id,
                     value=round(sf.distance_m, 1),
                     t_s=t,
@@ -595,6 +601,7 @@ class TeamController(ZoneGuard, TeamTime):
                         "until_s": round(res.until_s, 1),
                         "distance_m": round(res.unresolved_m, 1),
                         "resolved_m": round(res.predicted_m, 1),
+                        "keeps_separation": res.keeps_separation,
                         "at_s": round(res.at_s, 1),
                     },
                 )

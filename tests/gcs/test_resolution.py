@@ -99,6 +99,26 @@ def test_no_resolution_for_a_pair_apart_none_possible_or_only_the_movable_one_mo
     )
 
 
+def test_two_abreast_already_under_the_separation_on_converging_routes_are_opened_up() -> None:
+    """A and B abreast 470 m apart, their routes 10 degrees apart and crossing 2.7 km ahead,
+    both at 25 m/s: as they fly they drift together to tens of metres. No speed keeps the
+    whole 500 m (they are under it already), but one of them flown faster or slower opens
+    their closest approach to hundreds of metres: that choice is taken and says it falls
+    short. Checked in this test's own geometry."""
+    a = _straight("A", (0.0, 0.0), 0.0)
+    b = _straight("B", (470.0, 0.0), -10.0)
+    separation_m = 500.0
+    assert _flown_apart_m(a, b, {}, 5.0) < 100.0
+    r = resolve(a, b, now_s=0.0, separation_m=separation_m)
+    assert r is not None and not r.keeps_separation
+    assert r.unresolved_m < 100.0 and r.predicted_m < separation_m
+    flown = _flown_apart_m(a, b, {r.vehicle: r.airspeed_m_s}, 5.0)
+    assert flown >= 200.0 and flown == pytest.approx(r.predicted_m, abs=25.0)
+    # Head-on on one line the same choices gain nothing: none is taken.
+    head_on = _straight("B", (0.0, 3000.0), 180.0)
+    assert resolve(a, head_on, now_s=0.0, separation_m=separation_m) is None
+
+
 def test_a_vehicle_in_its_loiter_turns_is_predicted_round_them_and_the_other_one_moves() -> None:
     """L flies 8 turns of 150 m round (0, 0), clockwise, entered at the circle's west point
     from its north-bound route, at 25 m/s (37.7 s a turn): it is at the north point at 9.4 s

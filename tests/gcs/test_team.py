@@ -956,6 +956,28 @@ def test_the_separation_watch_skips_stale_fixes_and_clears_a_pair_once_apart() -
     assert w.update("C", Position(13.5, 200.0, 0.0, 100.0), ["C", "B"]) == []
 
 
+def test_a_pair_under_the_separation_is_said_again_each_step_closer_and_checkpoints_keep_it() -> (
+    None
+):
+    """Abreast on parallel tracks closing 10 m a second from 499 m: said at 499 m, then again
+    each 100 m closer (a fifth of d_s), not in between; a checkpointed watch goes on where it
+    was, and one kept before the step existed starts from its close pairs."""
+    w = SeparationWatch(500.0)
+    said: list[tuple[float, float | None]] = []
+    for k in range(45):
+        t = float(k)
+        for vid, north_m in (("B", 499.0 - 10.0 * t), ("A", 0.0)):
+            for sf in w.update(vid, Position(t, 0.0, north_m, 500.0), ["A", "B"]):
+                said.append((round(sf.distance_m), sf.previous_m and round(sf.previous_m)))
+        if k == 25:
+            w = pickle.loads(pickle.dumps(w))
+    assert said == [(499, None), (399, 499), (299, 399), (199, 299), (99, 199)]
+    old = pickle.loads(pickle.dumps(w))
+    del old.__dict__["said_m"]
+    old = pickle.loads(pickle.dumps(old))  # as a checkpoint from before the step
+    assert old.said_m == old.close
+
+
 # -- arrival windows ------------------------------------------------------------------------------
 
 
