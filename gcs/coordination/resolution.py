@@ -22,7 +22,7 @@ its speed range recovers over the rest of a route).
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -130,6 +130,7 @@ def resolve(
     step_s: float = 1.0,
     response_s: float = 5.0,
     release_after_s: float = 10.0,
+    neighbours: Mapping[str, Sequence[Ahead]] | None = None,
 ) -> Resolution | None:
     """The speed that keeps ``a`` and ``b`` apart if they are predicted to come closer than
     ``separation_m`` within ``look_ahead_s`` (None if they are not, or if no choice keeps
@@ -137,7 +138,11 @@ def resolve(
     of the separation).
 
     A choice is judged over twice the look-ahead (so that it does not merely put the meeting
-    beyond it) and held until ``release_after_s`` past the closest approach so resolved."""
+    beyond it) and held until ``release_after_s`` past the closest approach so resolved.
+    ``neighbours`` are, for ``a`` and for ``b`` (by vehicle id), the other vehicles near it:
+    a choice that would bring its mover closer to one of them than the separation, and closer
+    than it flies now, is not taken (in a crowd, one pair's resolution otherwise pushed the
+    middle one of three aircraft abreast into the third)."""
     bound = min(a.t_s + a.horizon_s, b.t_s + b.horizon_s)
     if min(bound, now_s + look_ahead_s) <= now_s:
         return None
@@ -150,9 +155,14 @@ def resolve(
     for mover in (a, b):
         if not mover.movable:
             continue
+        near = (neighbours or {}).get(mover.vehicle, ())
+        near_now = _nearest_m(mover, mover.airspeed_m_s, near, t, response_s)
         for speed in (mover.airspeed_min_m_s, mover.airspeed_max_m_s):
             if abs(speed - mover.airspeed_m_s) < 1e-9:
                 continue
+            near_so = _nearest_m(mover, speed, near, t, response_s)
+            if near_so < separation_m and near_so < near_now:
+                continue  # into another conflict, or deeper into one
             if mover is a:
                 d, when = closest_m(a, b, t, speed, b.airspeed_m_s, response_s)
             else:
@@ -171,6 +181,17 @@ def resolve(
     other = b.vehicle if vid == a.vehicle else a.vehicle
     until = (when if math.isfinite(when) else at) + release_after_s
     return Resolution(vid, other, speed, until, d, as_flown, at, d >= separation_m)
+
+
+def _nearest_m(
+    mover: Ahead, airspeed_m_s: float, others: Sequence[Ahead], t_s: FloatArray, response_s: float
+) -> float:
+    """The mover's least distance to any of ``others`` (flying as they do) over ``t_s`` at
+    ``airspeed_m_s``, m (inf with none)."""
+    return min(
+        (closest_m(mover, o, t_s, airspeed_m_s, o.airspeed_m_s, response_s)[0] for o in others),
+        default=math.inf,
+    )
 
 
 class Forecasts:

@@ -62,6 +62,9 @@ GOAL_ALONG_SLACK_M = 500.0
 the arrival radius and this much more (a fix or two of travel)."""
 
 
+NEIGHBOUR_SEPARATIONS = 2.0
+"""A conflict's resolution is judged against the vehicles forecast within this many
+separations of either of the pair too (:func:`gcs.coordination.resolution.resolve`)."""
 LANDING_MARGIN_S = 120.0
 """Flare, roll-out and the disarm delay, on top of the glide (see ``landing_bound_s``)."""
 
@@ -579,9 +582,18 @@ class TeamController(ZoneGuard, TeamTime):
             if x.resolving is not None or x.over:
                 continue
             theirs = forecasts.ahead[other]
+            # The vehicles a speed change could bring either of the pair near.
+            neighbours = {
+                vid: [
+                    forecasts.ahead[n]
+                    for n in forecasts.near(vid, NEIGHBOUR_SEPARATIONS * d_s, t)
+                    if n not in (m.vehicle_id, other)
+                ]
+                for vid in (m.vehicle_id, other)
+            }
             res = resolve(
                 mine, theirs, now_s=t, separation_m=d_s, look_ahead_s=cfg.resolve_horizon_s,
-                response_s=cfg.resolve_response_s,
+                response_s=cfg.resolve_response_s, neighbours=neighbours,
             )  # fmt: skip
             if res is None:
                 continue

@@ -119,6 +119,27 @@ def test_two_abreast_already_under_the_separation_on_converging_routes_are_opene
     assert resolve(a, head_on, now_s=0.0, separation_m=separation_m) is None
 
 
+def test_a_resolution_does_not_push_its_mover_into_a_third_vehicle() -> None:
+    """The crossing of A and B, with C 500 m behind A on A's line at A's speed. Alone, the pair
+    is resolved by A slowing down, which C would then fly into. With C given as A's neighbour
+    that choice is not taken: B moves, the pair keeps the separation and A and C their 500 m
+    (each checked in this test's own geometry)."""
+    a = _straight("A", (-1500.0, 0.0), 90.0)
+    b = _straight("B", (0.0, -1500.0), 0.0)
+    c = _straight("C", (-2000.0, 0.0), 90.0)
+    alone = resolve(a, b, now_s=0.0, separation_m=300.0)
+    assert alone is not None and (alone.vehicle, alone.airspeed_m_s) == ("A", 18.0)
+    assert _flown_apart_m(a, c, {"A": 18.0}, 5.0) < 300.0
+    r = resolve(a, b, now_s=0.0, separation_m=300.0, neighbours={"A": [c], "B": []})
+    assert r is not None and r.vehicle == "B" and r.keeps_separation
+    assert _flown_apart_m(a, b, {"B": r.airspeed_m_s}, 5.0) >= 300.0 - 1.0
+    assert _flown_apart_m(a, c, {"B": r.airspeed_m_s}, 5.0) == pytest.approx(500.0, abs=1.0)
+    # A neighbour already closer than the separation may stay so, but not come closer.
+    near_c = _straight("C", (-1750.0, 0.0), 90.0)  # 250 m behind A
+    r = resolve(a, b, now_s=0.0, separation_m=300.0, neighbours={"A": [near_c]})
+    assert r is not None and not (r.vehicle == "A" and r.airspeed_m_s < 25.0)
+
+
 def test_a_vehicle_in_its_loiter_turns_is_predicted_round_them_and_the_other_one_moves() -> None:
     """L flies 8 turns of 150 m round (0, 0), clockwise, entered at the circle's west point
     from its north-bound route, at 25 m/s (37.7 s a turn): it is at the north point at 9.4 s
