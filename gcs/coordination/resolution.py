@@ -180,6 +180,12 @@ def resolve(
             return None
     other = b.vehicle if vid == a.vehicle else a.vehicle
     until = (when if math.isfinite(when) else at) + release_after_s
+    if d < separation_m:
+        # Short of the separation, the pair is closest under the new speed soon after it is
+        # taken: held only that long, it was given up before the pair had drawn apart (two
+        # abreast hovered some 50 m under the separation for minutes). Held past the meeting
+        # as they fly instead.
+        until = max(until, at + release_after_s)
     return Resolution(vid, other, speed, until, d, as_flown, at, d >= separation_m)
 
 

@@ -112,6 +112,7 @@ def test_two_abreast_already_under_the_separation_on_converging_routes_are_opene
     r = resolve(a, b, now_s=0.0, separation_m=separation_m)
     assert r is not None and not r.keeps_separation
     assert r.unresolved_m < 100.0 and r.predicted_m < separation_m
+    assert r.until_s > r.at_s  # held past their meeting as they fly, not only its own closest
     flown = _flown_apart_m(a, b, {r.vehicle: r.airspeed_m_s}, 5.0)
     assert flown >= 200.0 and flown == pytest.approx(r.predicted_m, abs=25.0)
     # Head-on on one line the same choices gain nothing: none is taken.
