@@ -170,6 +170,11 @@ def _team_step_s(vehicles: Sequence[VehicleSchedule], required_m: float) -> floa
     return max(required_m / (10.0 * 2.0 * fastest), 0.05)
 
 
+BOX_SAMPLES = 32
+"""Samples per block over which :class:`TeamSamples` keeps each vehicle's extent (on the
+hundred-vehicle team's grid, about 27 s: 800 m at 30 m/s)."""
+
+
 class TeamSamples:
     """The team's schedules sampled once on a common time grid, for trying one vehicle's
     other timings against the rest (:meth:`nearest`) without sampling them again."""
@@ -183,27 +188,62 @@ class TeamSamples:
             np.stack([_positions(v, self.t_s) for v in vehicles]).transpose(2, 0, 1)
         )
         """East, north and altitude, each (vehicle, time), m."""
+        self._row = {vid: k for k, vid in enumerate(self.ids)}
+        self._starts = np.arange(0, len(self.t_s), BOX_SAMPLES)
+        self.boxes = np.stack([self._boxes(self.planes[:, k]) for k in range(len(self.ids))], 1)
+        """Each vehicle's horizontal extent over each block of :data:`BOX_SAMPLES` samples:
+        east min, east max, north min, north max of (vehicle, block), m; NaN where it does
+        not fly."""
+
+    def _boxes(self, track: FloatArray) -> FloatArray:
+        with np.errstate(invalid="ignore"):
+            return np.stack(
+                [
+                    np.fmin.reduceat(track[0], self._starts),
+                    np.fmax.reduceat(track[0], self._starts),
+                    np.fmin.reduceat(track[1], self._starts),
+                    np.fmax.reduceat(track[1], self._starts),
+                ]
+            )
 
     def _track(self, vs: VehicleSchedule) -> FloatArray:
         return np.ascontiguousarray(_positions(vs, self.t_s).T)
 
     def nearest(
-        self, vs: VehicleSchedule, among: Sequence[str] | None = None
+        self,
+        vs: VehicleSchedule,
+        among: Sequence[str] | None = None,
+        within_m: float | None = None,
     ) -> tuple[float, str | None]:
         """How close ``vs`` comes to any other vehicle of the team (or of ``among``) (on the
         grid: at most a twentieth of ``d_s`` more than the exact search finds, off the grid's
         span not compared), and to whom; ``(inf, None)`` when they never fly together."""
-        best, who, _ = self.closest(vs, among)
+        best, who, _ = self.closest(vs, among, within_m)
         return best, who
 
     def closest(
-        self, vs: VehicleSchedule, among: Sequence[str] | None = None
+        self,
+        vs: VehicleSchedule,
+        among: Sequence[str] | None = None,
+        within_m: float | None = None,
     ) -> tuple[float, str | None, float]:
-        """:meth:`nearest`, and when (s; NaN when they never fly together)."""
+        """:meth:`nearest`, and when (s; NaN when they never fly together). With
+        ``within_m``, only a closest approach under it is found (else ``(inf, None, NaN)``),
+        the team compared only where it comes near (:meth:`_within`)."""
+        wanted = None if among is None else set(among)
+        if within_m is not None:
+            mask = None if wanted is None else np.array([vid in wanted for vid in self.ids])
+            least, where = self._within(
+                self._track(vs), within_m, self._row.get(vs.vehicle_id), mask
+            )
+            j = int(least.argmin())
+            if not math.isfinite(float(least[j])):
+                return math.inf, None, math.nan
+            return math.sqrt(float(least[j])), self.ids[j], float(self.t_s[where[j]])
         others = [
             k
             for k, vid in enumerate(self.ids)
-            if vid != vs.vehicle_id and (among is None or vid in among)
+            if vid != vs.vehicle_id and (wanted is None or vid in wanted)
         ]
         if not others:
             return math.inf, None, math.nan
@@ -216,15 +256,84 @@ class TeamSamples:
 
     def too_close(self, vs: VehicleSchedule, below_m: float) -> frozenset[str]:
         """The others of the team ``vs`` comes within ``below_m`` of (on the grid)."""
-        d2 = _squared_gaps_m2(self.planes, self._track(vs)).min(axis=1)
-        me = vs.vehicle_id
-        return frozenset(
-            vid for vid, dk in zip(self.ids, d2, strict=True) if dk < below_m**2 and vid != me
-        )
+        least, _ = self._within(self._track(vs), below_m, self._row.get(vs.vehicle_id))
+        return frozenset(self.ids[k] for k in np.flatnonzero(least < below_m**2))
 
-    def replace(self, vs: VehicleSchedule) -> None:
-        """Take ``vs`` as its vehicle's schedule from now on."""
-        self.planes[:, self.ids.index(vs.vehicle_id)] = self._track(vs)
+    def track(self, vs: VehicleSchedule) -> FloatArray:
+        """``vs`` sampled on the team's grid (east, north and altitude rows; NaN where it does
+        not fly): a timing to be tried more than once is sampled once."""
+        return self._track(vs)
+
+    def shortfall_m(self, vehicle_id: str, track: FloatArray, below_m: float) -> float:
+        """How far ``track`` (:meth:`track`, for ``vehicle_id``) comes inside ``below_m`` of
+        the others, summed over them: ``sum_k max(0, below_m - least distance to k)`` on the
+        grid; 0 when it is clear of all."""
+        least_m2, _ = self._within(track, below_m, self._row[vehicle_id])
+        return float(np.maximum(0.0, below_m - np.sqrt(least_m2)).sum())
+
+    def _within(
+        self, track: FloatArray, below_m: float, skip: int | None, among: FloatArray | None = None
+    ) -> tuple[FloatArray, NDArray[np.intp]]:
+        """Each vehicle's least squared distance (m^2) from ``track`` and the sample where it
+        is, wherever that is under ``below_m``; inf (and -1) for the others, for row ``skip``
+        and for the rows ``among`` (a mask, when given) leaves out.
+
+        Only the blocks of samples where another vehicle's extent comes within ``below_m`` of
+        this track's are compared sample by sample: a crowd's vehicles are near each other
+        in few of them."""
+        n = len(self.ids)
+        least, where = np.full(n, np.inf), np.full(n, -1, dtype=np.intp)
+        mine, theirs, m = self._boxes(track), self.boxes, below_m
+        with np.errstate(invalid="ignore"):
+            near = (
+                (theirs[0] <= mine[1] + m)
+                & (theirs[1] >= mine[0] - m)
+                & (theirs[2] <= mine[3] + m)
+                & (theirs[3] >= mine[2] - m)
+            )  # (vehicle, block); False where either does not fly (NaN)
+        if skip is not None:
+            near[skip] = False
+        if among is not None:
+            near &= among[:, None]
+        rows, blocks = np.nonzero(near)
+        if len(rows) == 0:
+            return least, where
+        cols = np.minimum(
+            self._starts[blocks][:, None] + np.arange(BOX_SAMPLES), len(self.t_s) - 1
+        )  # (pair, sample); the last block's short end repeats its last sample
+        d2 = (self.planes[0][rows[:, None], cols] - track[0][cols]) ** 2
+        d2 += (self.planes[1][rows[:, None], cols] - track[1][cols]) ** 2
+        d2 += (self.planes[2][rows[:, None], cols] - track[2][cols]) ** 2
+        d2[np.isnan(d2)] = np.inf
+        k = d2.argmin(axis=1)
+        pair_m2, pair_col = d2[np.arange(len(rows)), k], cols[np.arange(len(rows)), k]
+        order = np.lexsort((pair_m2, rows))  # by vehicle, the least first
+        first = order[np.r_[True, rows[order][1:] != rows[order][:-1]]]
+        inside = pair_m2[first] < below_m**2
+        least[rows[first][inside]] = pair_m2[first][inside]
+        where[rows[first][inside]] = pair_col[first][inside]
+        return least, where
+
+    def row(self, vehicle_id: str) -> FloatArray:
+        """The team's track of ``vehicle_id`` (as :meth:`track`)."""
+        out: FloatArray = self.planes[:, self._row[vehicle_id]]
+        return out
+
+    def closest_pair(self, vs: VehicleSchedule) -> PairSeparation:
+        """``vs``'s closest approach to the rest of the team, on the grid."""
+        best, who, t = self.closest(vs)
+        if who is None:
+            return PairSeparation(vs.vehicle_id, "", math.inf, math.nan, math.nan, math.nan)
+        k = int(np.argmin(np.abs(self.t_s - t)))
+        mid = 0.5 * (self._track(vs)[:2, k] + self.planes[:2, self.ids.index(who), k])
+        return PairSeparation(vs.vehicle_id, who, best, t, float(mid[0]), float(mid[1]))
+
+    def replace(self, vs: VehicleSchedule, track: FloatArray | None = None) -> None:
+        """Take ``vs`` as its vehicle's schedule from now on (``track``: as :meth:`track`
+        sampled it, when the caller has it)."""
+        k = self._row[vs.vehicle_id]
+        self.planes[:, k] = self._track(vs) if track is None else track
+        self.boxes[:, k] = self._boxes(self.planes[:, k])
 
 
 def _coarse_pairs(samples: TeamSamples) -> list[tuple[int, int, float, float, FloatArray]]:

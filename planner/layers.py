@@ -196,10 +196,12 @@ def lift_team(
 
     for _ in range(LIFT_ROUNDS):
         progress = False
-        closest = {vid: samples.closest(vs) for vid, vs in current.items()}
+        closest = {vid: samples.closest(vs, within_m=enough) for vid, vs in current.items()}
         for vid in sorted(closest, key=lambda k: closest[k][0]):
             # Looked up again only once a lift this round may have changed it.
-            near, who, when_s = samples.closest(current[vid]) if progress else closest[vid]
+            near, who, when_s = (
+                samples.closest(current[vid], within_m=enough) if progress else closest[vid]
+            )
             if near >= enough or who is None:
                 continue
             if try_lift(vid, who, near, when_s) or try_lift(who, vid, near, when_s):

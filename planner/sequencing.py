@@ -8,7 +8,14 @@ conflict are placed as they are; the others follow, those with the least room to
 (airborne, then by their timing slack), each keeping its timing if it is clear of every
 vehicle placed so far, else taking the first of its other timings (its caller's order:
 nearest its own cruise speed first) that is. A vehicle none of whose timings is clear keeps
-its own, and the conflict is left to altitude layers where the scenario allows them
+its own.
+
+One pass in that order leaves a crowd in conflict where the vehicles placed early took the
+times the later ones needed. The pass is then repaired by local search (min-conflicts): round
+by round, each vehicle with room that is still inside the separation of others takes, of its
+own timing and all its others, the one that comes least far inside it (summed over the team),
+if that is less than now; until the team is clear, or a round changes nothing, or after
+:data:`REPAIR_ROUNDS`. What is left goes to altitude layers where the scenario allows them
 (:func:`planner.layers.lift_team`), else for :func:`planner.retime.check_feasible` to refuse.
 
 Each placement compares one vehicle with the team on the grid of
@@ -22,13 +29,23 @@ from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import dataclass
 from typing import Generic, TypeVar
 
+import numpy as np
+from numpy.typing import NDArray
+
 from planner.deconflict import PairSeparation, Separation, TeamSamples, separation
 from planner.schedule import VehicleSchedule
+
+FloatArray = NDArray[np.float64]
 
 SEPARATION_CHECK_MARGIN = 1.1
 """A timing tried for separation is kept when it comes no closer than this many ``d_s`` to
 the vehicles placed on the sampling grid (whose distances may be up to a tenth of ``d_s`` too
 long)."""
+
+REPAIR_ROUNDS = 6
+"""Rounds of the local search after the first pass. On the planner bench's 100-vehicle team
+the last rounds move one vehicle each; each round tries every timing of every vehicle in
+conflict against the team."""
 
 T = TypeVar("T")
 
@@ -50,6 +67,7 @@ def sequence_team(
     *,
     slack_s: Mapping[str, float],
     alternatives: Callable[[str], Iterable[tuple[VehicleSchedule, T]]],
+    repair_rounds: int | None = None,
 ) -> tuple[dict[str, Moved[T]], Separation]:
     """Re-time the vehicles in conflict so that the team keeps ``required_m``.
 
@@ -65,6 +83,9 @@ def sequence_team(
     alternatives
         A vehicle's other timings, best first, each with what made it; produced lazily (a
         vehicle clear with its first is not asked for the rest).
+    repair_rounds
+        Rounds of local search after the first pass (0: the first pass alone; default
+        :data:`REPAIR_ROUNDS`).
 
     Returns
     -------
@@ -84,16 +105,113 @@ def sequence_team(
     enough = SEPARATION_CHECK_MARGIN * required_m
     moved: dict[str, Moved[T]] = {}
     for vid in sorted(worst, key=lambda v: (slack_s.get(v, 0.0), v)):
-        near, who = samples.nearest(current[vid], placed)
+        near, who = samples.nearest(current[vid], placed, enough)
         if near < enough and slack_s.get(vid, 0.0) > 0.0:
             for schedule, chosen in alternatives(vid):
-                if who is not None and samples.nearest(schedule, (who,))[0] < enough:
+                if who is not None and samples.nearest(schedule, (who,), enough)[0] < enough:
                     continue  # most timings do not even clear the vehicle it met
-                if samples.nearest(schedule, placed)[0] >= enough:
+                if samples.nearest(schedule, placed, enough)[0] >= enough:
                     samples.replace(schedule)
                     current[vid] = schedule
                     moved[vid] = Moved(schedule, chosen, worst[vid])
                     break
         placed.append(vid)
+    own = {vs.vehicle_id: vs for vs in timed}
+    was: TeamSamples | None = None  # the team as first timed, for a vehicle's pair then
+    for vid, (repaired, made) in _repair(
+        samples,
+        current,
+        slack_s,
+        alternatives,
+        enough,
+        REPAIR_ROUNDS if repair_rounds is None else repair_rounds,
+    ).items():
+        current[vid] = repaired
+        if made is None:  # back to where the search started
+            continue
+        if vid in moved or vid in worst:
+            conflict = worst[vid] if vid in worst else moved[vid].conflict
+        else:
+            was = was or TeamSamples(timed, required_m)
+            conflict = was.closest_pair(own[vid])
+        moved[vid] = Moved(repaired, made, conflict)
     team = [current[vs.vehicle_id] for vs in timed]
     return moved, separation(team, required_m, samples)
+
+
+def _repair(
+    samples: TeamSamples,
+    current: Mapping[str, VehicleSchedule],
+    slack_s: Mapping[str, float],
+    alternatives: Callable[[str], Iterable[tuple[VehicleSchedule, T]]],
+    enough_m: float,
+    rounds: int,
+) -> dict[str, tuple[VehicleSchedule, T | None]]:
+    """The local search after the first pass, on ``samples`` (updated as vehicles move): the
+    timings it changed, with what made each (None: the vehicle's timing when the search
+    began)."""
+    search = _Search(samples, current, alternatives, enough_m)
+    movable = [vid for vid in samples.ids if slack_s.get(vid, 0.0) > 0.0]
+    for _ in range(rounds):
+        if search.move_each(movable) == 0:
+            break
+    return search.changed
+
+
+_Timing = tuple[VehicleSchedule, T | None, FloatArray]
+
+
+class _Search(Generic[T]):
+    """A vehicle's timings tried against the team on the samples: the moves of
+    :func:`_repair`. The measure is how far inside ``enough_m`` a vehicle comes of the
+    others, summed (:meth:`TeamSamples.shortfall_m`); a move is taken when it lessens it."""
+
+    def __init__(
+        self,
+        samples: TeamSamples,
+        current: Mapping[str, VehicleSchedule],
+        alternatives: Callable[[str], Iterable[tuple[VehicleSchedule, T]]],
+        enough_m: float,
+    ) -> None:
+        self.samples, self.enough_m = samples, enough_m
+        self._start, self._alternatives = current, alternatives
+        self._timings: dict[str, list[_Timing[T]]] = {}
+        self.changed: dict[str, tuple[VehicleSchedule, T | None]] = {}
+
+    def timings(self, vid: str) -> list[_Timing[T]]:
+        """The vehicle's timing when the search began, then its others, each sampled."""
+        if vid not in self._timings:
+            start = self._start[vid]
+            self._timings[vid] = [(start, None, self.samples.track(start))] + [
+                (schedule, chosen, self.samples.track(schedule))
+                for schedule, chosen in self._alternatives(vid)
+            ]
+        return self._timings[vid]
+
+    def inside_m(self, vid: str, track: FloatArray | None = None) -> float:
+        """How far the vehicle (on ``track``, else as it is now) comes inside ``enough_m``
+        of the others, summed over them."""
+        row = self.samples.row(vid) if track is None else track
+        return self.samples.shortfall_m(vid, row, self.enough_m)
+
+    def _take(self, vid: str, timing: _Timing[T]) -> None:
+        self.samples.replace(timing[0], timing[2])
+        self.changed[vid] = (timing[0], timing[1])
+
+    def move_each(self, movable: Sequence[str]) -> int:
+        """Each vehicle inside the separation, the deepest first, to its timing that comes
+        least far inside (if less than now); how many moved."""
+        inside = {vid: x for vid in movable if (x := self.inside_m(vid)) > 0.0}
+        moves = 0
+        for vid in sorted(inside, key=lambda v: (-inside[v], v)):
+            least, pick = self.inside_m(vid), None  # others have moved since
+            for timing in self.timings(vid) if least > 0.0 else ():
+                x = self.inside_m(vid, timing[2])
+                if x < least - 1e-6:
+                    least, pick = x, timing
+                    if x <= 0.0:
+                        break
+            if pick is not None:
+                self._take(vid, pick)
+                moves += 1
+        return moves

@@ -16,7 +16,8 @@ from typing import Any
 import numpy as np
 import pytest
 
-from planner.deconflict import pair_separation
+from planner import sequencing
+from planner.deconflict import TeamSamples, pair_separation
 from planner.errors import ScenarioError, SeparationError
 from planner.goals import assign_goals
 from planner.plan import build_world, plan
@@ -167,3 +168,64 @@ def test_the_planner_bench_teams_are_separated_with_their_approach_points_shared
         assert d < scenario.separation_m
         with pytest.raises(SeparationError, match="under the separation minimum"):
             check_feasible(s)
+
+
+def test_the_first_pass_leaves_a_crowd_in_conflict_and_the_repair_separates_it(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """30 vehicles of the planner bench (seed 1, no altitude layer): placed in one pass, some
+    pairs stay under d_s; the local search after it moves vehicles to their other timings
+    until every pair keeps d_s. Each still arrives at the team time, at speeds in its range."""
+    scenario = parse_scenario(team_scenario(30, seed=1, altitude_layers_m=()))
+    world = build_world(scenario)
+    planned = plan(scenario, "aco", rng=np.random.default_rng(1), world=world)
+    monkeypatch.setattr(sequencing, "REPAIR_ROUNDS", 0)
+    one_pass = build_schedule(scenario, planned, world=world)
+    d, pair = _min_pair_separation_m(one_pass)
+    assert d < scenario.separation_m, pair
+    monkeypatch.undo()
+    s = build_schedule(scenario, planned, world=world)
+    d, pair = _min_pair_separation_m(s)
+    assert d >= scenario.separation_m, pair
+    check_feasible(s)
+    assert s.required_arrival_s is not None
+    for v, vs in zip(scenario.vehicles, s.vehicles, strict=True):
+        assert vs.arrival_s == pytest.approx(s.required_arrival_s, abs=0.5), v.id
+        assert vs.takeoff_s >= v.takeoff_window_s[0] - 1e-6, v.id
+        for leg in vs.legs:
+            assert v.speed_min_m_s - 1e-9 <= leg.speed_m_s <= v.speed_max_m_s + 1e-9, v.id
+    moved = [e.text for e in s.events if e.kind == "separation"]
+    assert len(moved) > len([e for e in one_pass.events if e.kind == "separation"])
+
+
+@pytest.mark.parametrize("below_m", [550.0, 5_000.0, 50_000.0])
+def test_a_tracks_shortfall_from_the_team_is_the_sum_over_every_sample(below_m: float) -> None:
+    """:meth:`TeamSamples.shortfall_m`, ``closest(within_m=)`` and ``too_close`` compare sample
+    by sample only where the blocks' extents come near: the same figures as every sample of
+    every other vehicle compared."""
+    scenario = parse_scenario(team_scenario(10, seed=0))
+    s = build_schedule(scenario, plan(scenario, "aco", rng=np.random.default_rng(0)))
+    samples = TeamSamples(s.vehicles, scenario.separation_m)
+    for k, vs in enumerate(s.vehicles):
+        track = samples.track(vs)
+        gaps = np.sqrt(((samples.planes - track[:, None, :]) ** 2).sum(axis=0))
+        gaps = np.where(np.isnan(gaps), np.inf, gaps).min(axis=1)
+        gaps[k] = np.inf
+        expected = float(np.maximum(0.0, below_m - gaps).sum())
+        assert samples.shortfall_m(vs.vehicle_id, track, below_m) == pytest.approx(
+            expected, rel=1e-9, abs=1e-6
+        )
+        if below_m > 5_000.0:
+            assert expected > 0.0  # the test compares something
+        # The closest approach under below_m, and who comes that near, as every sample finds.
+        d, who, t = samples.closest(vs, within_m=below_m)
+        j = int(gaps.argmin())
+        if gaps[j] < below_m:
+            assert (d, who) == (pytest.approx(gaps[j]), samples.ids[j])
+            i = int(np.argmin(np.abs(samples.t_s - t)))
+            assert np.linalg.norm(samples.planes[:, j, i] - track[:, i]) == pytest.approx(d)
+        else:
+            assert (d, who) == (math.inf, None)
+        assert samples.too_close(vs, below_m) == {
+            samples.ids[i] for i in np.flatnonzero(gaps < below_m)
+        }
