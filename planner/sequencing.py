@@ -11,12 +11,13 @@ nearest its own cruise speed first) that is. A vehicle none of whose timings is 
 its own.
 
 One pass in that order leaves a crowd in conflict where the vehicles placed early took the
-times the later ones needed. The pass is then repaired by local search (min-conflicts): round
-by round, each vehicle with room that is still inside the separation of others takes, of its
-own timing and all its others, the one that comes least far inside it (summed over the team),
-if that is less than now; until the team is clear, or a round changes nothing, or after
-:data:`REPAIR_ROUNDS`. What is left goes to altitude layers where the scenario allows them
-(:func:`planner.layers.lift_team`), else for :func:`planner.retime.check_feasible` to refuse.
+times the later ones needed. Such a pass is then repaired by local search (min-conflicts):
+round by round, each vehicle with room that is still inside the separation of others takes,
+of its own timing and all its others, the one that comes least far inside it (summed over the
+team), if that is less than now; until the team is clear, or a round changes nothing, or
+after :data:`REPAIR_ROUNDS`. What is left goes to altitude layers where the scenario allows
+them (:func:`planner.layers.lift_team`), else for :func:`planner.retime.check_feasible` to
+refuse.
 
 Each placement compares one vehicle with the team on the grid of
 :class:`~planner.deconflict.TeamSamples` (the team sampled once): a hundred vehicles, each
@@ -116,6 +117,9 @@ def sequence_team(
                     moved[vid] = Moved(schedule, chosen, worst[vid])
                     break
         placed.append(vid)
+    placed_sep = separation([current[vs.vehicle_id] for vs in timed], required_m, samples)
+    if not placed_sep.conflicts:
+        return moved, placed_sep  # the search would only widen what keeps d_s already
     own = {vs.vehicle_id: vs for vs in timed}
     was: TeamSamples | None = None  # the team as first timed, for a vehicle's pair then
     for vid, (repaired, made) in _repair(
