@@ -206,7 +206,9 @@ class TeamSamples:
                 ]
             )
 
-    def _track(self, vs: VehicleSchedule) -> FloatArray:
+    def track(self, vs: VehicleSchedule) -> FloatArray:
+        """``vs`` sampled on the team's grid (east, north and altitude rows; NaN where it does
+        not fly): a timing to be tried more than once is sampled once."""
         return np.ascontiguousarray(_positions(vs, self.t_s).T)
 
     def nearest(
@@ -234,7 +236,7 @@ class TeamSamples:
         if within_m is not None:
             mask = None if wanted is None else np.array([vid in wanted for vid in self.ids])
             least, where = self._within(
-                self._track(vs), within_m, self._row.get(vs.vehicle_id), mask
+                self.track(vs), within_m, self._row.get(vs.vehicle_id), mask
             )
             j = int(least.argmin())
             if not math.isfinite(float(least[j])):
@@ -247,7 +249,7 @@ class TeamSamples:
         ]
         if not others:
             return math.inf, None, math.nan
-        d2 = _squared_gaps_m2(self.planes[:, others], self._track(vs))
+        d2 = _squared_gaps_m2(self.planes[:, others], self.track(vs))
         k = np.unravel_index(int(d2.argmin()), d2.shape)
         best = math.sqrt(float(d2[k]))
         if not math.isfinite(best):
@@ -256,13 +258,8 @@ class TeamSamples:
 
     def too_close(self, vs: VehicleSchedule, below_m: float) -> frozenset[str]:
         """The others of the team ``vs`` comes within ``below_m`` of (on the grid)."""
-        least, _ = self._within(self._track(vs), below_m, self._row.get(vs.vehicle_id))
+        least, _ = self._within(self.track(vs), below_m, self._row.get(vs.vehicle_id))
         return frozenset(self.ids[k] for k in np.flatnonzero(least < below_m**2))
-
-    def track(self, vs: VehicleSchedule) -> FloatArray:
-        """``vs`` sampled on the team's grid (east, north and altitude rows; NaN where it does
-        not fly): a timing to be tried more than once is sampled once."""
-        return self._track(vs)
 
     def shortfall_m(self, vehicle_id: str, track: FloatArray, below_m: float) -> float:
         """How far ``track`` (:meth:`track`, for ``vehicle_id``) comes inside ``below_m`` of
@@ -272,7 +269,11 @@ class TeamSamples:
         return float(np.maximum(0.0, below_m - np.sqrt(least_m2)).sum())
 
     def _within(
-        self, track: FloatArray, below_m: float, skip: int | None, among: FloatArray | None = None
+        self,
+        track: FloatArray,
+        below_m: float,
+        skip: int | None,
+        among: NDArray[np.bool_] | None = None,
     ) -> tuple[FloatArray, NDArray[np.intp]]:
         """Each vehicle's least squared distance (m^2) from ``track`` and the sample where it
         is, wherever that is under ``below_m``; inf (and -1) for the others, for row ``skip``
@@ -325,14 +326,14 @@ class TeamSamples:
         if who is None:
             return PairSeparation(vs.vehicle_id, "", math.inf, math.nan, math.nan, math.nan)
         k = int(np.argmin(np.abs(self.t_s - t)))
-        mid = 0.5 * (self._track(vs)[:2, k] + self.planes[:2, self.ids.index(who), k])
+        mid = 0.5 * (self.track(vs)[:2, k] + self.planes[:2, self._row[who], k])
         return PairSeparation(vs.vehicle_id, who, best, t, float(mid[0]), float(mid[1]))
 
     def replace(self, vs: VehicleSchedule, track: FloatArray | None = None) -> None:
         """Take ``vs`` as its vehicle's schedule from now on (``track``: as :meth:`track`
         sampled it, when the caller has it)."""
         k = self._row[vs.vehicle_id]
-        self.planes[:, k] = self._track(vs) if track is None else track
+        self.planes[:, k] = self.track(vs) if track is None else track
         self.boxes[:, k] = self._boxes(self.planes[:, k])
 
 

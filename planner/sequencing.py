@@ -122,14 +122,17 @@ def sequence_team(
         return moved, placed_sep  # the search would only widen what keeps d_s already
     own = {vs.vehicle_id: vs for vs in timed}
     was: TeamSamples | None = None  # the team as first timed, for a vehicle's pair then
-    for vid, (repaired, made) in _repair(
+    repaired_timings = _repair(
         samples,
         current,
         slack_s,
         alternatives,
         enough,
         REPAIR_ROUNDS if repair_rounds is None else repair_rounds,
-    ).items():
+    )
+    if not repaired_timings:
+        return moved, placed_sep
+    for vid, (repaired, made) in repaired_timings.items():
         current[vid] = repaired
         if made is None:  # back to where the search started
             continue
