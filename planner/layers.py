@@ -17,12 +17,21 @@ the ceiling and the two gradient caps, and the greater of that and the profile, 
 changing no faster than the gradient. Its waypoints are the planned ones plus those where
 the lesser switches from one of them to another (found on a grid of :data:`GRID_M`): between
 them it is straight, as the autopilot flies it.
+
+Layers are used twice when the team is timed (:func:`planner.retime.build_schedule`):
+
+- as lanes (:func:`lanes`): among each vehicle's timings the placement by timing tries
+  (:func:`planner.sequencing.sequence_team`), after its cruise speeds, each speed on a layer
+  over the end of its path. Vehicles sharing a corridor to neighbouring goals at one time
+  cannot all be told apart by a uniform speed each (the faster overtakes the slower where
+  they share it), but two lanes, each timed in trail, can hold them;
+- then pair by pair for what is left (:func:`lift_team`), over the stretch where they meet.
 """
 
 from __future__ import annotations
 
 import math
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Callable, Iterator, Mapping, Sequence
 from dataclasses import dataclass, replace
 from typing import Generic, TypeVar
 
@@ -44,6 +53,10 @@ LIFT_HALF_SPANS_M = (5_000.0, 20_000.0, 60_000.0)
 """A vehicle lifted to an altitude layer flies it this far either side of where it came too
 close (plus the climb to it and the descent from it), the shortest that helps; else all its
 path."""
+LANE_STRETCHES_M = (math.inf, 20_000.0, 40_000.0, 80_000.0)
+"""A vehicle timed on a layer (:func:`lanes`) flies it over the last this many metres of its
+path before the goal (and the climb to it), the shortest first; ``inf``: all its path after
+the climb-out."""
 LIFT_ROUNDS = 8
 """Passes over the team's conflicts at most (each lowers their number, or the search ends)."""
 
@@ -111,6 +124,37 @@ def lift(
     if float((layer - mine).max()) < 1.0:
         return None
     return replace(vs, wp_s_m=s, wp_alt_m=np.maximum(mine, layer))
+
+
+@dataclass(frozen=True)
+class Lane:
+    """A layer flown over the end of a vehicle's path: ``height_m`` above its profile from
+    ``from_m`` along the path (climbing to it from there) to the goal."""
+
+    height_m: float
+    from_m: float
+    to_m: float
+
+
+def lanes(
+    vs: VehicleSchedule, v: Vehicle, heights_m: Sequence[float]
+) -> Iterator[tuple[VehicleSchedule, Lane]]:
+    """``vs`` (as planned, before it is timed) on each layer of ``heights_m`` (lowest first)
+    over each stretch of :data:`LANE_STRETCHES_M` before its goal (the shortest first), where
+    the layer lifts it at all. Each is timed again by the caller: the timing that keeps
+    vehicles sharing a corridor apart may do so on different layers (two lanes where one
+    would have them overtake each other)."""
+    length = vs.path.length_m
+    for height in heights_m:
+        seen: set[float] = set()
+        for stretch_m in LANE_STRETCHES_M:
+            from_m = max(0.0, length - stretch_m)
+            if from_m in seen:
+                continue  # a path shorter than the stretch: all of it, once
+            seen.add(from_m)
+            up = lift(vs, vs, v, height, (from_m, math.inf))
+            if up is not None:
+                yield up, Lane(height, from_m, length)
 
 
 @dataclass(frozen=True)

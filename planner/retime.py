@@ -18,6 +18,7 @@ from __future__ import annotations
 import math
 from collections.abc import Callable, Iterator, Mapping, Sequence
 from dataclasses import dataclass, replace
+from typing import NamedTuple
 
 import numpy as np
 from numpy.typing import NDArray
@@ -32,7 +33,7 @@ from planner.deconflict import (
 from planner.dubins import Pose
 from planner.errors import ArrivalTimeError, InfeasibleError
 from planner.flightpath import FlightPath
-from planner.layers import lift_team
+from planner.layers import Lane, lanes, lift_team
 from planner.plan import Plan, World, build_world, required_arrival_s
 from planner.scenario import Scenario, Spaced, Vehicle, Waves, Windows
 from planner.schedule import (
@@ -664,7 +665,8 @@ def build_schedule(
     if team.separation.conflicts and requested is None and ref is not None and bounds is not None:
         # Those in conflict could not move at the earliest time: later, they have room. The
         # latest delay is tried first: if even that does not separate them, none will (the
-        # team is refused after two timings, not six); else the least delay that does.
+        # team is refused after two timings, not six, on the one with fewer pairs too
+        # close); else the least delay that does.
         pairs = len(team.separation.conflicts)
         delays = [d for d in SEPARATION_DELAYS_S if ref + d <= bounds.latest_s]
         found: tuple[float, dict[str, float], _TeamTiming] | None = None
@@ -673,6 +675,8 @@ def build_schedule(
             attempt = _time_team(scenario, base, windows, later, step_m_s, threats)
             if attempt.separation.conflicts:
                 if found is None:
+                    if len(attempt.separation.conflicts) < pairs:
+                        found = (delay_s, later, attempt)
                     break  # not even the latest
                 continue
             found = (delay_s, later, attempt)
@@ -680,9 +684,14 @@ def build_schedule(
                 break  # the least that separates them
         if found is not None:
             delay_s, targets, team = found
+            left = len(team.separation.conflicts)
+            goal = (
+                f"where {left} pair{'s are' if left > 1 else ' is'} still too close"
+                if left
+                else f"to keep the {scenario.separation_m:g} m separation"
+            )
             reason = (
-                f"{reason}; moved {delay_s:g} s later to keep the "
-                f"{scenario.separation_m:g} m separation ({pairs} pair"
+                f"{reason}; moved {delay_s:g} s later {goal} ({pairs} pair"
                 f"{'s' if pairs > 1 else ''} too close at {ref:.1f} s)"
             )
             ref += delay_s
@@ -720,6 +729,16 @@ SEPARATION_DELAYS_S = (60.0, 120.0, 240.0, 480.0, 960.0)
 the earliest one cannot be separated by their own timings (a later time gives those that had
 to fly at their top speed the room to move); within every vehicle's window, and not when the
 operator asked for a time."""
+
+
+class _Timing(NamedTuple):
+    """How a vehicle's other timing for the separation was made."""
+
+    retimed: Retimed
+    cruise_m_s: float
+    lane: Lane | None = None
+    planned: VehicleSchedule | None = None
+    """Its planned schedule on the lane (before it was timed)."""
 
 
 @dataclass(frozen=True)
@@ -774,18 +793,26 @@ def _time_team(
         except InfeasibleError:
             return None
 
-    def other_cruises(vid: str) -> Iterator[tuple[VehicleSchedule, tuple[Retimed, float]]]:
+    def other_timings(vid: str) -> Iterator[tuple[VehicleSchedule, _Timing]]:
         """The vehicle at each other cruise speed, nearest its own first, for the same
-        arrival (its takeoff moved)."""
+        arrival (its takeoff moved); then, where the scenario allows altitude layers, at
+        each cruise speed on each of its :func:`planner.layers.lanes`."""
         v = scenario.vehicle(vid)
-        levels = speed_grid(v.speed_min_m_s, v.speed_max_m_s, step_m_s)
-        for cruise in sorted(
-            (c for c in levels if abs(c - v.cruise_m_s) > 1e-9),
+        levels = sorted(
+            speed_grid(v.speed_min_m_s, v.speed_max_m_s, step_m_s),
             key=lambda c: (abs(c - v.cruise_m_s), c),
-        ):
+        )
+        for cruise in levels:
+            if abs(cruise - v.cruise_m_s) <= 1e-9:
+                continue
             r = timed_at(vid, by_id[vid], cruise)
             if r is not None:
-                yield r.schedule, (r, cruise)
+                yield r.schedule, _Timing(r, cruise)
+        for up, lane in lanes(by_id[vid], v, scenario.altitude_layers_m):
+            for cruise in levels:
+                r = timed_at(vid, up, cruise)
+                if r is not None:
+                    yield r.schedule, _Timing(r, cruise, lane, up)
 
     said: list[str] = []
     changed: dict[str, Retimed] = {}
@@ -795,20 +822,29 @@ def _time_team(
         r = timed_at(vs.vehicle_id, vs, cruise_now[vs.vehicle_id])
         return None if r is None else (r.schedule, r)
 
-    moved, sep = sequence_team(timed, required, slack_s=slack, alternatives=other_cruises)
+    moved, sep = sequence_team(timed, required, slack_s=slack, alternatives=other_timings)
+    planned = dict(by_id)  # with the layers the timing flies
     for vid, m in moved.items():
-        changed[vid], cruise_now[vid] = m.chosen
+        changed[vid], cruise_now[vid] = m.chosen.retimed, m.chosen.cruise_m_s
         other = m.conflict.b if m.conflict.a == vid else m.conflict.a
+        lane = m.chosen.lane
+        on_lane = ""
+        if lane is not None and m.chosen.planned is not None:
+            planned[vid] = m.chosen.planned
+            on_lane = (
+                f", {lane.height_m:g} m above its profile from {lane.from_m / 1000:.1f} to "
+                f"{lane.to_m / 1000:.1f} km"
+            )
         said.append(
             f"{vid} cruises at {cruise_now[vid]:g} m/s instead of "
-            f"{vehicles[vid].cruise_m_s:g} m/s (takeoff at {m.schedule.takeoff_s:.1f} "
-            f"s): it came {m.conflict.distance_m:.0f} m from {other} at "
-            f"{m.conflict.time_s:.0f} s, under the {required:g} m separation"
+            f"{vehicles[vid].cruise_m_s:g} m/s{on_lane} (takeoff at "
+            f"{m.schedule.takeoff_s:.1f} s): it came {m.conflict.distance_m:.0f} m from "
+            f"{other} at {m.conflict.time_s:.0f} s, under the {required:g} m separation"
         )
         timed = [m.schedule if x.vehicle_id == vid else x for x in timed]
     if sep.conflicts and scenario.altitude_layers_m:
         lifted, sep = lift_team(
-            timed, by_id, vehicles, scenario.altitude_layers_m, required, retime_lifted
+            timed, planned, vehicles, scenario.altitude_layers_m, required, retime_lifted
         )
         for vid, up in lifted.items():
             changed[vid] = up.chosen

@@ -157,8 +157,17 @@ class VehicleSchedule:
         return float(np.interp(s_m, self.wp_s_m, self.wp_alt_m))
 
     def tas_per_eas(self, s_from_m: float = 0.0) -> float:
-        """True per equivalent airspeed that times the path from ``s_from_m`` (ISA)."""
-        return mean_eas2tas(self.wp_s_m, self.wp_alt_m, s_from_m=s_from_m)
+        """True per equivalent airspeed that times the path from ``s_from_m`` (ISA); kept
+        for the next call from the same place (timing a vehicle at each of its cruise speeds
+        asks the same schedule for it again and again)."""
+        memo = self._tas_per_eas
+        if s_from_m not in memo:
+            memo[s_from_m] = mean_eas2tas(self.wp_s_m, self.wp_alt_m, s_from_m=s_from_m)
+        return memo[s_from_m]
+
+    @cached_property
+    def _tas_per_eas(self) -> dict[float, float]:
+        return {}
 
     @cached_property
     def _track(self) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:

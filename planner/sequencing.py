@@ -3,12 +3,13 @@
 Routes that share a corridor or cross are kept ``d_s`` apart by when each vehicle passes
 (eq. 1 by the takeoff staggering of eq. 5): a vehicle on the ground flies another cruise speed
 and takes off earlier or later for the same arrival, so that it passes the shared place at
-another time. :func:`sequence_team` is prioritised planning in time: the vehicles in no
-conflict are placed as they are; the others follow, those with the least room to move first
-(airborne, then by their timing slack), each keeping its timing if it is clear of every
-vehicle placed so far, else taking the first of its other timings (its caller's order:
-nearest its own cruise speed first) that is. A vehicle none of whose timings is clear keeps
-its own.
+another time (its caller may also offer timings on an altitude layer:
+:func:`planner.layers.lanes`). :func:`sequence_team` is prioritised planning in time: the
+vehicles in no conflict are placed as they are; the others follow, those with the least
+room to move first (airborne, then by their timing slack), each keeping its timing if it is
+clear of every vehicle placed so far, else taking the first of its other timings (its
+caller's order: nearest its own cruise speed first) that is. A vehicle none of whose timings
+is clear keeps its own.
 
 One pass in that order leaves a crowd in conflict where the vehicles placed early took the
 times the later ones needed. Such a pass is then repaired by local search (min-conflicts):

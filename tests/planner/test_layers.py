@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 
 from planner.errors import ScenarioError, SeparationError
-from planner.layers import layer_profile, lift
+from planner.layers import LANE_STRETCHES_M, lanes, layer_profile, lift
 from planner.plan import build_terrain, plan
 from planner.retime import build_schedule, check_feasible
 from planner.scenario import Scenario, parse_scenario
@@ -157,6 +157,28 @@ def test_lifts_add_up_and_a_lift_that_lifts_nothing_is_none() -> None:
     assert lift(two, vs, v, 300.0, (8_000.0, 15_000.0)) is None  # under what it flies there
     at_ceiling = v.model_copy(update={"alt_max_m": float(vs.wp_alt_m.max())})
     assert layer_profile(vs, at_ceiling, 600.0) is None
+
+
+def test_lanes_are_the_layers_over_the_end_of_the_path_each_stretch_once() -> None:
+    """Each layer over the last 20, 40 and 80 km and over all the path: the profile as planned
+    up to where the lane begins, above it after, back at the goal's altitude; a stretch as
+    long as the path is offered once."""
+    scenario, vs = _profile_case()
+    v = scenario.vehicles[0].model_copy(update={"alt_max_m": 3000.0})
+    length = vs.path.length_m
+    got = list(lanes(vs, v, [300.0, 600.0]))
+    expected = [(h, max(0.0, length - k)) for h in (300.0, 600.0) for k in LANE_STRETCHES_M]
+    expected = list(dict.fromkeys(expected))  # a path under 80 km: the whole path once
+    assert [(lane.height_m, lane.from_m) for _, lane in got] == expected
+    s = np.linspace(0.0, length, 20_001)
+    base = np.interp(s, vs.wp_s_m, vs.wp_alt_m)
+    for up, lane in got:
+        alt = np.interp(s, up.wp_s_m, up.wp_alt_m)
+        assert lane.to_m == pytest.approx(length)
+        assert np.allclose(alt[s <= lane.from_m], base[s <= lane.from_m]), lane
+        assert (alt >= base - 1e-6).all() and alt[-1] == pytest.approx(base[-1])
+        assert (alt - base).max() == pytest.approx(lane.height_m, abs=1.0), lane
+        assert (up.path is vs.path) and up.takeoff_s == vs.takeoff_s  # to be timed again
 
 
 # -- the scenario field --------------------------------------------------------------------

@@ -10,19 +10,20 @@ from __future__ import annotations
 import itertools
 import math
 import sys
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 import pytest
 
-from planner import sequencing
+from planner import layers, sequencing
 from planner.deconflict import TeamSamples, pair_separation
 from planner.errors import ScenarioError, SeparationError
 from planner.goals import assign_goals
-from planner.plan import build_world, plan
+from planner.plan import Plan, build_world, plan
 from planner.retime import build_schedule, check_feasible
-from planner.scenario import parse_scenario
+from planner.scenario import Scenario, parse_scenario
 from planner.schedule import Schedule
 from tests.planner.conftest import crossing_scenario, small_scenario
 
@@ -170,18 +171,22 @@ def test_the_planner_bench_teams_are_separated_with_their_approach_points_shared
             check_feasible(s)
 
 
-def test_the_first_pass_leaves_a_crowd_in_conflict_and_the_repair_separates_it(
+def _separated_only_with(
     monkeypatch: pytest.MonkeyPatch,
-) -> None:
-    """30 vehicles of the planner bench (seed 1, no altitude layer): placed in one pass, some
-    pairs stay under d_s; the local search after it moves vehicles to their other timings
-    until every pair keeps d_s. Each still arrives at the team time, at speeds in its range."""
-    scenario = parse_scenario(team_scenario(30, seed=1, altitude_layers_m=()))
+    scenario: Scenario,
+    switch_off: Callable[[pytest.MonkeyPatch], None],
+    *,
+    seed: int,
+) -> tuple[Schedule, Schedule, Plan]:
+    """The team planned, then timed with a part of the search switched off (``switch_off``)
+    and some pair under d_s; then timed with it (the switch undone) and every pair keeping
+    d_s, feasible, each vehicle arriving at the team time, taking off in its window, at
+    speeds in its range. Both schedules, and the plan."""
     world = build_world(scenario)
-    planned = plan(scenario, "aco", rng=np.random.default_rng(1), world=world)
-    monkeypatch.setattr(sequencing, "REPAIR_ROUNDS", 0)
-    one_pass = build_schedule(scenario, planned, world=world)
-    d, pair = _min_pair_separation_m(one_pass)
+    planned = plan(scenario, "aco", rng=np.random.default_rng(seed), world=world)
+    switch_off(monkeypatch)
+    partial = build_schedule(scenario, planned, world=world)
+    d, pair = _min_pair_separation_m(partial)
     assert d < scenario.separation_m, pair
     monkeypatch.undo()
     s = build_schedule(scenario, planned, world=world)
@@ -194,8 +199,41 @@ def test_the_first_pass_leaves_a_crowd_in_conflict_and_the_repair_separates_it(
         assert vs.takeoff_s >= v.takeoff_window_s[0] - 1e-6, v.id
         for leg in vs.legs:
             assert v.speed_min_m_s - 1e-9 <= leg.speed_m_s <= v.speed_max_m_s + 1e-9, v.id
+    return partial, s, planned
+
+
+def test_the_first_pass_leaves_a_crowd_in_conflict_and_the_repair_separates_it(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """30 vehicles of the planner bench (seed 1, no altitude layer): placed in one pass, some
+    pairs stay under d_s; the local search after it moves vehicles to their other timings
+    until every pair keeps d_s. Each still arrives at the team time, at speeds in its range."""
+    scenario = parse_scenario(team_scenario(30, seed=1, altitude_layers_m=()))
+    one_pass, s, _ = _separated_only_with(
+        monkeypatch, scenario, lambda m: m.setattr(sequencing, "REPAIR_ROUNDS", 0), seed=1
+    )
     moved = [e.text for e in s.events if e.kind == "separation"]
     assert len(moved) > len([e for e in one_pass.events if e.kind == "separation"])
+
+
+def test_a_crowd_the_pairwise_lifts_leave_too_close_is_timed_on_lanes(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """50 vehicles of the planner bench (seed 1, the bench's 600 m layer): timed on their
+    own profiles and lifted pair by pair afterwards, some pairs stay under d_s; with each
+    vehicle's timings on the layer (over the end of its path) among those the placement
+    tries, every pair keeps d_s in 3-D. The lanes keep above the planned profiles and under
+    the ceiling, and every vehicle arrives at the team time at speeds in its range."""
+    scenario = parse_scenario(team_scenario(50, seed=1))
+    _, s, planned = _separated_only_with(
+        monkeypatch, scenario, lambda m: m.setattr(layers, "LANE_STRETCHES_M", ()), seed=1
+    )
+    on_lanes = [e.text for e in s.events if "m/s, 600 m above its profile from" in e.text]
+    assert on_lanes, [e.text for e in s.events if e.kind == "separation"]
+    for v, vs, route in zip(scenario.vehicles, s.vehicles, planned.routes, strict=True):
+        profile = np.interp(vs.wp_s_m, route.profile.s_m, route.profile.alt_m)
+        assert (vs.wp_alt_m >= profile - 1e-6).all(), v.id
+        assert (vs.wp_alt_m <= max(v.alt_max_m, float(profile.max())) + 1e-6).all(), v.id
 
 
 @pytest.mark.parametrize("below_m", [550.0, 5_000.0, 50_000.0])
