@@ -835,11 +835,16 @@ def _time_team(
                 f", {lane.height_m:g} m above its profile from {lane.from_m / 1000:.1f} to "
                 f"{lane.to_m / 1000:.1f} km"
             )
+        own = vehicles[vid].cruise_m_s
+        speed = (
+            f"keeps its {own:g} m/s cruise"
+            if abs(cruise_now[vid] - own) <= 1e-9
+            else f"cruises at {cruise_now[vid]:g} m/s instead of {own:g} m/s"
+        )
         said.append(
-            f"{vid} cruises at {cruise_now[vid]:g} m/s instead of "
-            f"{vehicles[vid].cruise_m_s:g} m/s{on_lane} (takeoff at "
-            f"{m.schedule.takeoff_s:.1f} s): it came {m.conflict.distance_m:.0f} m from "
-            f"{other} at {m.conflict.time_s:.0f} s, under the {required:g} m separation"
+            f"{vid} {speed}{on_lane} (takeoff at {m.schedule.takeoff_s:.1f} s): it came "
+            f"{m.conflict.distance_m:.0f} m from {other} at {m.conflict.time_s:.0f} s, "
+            f"under the {required:g} m separation"
         )
         timed = [m.schedule if x.vehicle_id == vid else x for x in timed]
     if sep.conflicts and scenario.altitude_layers_m:

@@ -153,11 +153,12 @@ def test_the_planner_bench_teams_are_separated_with_their_approach_points_shared
     n: int, assign: bool
 ) -> None:
     """The teams of ``bench/bench_planner.py`` (launch sites on the west and south edges,
-    approach points on rings around the target): with the points shared out, every pair
-    keeps d_s; with each vehicle held to the point drawn for it, routes cross next to the
-    goals (where simultaneous arrivals cannot be told apart by time) and the schedule is
-    refused naming a pair."""
-    scenario = parse_scenario(team_scenario(n, seed=0, assign_goals=assign))
+    approach points on rings around the target; no altitude layer): with the points shared
+    out, every pair keeps d_s; with each vehicle held to the point drawn for it, routes cross
+    next to the goals (where simultaneous arrivals cannot be told apart by time) and the
+    schedule is refused naming a pair."""
+    data = team_scenario(n, seed=0, assign_goals=assign, altitude_layers_m=())
+    scenario = parse_scenario(data)
     world = build_world(scenario)
     planned = plan(scenario, "aco", rng=np.random.default_rng(0), world=world)
     s = build_schedule(scenario, planned, world=world)
@@ -228,7 +229,11 @@ def test_a_crowd_the_pairwise_lifts_leave_too_close_is_timed_on_lanes(
     _, s, planned = _separated_only_with(
         monkeypatch, scenario, lambda m: m.setattr(layers, "LANE_STRETCHES_M", ()), seed=1
     )
-    on_lanes = [e.text for e in s.events if "m/s, 600 m above its profile from" in e.text]
+    on_lanes = [  # said with the speed it is timed at (a lift pair by pair "flies")
+        e.text
+        for e in s.events
+        if "600 m above its profile from" in e.text and e.text.split()[1] in ("cruises", "keeps")
+    ]
     assert on_lanes, [e.text for e in s.events if e.kind == "separation"]
     for v, vs, route in zip(scenario.vehicles, s.vehicles, planned.routes, strict=True):
         profile = np.interp(vs.wp_s_m, route.profile.s_m, route.profile.alt_m)
