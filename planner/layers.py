@@ -55,8 +55,8 @@ close (plus the climb to it and the descent from it), the shortest that helps; e
 path."""
 LANE_STRETCHES_M = (math.inf, 20_000.0, 40_000.0, 80_000.0)
 """A vehicle timed on a layer (:func:`lanes`) flies it over the last this many metres of its
-path before the goal (and the climb to it), the shortest first; ``inf``: all its path after
-the climb-out."""
+path before the goal (and the climb to it); ``inf``: all its path after the climb-out. In
+this order: all of it first, then the shortest stretch."""
 LIFT_ROUNDS = 8
 """Passes over the team's conflicts at most (each lowers their number, or the search ends)."""
 
@@ -140,7 +140,7 @@ def lanes(
     vs: VehicleSchedule, v: Vehicle, heights_m: Sequence[float]
 ) -> Iterator[tuple[VehicleSchedule, Lane]]:
     """``vs`` (as planned, before it is timed) on each layer of ``heights_m`` (lowest first)
-    over each stretch of :data:`LANE_STRETCHES_M` before its goal (the shortest first), where
+    over each stretch of :data:`LANE_STRETCHES_M` before its goal (in that order), where
     the layer lifts it at all. Each is timed again by the caller: the timing that keeps
     vehicles sharing a corridor apart may do so on different layers (two lanes where one
     would have them overtake each other)."""

@@ -736,9 +736,9 @@ class _Timing(NamedTuple):
 
     retimed: Retimed
     cruise_m_s: float
+    planned: VehicleSchedule
+    """The planned schedule it timed (on the lane, if any), before it was timed."""
     lane: Lane | None = None
-    planned: VehicleSchedule | None = None
-    """Its planned schedule on the lane (before it was timed)."""
 
 
 @dataclass(frozen=True)
@@ -807,12 +807,12 @@ def _time_team(
                 continue
             r = timed_at(vid, by_id[vid], cruise)
             if r is not None:
-                yield r.schedule, _Timing(r, cruise)
+                yield r.schedule, _Timing(r, cruise, by_id[vid])
         for up, lane in lanes(by_id[vid], v, scenario.altitude_layers_m):
             for cruise in levels:
                 r = timed_at(vid, up, cruise)
                 if r is not None:
-                    yield r.schedule, _Timing(r, cruise, lane, up)
+                    yield r.schedule, _Timing(r, cruise, up, lane)
 
     said: list[str] = []
     changed: dict[str, Retimed] = {}
@@ -827,10 +827,9 @@ def _time_team(
     for vid, m in moved.items():
         changed[vid], cruise_now[vid] = m.chosen.retimed, m.chosen.cruise_m_s
         other = m.conflict.b if m.conflict.a == vid else m.conflict.a
-        lane = m.chosen.lane
+        planned[vid], lane = m.chosen.planned, m.chosen.lane
         on_lane = ""
-        if lane is not None and m.chosen.planned is not None:
-            planned[vid] = m.chosen.planned
+        if lane is not None:
             on_lane = (
                 f", {lane.height_m:g} m above its profile from {lane.from_m / 1000:.1f} to "
                 f"{lane.to_m / 1000:.1f} km"
