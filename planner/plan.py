@@ -49,6 +49,9 @@ FloatArray = NDArray[np.float64]
 Method = Literal["aco", "astar"]
 PROFILE_STEP_M = 50.0
 CLIMB_OUT_CLEARANCE_FRACTION = 0.5
+CLIMB_HEAD_FACTOR = 1.5
+"""A route whose shortened climb from home is too low keeps its grid legs as they are for
+this many times the distance that climb took, and is shortened after them."""
 """Climbing from home, the aircraft keeps at least this fraction of the height it has climbed
 between it and the terrain (until that is ``clearance_m``): level ground under the climb
 leaves all of it, rising ground ahead eats into it. A route whose climb-out rises toward
@@ -691,8 +694,7 @@ def climb_out_violation(
     s, pts = sample_by_distance(path, PROFILE_STEP_M)
     ground = terrain.elevation_m(pts[:, 0], pts[:, 1])
     home = float(ground[0])
-    planned = np.interp(s, profile.s_m, profile.alt_m)
-    climb = home + v.climb_gradient * s
+    climb, planned = _climb_from(home, s, v, profile)
     climbing = climb < planned
     if not climbing[1:].any():
         return None
@@ -712,6 +714,23 @@ def climb_out_violation(
         f"along the path, needs {need[k]:.0f} m",
         float(s[k]),
     )
+
+
+def _climb_from(
+    home_m: float, s_m: FloatArray, v: Vehicle, profile: AltitudeProfile
+) -> tuple[FloatArray, FloatArray]:
+    """The climb from home at ``climb_gradient`` and the planned profile, at ``s_m`` (m)."""
+    return home_m + v.climb_gradient * s_m, np.interp(s_m, profile.s_m, profile.alt_m)
+
+
+def climb_end_m(path: FlightPath, terrain: Terrain, v: Vehicle, profile: AltitudeProfile) -> float:
+    """How far along ``path`` the climb from home meets the altitude profile, m (the path's
+    length if it never does)."""
+    s, pts = sample_by_distance(path, PROFILE_STEP_M)
+    home = float(terrain.elevation_m(pts[:1, 0], pts[:1, 1])[0])
+    climb, planned = _climb_from(home, s, v, profile)
+    met = np.flatnonzero(climb[1:] >= planned[1:])
+    return float(s[met[0] + 1]) if len(met) else path.length_m
 
 
 def _where(world: World, path: FlightPath, violation: Violation) -> str:
@@ -764,15 +783,28 @@ def finish_route(
         (pts[: -len(task.tail_m)], pts[-len(task.tail_m) :]) if task.tail_m else (pts, pts[:0])
     )
 
+    climb_m: float | None = None
+    """Where the climb from home met the profile on a candidate whose climb was too low."""
+
     def candidates() -> Iterator[FloatArray]:
-        """Shortened with the margin, with three times it, then the grid route as it is.
+        """Shortened with the margin, with three times it; then, when only the climb from
+        home kept those from flying, the grid route as it is over the climb and shortened
+        after it; then the grid route as it is.
 
         Built one at a time: most routes are finished by the first, so the others are
-        never simplified.
+        never simplified. A shortened route may take the climb straight over a ridge the
+        grid route winds round; the grid route flown all the way is longer by a tenth and
+        ends in the turns of its last grid leg, which may lie past the goal.
         """
         for route_margin_m in (margin, 3.0 * margin):
             simplified = simplify_route(head, task.cost_map, threats, world.terrain, route_margin_m)
             yield np.concatenate([simplified, tail])
+        if climb_m is not None:
+            along = np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(head, axis=0).T))])
+            k = int(np.searchsorted(along, CLIMB_HEAD_FACTOR * climb_m)) + 1
+            if k < len(head) - 1:
+                rest = simplify_route(head[k:], task.cost_map, threats, world.terrain, margin)
+                yield np.concatenate([head[:k], rest, tail])
         yield pts
 
     for candidate in candidates():
@@ -808,6 +840,7 @@ def finish_route(
         climb_out = climb_out_violation(path, world.terrain, v, profile) if from_home else None
         if climb_out is not None:
             constraints.append(climb_out)
+            climb_m = climb_end_m(path, world.terrain, v, profile)
         if path.length_m > v.max_range_m:
             constraints.append(
                 Violation(

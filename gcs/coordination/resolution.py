@@ -15,8 +15,12 @@ not kept, as the alarm does if it comes true. A choice that gains less (head-on 
 is not taken.
 
 A vehicle flying a resolution is not timed for its slot meanwhile; once released, its arrival
-controller makes up the time (the seconds a minute at another speed costs are well inside what
-its speed range recovers over the rest of a route).
+controller makes up the time. So a resolution is held no longer than that can be done with
+:data:`RECOVERY_SHARE` of the speed range left on the other side over the rest of the way to
+the slot (:func:`longest_hold_s`), and each choice is judged as flown that long and then at the
+speed before it: near the goals a resolution is short or not taken, where held until the
+closest approach it judged it would have brought its mover to the goal tens of seconds early
+or late (and into the vehicles arriving beside it).
 """
 
 from __future__ import annotations
@@ -31,6 +35,10 @@ from numpy.typing import NDArray
 FloatArray = NDArray[np.float64]
 
 MIN_GAIN_FRACTION = 0.1
+RECOVERY_SHARE = 0.5
+"""A resolution is held only as long as its mover's arrival can make up with this share of the
+speed range on the other side of its speed (:func:`longest_hold_s`); the rest is left for
+what else it meets."""
 """A choice that keeps less than the whole separation is taken only if it opens the pair's
 closest approach by this fraction of the separation or more (:func:`resolve`)."""
 
@@ -64,13 +72,25 @@ class Ahead:
     movable: bool = True
     """Whether it may be asked another speed (not on its final approach, say)."""
 
-    def positions(self, t_s: FloatArray, airspeed_m_s: float, response_s: float) -> FloatArray:
+    def positions(
+        self,
+        t_s: FloatArray,
+        airspeed_m_s: float,
+        response_s: float,
+        until_s: float = math.inf,
+    ) -> FloatArray:
         """(east, north) at the times ``t_s`` flying ``airspeed_m_s`` from its fix (reached
-        ``response_s`` after it), NaN past its look-ahead."""
+        ``response_s`` after it) until ``until_s``, at its present speed again after it; NaN
+        past its look-ahead."""
         dt = t_s - self.t_s
+        held = max(until_s - self.t_s, response_s)
         gs = self.groundspeed_m_s
         new_gs = max(gs + (airspeed_m_s - self.airspeed_m_s) * self.tas_per_eas, 0.0)
-        s = self.s_m + gs * np.minimum(dt, response_s) + new_gs * np.maximum(dt - response_s, 0.0)
+        s = (
+            self.s_m
+            + gs * (np.minimum(dt, response_s) + np.maximum(dt - held, 0.0))
+            + new_gs * np.clip(dt - response_s, 0.0, held - response_s)
+        )
         s = np.clip(s, self.route_s_m[0], self.route_s_m[-1])
         out = np.stack(
             [np.interp(s, self.route_s_m, self.route_east_m),
@@ -108,11 +128,13 @@ def closest_m(
     airspeed_a_m_s: float,
     airspeed_b_m_s: float,
     response_s: float,
+    until_s: float = math.inf,
 ) -> tuple[float, float]:
     """The pair's least 3-D distance (their present heights) over the times ``t_s`` at these
-    airspeeds, and when; ``(inf, nan)`` when they are never predicted together."""
-    pa = a.positions(t_s, airspeed_a_m_s, response_s)
-    pb = b.positions(t_s, airspeed_b_m_s, response_s)
+    airspeeds (flown until ``until_s``), and when; ``(inf, nan)`` when they are never
+    predicted together."""
+    pa = a.positions(t_s, airspeed_a_m_s, response_s, until_s)
+    pb = b.positions(t_s, airspeed_b_m_s, response_s, until_s)
     d = np.sqrt(((pa - pb) ** 2).sum(axis=1) + (a.alt_m - b.alt_m) ** 2)
     if np.isnan(d).all():
         return math.inf, math.nan
@@ -138,7 +160,9 @@ def resolve(
     of the separation).
 
     A choice is judged over twice the look-ahead (so that it does not merely put the meeting
-    beyond it) and held until ``release_after_s`` past the closest approach so resolved.
+    beyond it) and held until ``release_after_s`` past the closest approach so resolved, or
+    for as long as its mover can still make its slot (:func:`longest_hold_s`), whichever
+    comes first; it is judged as held that long.
     ``neighbours`` are, for ``a`` and for ``b`` (by vehicle id), the other vehicles near it:
     a choice that would bring its mover closer to one of them than the separation, and closer
     than it flies now, is not taken (in a crowd, one pair's resolution otherwise pushed the
@@ -160,18 +184,23 @@ def resolve(
         for speed in (mover.airspeed_min_m_s, mover.airspeed_max_m_s):
             if abs(speed - mover.airspeed_m_s) < 1e-9:
                 continue
-            near_so = _nearest_m(mover, speed, near, t, response_s)
+            hold_end = now_s + longest_hold_s(mover, speed, now_s)
+            if hold_end - now_s <= response_s:
+                continue  # its slot leaves no time to fly it
+            near_so = _nearest_m(mover, speed, near, t, response_s, hold_end)
             if near_so < separation_m and near_so < near_now:
                 continue  # into another conflict, or deeper into one
             if mover is a:
-                d, when = closest_m(a, b, t, speed, b.airspeed_m_s, response_s)
+                d, when = closest_m(a, b, t, speed, b.airspeed_m_s, response_s, hold_end)
             else:
-                d, when = closest_m(a, b, t, a.airspeed_m_s, speed, response_s)
+                d, when = closest_m(a, b, t, a.airspeed_m_s, speed, response_s, hold_end)
             kept = min(d, separation_m)  # beyond the separation, the smaller change
-            choices.append((-kept, abs(speed - mover.airspeed_m_s), mover.vehicle, speed, d, when))
+            choices.append(
+                (-kept, abs(speed - mover.airspeed_m_s), mover.vehicle, speed, d, when, hold_end)
+            )
     if not choices:
         return None
-    _, _, vid, speed, d, when = min(choices)
+    _, _, vid, speed, d, when, hold_end = min(choices)
     if d < separation_m:
         # Judged over the same times as the choices (as flown, the closest may lie beyond
         # the look-ahead).
@@ -186,16 +215,42 @@ def resolve(
         # abreast hovered some 50 m under the separation for minutes). Held past the meeting
         # as they fly instead.
         until = max(until, at + release_after_s)
+    until = min(until, hold_end)
     return Resolution(vid, other, speed, until, d, as_flown, at, d >= separation_m)
 
 
+def longest_hold_s(mover: Ahead, airspeed_m_s: float, now_s: float) -> float:
+    """How long (s) ``mover`` may fly ``airspeed_m_s`` from ``now_s`` and still make its slot
+    (``horizon_s`` after its fix): the distance it gains or loses meanwhile made up over the
+    rest of the way with :data:`RECOVERY_SHARE` of the room its speed range leaves on the
+    other side of its present airspeed (``H * |change| <= share * room * (left - H)``)."""
+    left_s = mover.t_s + mover.horizon_s - now_s
+    change = abs(airspeed_m_s - mover.airspeed_m_s)
+    if left_s <= 0.0 or change < 1e-9:
+        return max(left_s, 0.0)
+    if airspeed_m_s > mover.airspeed_m_s:
+        room = mover.airspeed_m_s - mover.airspeed_min_m_s
+    else:
+        room = mover.airspeed_max_m_s - mover.airspeed_m_s
+    recover = RECOVERY_SHARE * max(room, 0.0)
+    return left_s * recover / (change + recover)
+
+
 def _nearest_m(
-    mover: Ahead, airspeed_m_s: float, others: Sequence[Ahead], t_s: FloatArray, response_s: float
+    mover: Ahead,
+    airspeed_m_s: float,
+    others: Sequence[Ahead],
+    t_s: FloatArray,
+    response_s: float,
+    until_s: float = math.inf,
 ) -> float:
     """The mover's least distance to any of ``others`` (flying as they do) over ``t_s`` at
-    ``airspeed_m_s``, m (inf with none)."""
+    ``airspeed_m_s`` (until ``until_s``), m (inf with none)."""
     return min(
-        (closest_m(mover, o, t_s, airspeed_m_s, o.airspeed_m_s, response_s)[0] for o in others),
+        (
+            closest_m(mover, o, t_s, airspeed_m_s, o.airspeed_m_s, response_s, until_s)[0]
+            for o in others
+        ),
         default=math.inf,
     )
 

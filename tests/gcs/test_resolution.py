@@ -141,6 +141,50 @@ def test_a_resolution_does_not_push_its_mover_into_a_third_vehicle() -> None:
     assert r is not None and not (r.vehicle == "A" and r.airspeed_m_s < 25.0)
 
 
+def test_a_resolution_near_the_goals_is_held_only_as_long_as_the_slot_can_be_made() -> None:
+    """The crossing of A and B 60 s ahead, their slots 150 s ahead: at 25 m/s each arrives
+    on time. Held until its closest approach has passed (as with slots an hour ahead) the
+    speed would cost more than half of what the rest of the way can make up; the resolution
+    is held shorter, and in this test's own arithmetic the mover still makes its slot with
+    half its speed range to spare, and the pair keeps the separation as it flies it."""
+    far = resolve(
+        _straight("A", (-1500.0, 0.0), 90.0), _straight("B", (0.0, -1500.0), 0.0),
+        now_s=0.0, separation_m=300.0,
+    )  # fmt: skip
+    a = _straight("A", (-1500.0, 0.0), 90.0, horizon_s=150.0)
+    b = _straight("B", (0.0, -1500.0), 0.0, horizon_s=150.0)
+    r = resolve(a, b, now_s=0.0, separation_m=300.0)
+    assert far is not None and r is not None
+    assert r.until_s < far.until_s - 5.0
+    mover = a if r.vehicle == "A" else b
+    # Flown at the resolution's speed from 5 s (the response) to its end, then the rest of
+    # the way (what 25 m/s would fly in 150 s, less what was flown) in the time left.
+    flown_m = 25.0 * 5.0 + r.airspeed_m_s * (r.until_s - 5.0)
+    needed_m_s = (25.0 * 150.0 - flown_m) / (150.0 - r.until_s)
+    lo, hi = mover.airspeed_min_m_s, mover.airspeed_max_m_s
+    assert 25.0 - 0.5 * (25.0 - lo) - 1e-6 <= needed_m_s <= 25.0 + 0.5 * (hi - 25.0) + 1e-6
+
+    def apart_m(speed: float, until_s: float) -> float:
+        """Least distance over 90 s, the mover at ``speed`` from 5 s to ``until_s``."""
+        best = math.inf
+        for t in np.arange(0.0, 90.0, 0.1):
+            moved = 25.0 * (min(t, 5.0) + max(t - until_s, 0.0))
+            moved += speed * min(max(t - 5.0, 0.0), until_s - 5.0)
+            other = 25.0 * t
+            ae, bn = (moved, other) if r.vehicle == "A" else (other, moved)
+            best = min(best, math.hypot(-1500.0 + ae, -1500.0 + bn))
+        return best
+
+    assert apart_m(25.0, 0.0) < 1.0
+    assert apart_m(r.airspeed_m_s, r.until_s) >= min(r.predicted_m, 300.0) - 1.0
+    # A flying its top speed to make its slot and B its lowest: neither has room to make up
+    # another speed, and nothing is asked (they meet, and the flight's alarm says so).
+    late = _straight("A", (-1800.0, 0.0), 90.0, airspeed_m_s=30.0, groundspeed_m_s=30.0)
+    early = _straight("B", (0.0, -1080.0), 0.0, airspeed_m_s=18.0, groundspeed_m_s=18.0)
+    assert _flown_apart_m(late, early, {}, 5.0) < 1.0
+    assert resolve(late, early, now_s=0.0, separation_m=300.0) is None
+
+
 def test_a_vehicle_in_its_loiter_turns_is_predicted_round_them_and_the_other_one_moves() -> None:
     """L flies 8 turns of 150 m round (0, 0), clockwise, entered at the circle's west point
     from its north-bound route, at 25 m/s (37.7 s a turn): it is at the north point at 9.4 s

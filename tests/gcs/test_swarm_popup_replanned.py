@@ -187,10 +187,13 @@ def test_every_aircraft_passes_its_goal_within_a_second_of_the_team_time(flight:
 
 
 def test_the_team_keeps_its_separation_throughout(flight: Flight) -> None:
-    """Every pair of aircraft at every truth sample time while both are airborne: ``d_s``
-    horizontally, as the plan separates the team (eq. 1, :mod:`planner.deconflict`: the team
-    flies at one altitude, 800 m here), and so in 3-D too, as the flight's watch measures it
-    (:mod:`gcs.coordination.separation`; never less than the horizontal distance)."""
+    """Every pair of aircraft at every truth sample time while both are airborne: ``d_s`` in
+    3-D, as the plan separates the team (eq. 1, :mod:`planner.deconflict`) and the flight's
+    watch measures it (:mod:`gcs.coordination.separation`). The team flies its straight
+    routes level at 800 m, but a route re-planned round the zone has waypoints on its arcs,
+    and between them its profile comes down towards the terrain-following height (some 480 m
+    here): passing over or under a neighbour's route there, it may be under ``d_s``
+    horizontally and keep it in 3-D (printed, both)."""
     record = flight.record
     frame = flight.scenario.frame()
     ids = list(flight.truth)
@@ -223,5 +226,4 @@ def test_the_team_keeps_its_separation_throughout(flight: Flight) -> None:
     )
     print(said)
     d_s = flight.scenario.separation_m
-    assert float(np.nanmin(horizontal)) >= d_s, f"{said}\n{flight.told()}"
     assert float(np.nanmin(spatial)) >= d_s, f"{said}\n{flight.told()}"

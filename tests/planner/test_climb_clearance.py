@@ -11,20 +11,33 @@ from __future__ import annotations
 
 import math
 import re
+import sys
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 import pytest
 
+from planner import plan as plan_module
 from planner.errors import InfeasibleError
 from planner.mission import MAV_CMD_NAV_TAKEOFF, MAV_CMD_NAV_WAYPOINT
-from planner.plan import PROFILE_STEP_M, build_world, plan, sample_by_distance
+from planner.plan import (
+    CLIMB_OUT_CLEARANCE_FRACTION,
+    PROFILE_STEP_M,
+    PlannedRoute,
+    build_world,
+    plan,
+    sample_by_distance,
+)
 from planner.retime import build_schedule
 from planner.scenario import parse_scenario
 from planner.schedulefile import path_mission
 from tests.planner.conftest import small_scenario
 from tests.planner.test_terrain import tile_grid_deg, write_tile
+
+ROOT = Path(__file__).resolve().parents[2]
+sys.path.insert(0, str(ROOT / "bench"))
+from bench_planner import team_scenario  # noqa: E402  (the planner bench's generated teams)
 
 ORIGIN = {"lat_deg": 45.3, "lon_deg": 7.3}
 PLAIN_M = 335.0
@@ -115,3 +128,54 @@ def test_a_ridge_the_climb_outclimbs_is_flown(tmp_path: Path) -> None:
     route = p.routes[0]
     assert route.profile.min_clearance_m >= scenario.vehicles[0].clearance_m - 1.0
     assert math.isfinite(route.length_m)
+
+
+def _turned_rad(route: PlannedRoute, from_m: float) -> float:
+    """How much the path turns (rad, either way, summed) from ``from_m`` to its end, from
+    headings sampled every 50 m."""
+    s, pts = sample_by_distance(route.path, PROFILE_STEP_M)
+    end = pts[s >= from_m, :2]
+    heading = np.arctan2(*np.diff(end, axis=0).T)
+    return float(np.abs((np.diff(heading) + np.pi) % (2 * np.pi) - np.pi).sum())
+
+
+def test_a_route_whose_shortened_climb_is_too_low_is_shortened_after_the_climb(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    # The planner bench's 100-vehicle team once flew four routes as their grid legs, 10 km
+    # longer, because their straight climb from home went too low over rising ground:
+    # U014's ended in a loop round its last grid point, 340 m past its approach point, that
+    # crossed its neighbours' tracks there. Alone, on the exact search, it is the same.
+    data = parse_scenario(team_scenario(100, 0)).model_dump(mode="json", exclude_none=True)
+    data["vehicles"] = [v for v in data["vehicles"] if v["id"] == "U014"]
+    data["assign_goals"] = False  # its approach point in the team's sharing-out
+    scenario = parse_scenario(data)
+    v = scenario.vehicles[0]
+    world = build_world(scenario)
+
+    def routed() -> PlannedRoute:
+        return plan(scenario, method="astar", world=world).routes[0]
+
+    monkeypatch.setattr(plan_module, "CLIMB_HEAD_FACTOR", math.inf)  # grid legs or nothing
+    as_grid = routed()
+    monkeypatch.undo()
+    route = routed()
+    assert len(as_grid.simplified_m) == len(as_grid.grid_points_m)
+    assert as_grid.path.length_m > as_grid.grid_length_m
+    assert _turned_rad(as_grid, as_grid.path.length_m - 2000.0) > math.pi  # the loop
+    # Now the grid legs are flown over the climb only: 5% shorter than the grid route, with
+    # a few straight legs after the climb and no loop before the approach point.
+    assert route.path.length_m < 0.96 * route.grid_length_m
+    assert len(route.simplified_m) < 0.2 * len(route.grid_points_m)
+    assert _turned_rad(route, route.path.length_m - 2000.0) < math.radians(45.0)
+    # The climb from home, worked out here from the path, the terrain and the gradient,
+    # keeps the clearance the vehicle needs climbing until it meets the profile.
+    s, pts = sample_by_distance(route.path, PROFILE_STEP_M)
+    ground = world.terrain.elevation_m(pts[:, 0], pts[:, 1])
+    planned = np.interp(s, route.profile.s_m, route.profile.alt_m)
+    flown = np.minimum(ground[0] + v.climb_gradient * s, planned)
+    climbing = flown < planned
+    need = np.minimum(v.clearance_m, CLIMB_OUT_CLEARANCE_FRACTION * (flown - ground[0]))
+    assert climbing[1:].any()
+    assert (flown - ground - need)[climbing].min() >= -1.0
+    assert route.profile.min_clearance_m >= v.clearance_m - 1.0
