@@ -23,7 +23,7 @@ from __future__ import annotations
 import itertools
 import math
 import mmap
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -58,6 +58,10 @@ class AcoOptions:
     time_penalty_m_per_s: float = 100.0
     separation_penalty: float = 20.0
     candidates: int = 4
+    time_up: Callable[[], bool] | None = None
+    """Asked before each iteration once every colony has a route: True ends the search there
+    with the best routes so far (a re-plan in flight that must be on board before the
+    vehicles reach it; the caller keeps the clock). None: the iteration caps alone."""
 
 
 @dataclass(slots=True)
@@ -483,11 +487,15 @@ def _search(
     previous_total = math.inf
     gaps = np.zeros(n)
     shorts = np.zeros(n)
+    stopped = False
     for _round in range(o.rounds):  # STEP2 / STEP6
         stall = np.zeros(n, dtype=np.int64)
         for _it in range(o.max_iter):  # STEP3-STEP5
             running = np.flatnonzero(stall < o.patience)
             if running.size == 0:
+                break
+            if o.time_up is not None and all(b is not None for b in bests) and o.time_up():
+                stopped = True
                 break
             iterations += 1
             todo = [
@@ -562,7 +570,7 @@ def _search(
         for c, b in enumerate(found):
             b.score, gaps[c], shorts[c] = _scores(shared, c, [b], o)[0]
             total += b.score
-        if abs(previous_total - total) <= o.tol * total:
+        if stopped or abs(previous_total - total) <= o.tol * total:
             break
         previous_total = total
     final = [b for b in bests if b is not None]
@@ -579,7 +587,8 @@ def _search(
             Status.TIMEOUT,
             routes,
             iterations,
-            f"iteration cap reached with the team constraint missed by {gap_s:.1f} s "
+            f"{'search time' if stopped else 'iteration cap'} reached with the team constraint "
+            f"missed by {gap_s:.1f} s "
             f"and separation short by {short_m:.0f} m",
             total,
             gap_s,

@@ -9,11 +9,12 @@ threats offline, applying each at its appearance.
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, replace
 
 import numpy as np
 
+from planner.aco import AcoOptions
 from planner.deconflict import TeamTracks
 from planner.errors import InfeasibleError
 from planner.flightpath import FlightPath, Segment
@@ -91,6 +92,7 @@ def _replan(
     method: Method,
     rng: np.random.Generator,
     anchors: Anchors,
+    time_up: Callable[[], bool] | None = None,
 ) -> dict[str, VehicleSchedule]:
     """New paths for the vehicles from where they are at ``now_s`` (prefix kept)."""
     starts: dict[str, tuple[float, float, float]] = {}
@@ -109,8 +111,9 @@ def _replan(
     problem = build_problem(world, threats=threats, starts=starts, vehicles=list(vehicle_ids))
     airborne = {vid: (alt, heading) for vid, (_, heading, alt) in poses.items()}
     _, routes = solve_and_finish(
-        world, problem, method, threats=threats, rng=rng, airborne=airborne
-    )
+        world, problem, method, threats=threats, rng=rng, airborne=airborne,
+        options=None if time_up is None else AcoOptions(time_up=time_up),
+    )  # fmt: skip
     out: dict[str, VehicleSchedule] = {}
     for vid, route in zip(vehicle_ids, routes, strict=True):
         vs = schedule.vehicle(vid)
@@ -153,6 +156,7 @@ def apply_popup(
     rng: np.random.Generator,
     anchors: Anchors | None = None,
     loiter_margin_m_s: float = 0.0,
+    time_up: Callable[[], bool] | None = None,
 ) -> PopupOutcome:
     """Re-plan around one new threat from where the team is at ``at_s`` and re-time it.
 
@@ -174,6 +178,10 @@ def apply_popup(
         schedule has them at ``at_s``.
     loiter_margin_m_s
         Loiter turns leave the speed this far above the minimum when they can.
+    time_up
+        Ends the route search with the best routes so far when it says so (asked between
+        its iterations: :attr:`planner.aco.AcoOptions.time_up`); the routes are finished and
+        checked as always.
 
     Raises
     ------
@@ -197,7 +205,9 @@ def apply_popup(
             replace(current, events=(*current.events, *events)), (), (), tuple(events)
         )
     events.append(Event(at_s, "replan", f"re-planning {', '.join(affected)} around {zone.id}"))
-    new_paths = _replan(world, threats, scenario, current, affected, at_s, method, rng, anchors)
+    new_paths = _replan(
+        world, threats, scenario, current, affected, at_s, method, rng, anchors, time_up
+    )
     vehicles = [new_paths.get(vs.vehicle_id, vs) for vs in current.vehicles]
     staged = replace(current, vehicles=tuple(vehicles))
     where = {

@@ -9,7 +9,7 @@ control loop; its result comes back as :class:`Computed`). Every type here is pl
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from typing import Any, Literal
 
@@ -302,6 +302,9 @@ class PopupJob:
     lead_s: float
     holding: frozenset[str] = frozenset()
     """Vehicles re-planned from the point they hold at (anchored there, not ahead)."""
+    time_up: Callable[[], bool] | None = None
+    """Ends the route search with the best routes so far (the runner's wall-clock budget:
+    :attr:`planner.aco.AcoOptions.time_up`)."""
 
     def run(self) -> Any:
         return apply_popup(
@@ -314,6 +317,7 @@ class PopupJob:
             rng=self.rng,
             anchors=dict(self.anchors),
             loiter_margin_m_s=self.loiter_margin_m_s,
+            time_up=self.time_up,
         )
 
 

@@ -25,6 +25,7 @@ import math
 import pickle
 import time
 from collections.abc import Callable, Coroutine, Iterable, Mapping, Sequence
+from dataclasses import replace
 from typing import Any
 
 import numpy as np
@@ -109,6 +110,10 @@ PACED_TIMEOUT_MAX_FLIGHT_S = 2.0
 timeout a lost command cost up to 47 s of flight at 200x, a takeoff that late)."""
 MIN_COMMAND_WALL_S = 0.4
 """A command is retried for at least this long (wall s) before it is given up."""
+REPLAN_SEARCH_SHARE = 0.25
+"""A re-plan's route search (the ACO) ends with the best routes so far once this share of the
+planning lead, in wall time, is spent: the lead allows one and a half times the last re-plan's
+wall time, and half of it goes to the uploads."""
 
 
 class InfeasibleRequest(GcsError):
@@ -590,8 +595,14 @@ class FlightRunner:
         t0 = time.perf_counter()
         result: Any = None
         error: Exception | None = None
+        job = a.job
+        if isinstance(job, act.PopupJob):
+            # The route search ends with its best routes so far once a share of the lead's
+            # wall time is spent: the rest is for finishing, re-timing and the uploads.
+            end_s = t0 + REPLAN_SEARCH_SHARE * job.lead_s / self.clock.rate
+            job = replace(job, time_up=lambda: time.perf_counter() >= end_s)
         try:
-            result = await asyncio.to_thread(a.job.run)
+            result = await asyncio.to_thread(job.run)
         except Exception as err:
             if not isinstance(err, GcsError | ValueError):
                 log.exception("planning job failed")

@@ -267,6 +267,38 @@ def test_popup_anchor_time_is_when_the_vehicle_reaches_the_splice_point(
         assert s_then == pytest.approx(s_m, abs=1e-3)
 
 
+def test_a_re_plan_whose_search_time_is_up_still_routes_round_the_zone(
+    paper: tuple[Scenario, World, Schedule],
+) -> None:
+    """The coordinator gives the route search a share of the planning lead in wall time;
+    when that is spent at once, the re-plan takes the first routes its search found, and
+    every affected vehicle's new path (sampled every 50 m, past the splice point) still keeps
+    out of the zone."""
+    scenario, world, schedule = paper
+    threats = build_threats(scenario, {vs.vehicle_id: vs.takeoff_s for vs in schedule.vehicles})
+    zone = popup_zones(threats)[0]
+    t_p = float(zone.appears_at_s or 0.0)
+    w = replace(world, threats=tuple(threats))
+    asked: list[float] = []
+
+    def time_up() -> bool:
+        asked.append(t_p)
+        return True
+
+    out = apply_popup(
+        schedule, zone, at_s=t_p, world=w, threats=active(threats, t_p),
+        rng=np.random.default_rng(7), time_up=time_up,
+    )  # fmt: skip
+    assert out.affected and asked
+    for vid in out.affected:
+        vs = out.schedule.vehicle(vid)
+        _, s0, _ = vs.state_at(t_p)
+        s = np.arange(s0, vs.path.length_m, 50.0)
+        pts = np.array([(p.east_m, p.north_m) for p in map(vs.path.pose_at, s)])
+        assert float(zone.distance_m(pts[:, 0], pts[:, 1]).min()) > 0.0, vid
+    assert out.schedule.vehicle(out.affected[0]).replanned_at_s == (t_p,)
+
+
 @pytest.mark.parametrize("rtt_wall_s", [None, 0.0005, 0.05, 0.3])
 def test_on_a_pace_clock_a_command_waits_one_to_two_seconds_of_flight_whatever_the_round_trip(
     rtt_wall_s: float | None,

@@ -56,6 +56,31 @@ def test_routes_reach_their_goals_through_graph_edges() -> None:
         assert task.cost_map.path_cost(route.nodes) == pytest.approx(route.cost)
 
 
+def test_a_search_whose_time_is_up_ends_with_the_routes_it_has() -> None:
+    """``time_up`` is asked once every colony has a route: answering True at once ends the
+    search after its first iteration, with a route for every vehicle through graph edges
+    from its start to its goal; never True, the search runs to its caps. How many times it
+    was asked is counted here."""
+    problem = _problem(small_scenario())
+    asked: list[bool] = []
+
+    def at_once() -> bool:
+        asked.append(True)
+        return True
+
+    cut = solve_aco(problem, rng=np.random.default_rng(1), options=AcoOptions(time_up=at_once))
+    full = solve_aco(
+        problem, rng=np.random.default_rng(1), options=AcoOptions(time_up=lambda: False)
+    )
+    assert cut.iterations == 1 and len(asked) == 1
+    assert full.iterations > 1
+    assert full.routes == solve_aco(problem, rng=np.random.default_rng(1)).routes
+    for task, route in zip(problem.tasks, cut.routes, strict=True):
+        assert route is not None
+        assert route.nodes[0] == task.start_node and route.nodes[-1] == task.goal_node
+        assert task.cost_map.path_cost(route.nodes) == pytest.approx(route.cost)
+
+
 def test_separation_coupling_resolves_a_crossing_conflict() -> None:
     # A flies west to east and B south to north, equal lengths and speeds, no takeoff freedom:
     # their shortest routes cross at the centre at the same moment. The comprehensive cost
