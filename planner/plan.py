@@ -49,14 +49,14 @@ FloatArray = NDArray[np.float64]
 Method = Literal["aco", "astar"]
 PROFILE_STEP_M = 50.0
 CLIMB_OUT_CLEARANCE_FRACTION = 0.5
-CLIMB_HEAD_FACTOR = 1.5
-"""A route whose shortened climb from home is too low keeps its grid legs as they are for
-this many times the distance that climb took, and is shortened after them."""
 """Climbing from home, the aircraft keeps at least this fraction of the height it has climbed
 between it and the terrain (until that is ``clearance_m``): level ground under the climb
 leaves all of it, rising ground ahead eats into it. A route whose climb-out rises toward
 terrain faster than that is refused (a departure's obstacle-clearance idea: the climb must
 outclimb the ground ahead by a margin that grows with the distance flown)."""
+CLIMB_HEAD_FACTOR = 1.5
+"""A route whose shortened climb from home is too low keeps its grid legs as they are for
+this many times the distance that climb took, and is shortened after them."""
 
 
 @dataclass(frozen=True)
@@ -787,9 +787,9 @@ def finish_route(
     """Where the climb from home met the profile on a candidate whose climb was too low."""
 
     def candidates() -> Iterator[FloatArray]:
-        """Shortened with the margin, with three times it; then, when only the climb from
-        home kept those from flying, the grid route as it is over the climb and shortened
-        after it; then the grid route as it is.
+        """Shortened with the margin, with three times it; then, when the climb from home
+        was too low on those, the grid route as it is over the climb and shortened after
+        it; then the grid route as it is.
 
         Built one at a time: most routes are finished by the first, so the others are
         never simplified. A shortened route may take the climb straight over a ridge the

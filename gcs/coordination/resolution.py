@@ -35,12 +35,12 @@ from numpy.typing import NDArray
 FloatArray = NDArray[np.float64]
 
 MIN_GAIN_FRACTION = 0.1
+"""A choice that keeps less than the whole separation is taken only if it opens the pair's
+closest approach by this fraction of the separation or more (:func:`resolve`)."""
 RECOVERY_SHARE = 0.5
 """A resolution is held only as long as its mover's arrival can make up with this share of the
 speed range on the other side of its speed (:func:`longest_hold_s`); the rest is left for
 what else it meets."""
-"""A choice that keeps less than the whole separation is taken only if it opens the pair's
-closest approach by this fraction of the separation or more (:func:`resolve`)."""
 
 
 @dataclass(frozen=True)
