@@ -783,8 +783,8 @@ def finish_route(
         (pts[: -len(task.tail_m)], pts[-len(task.tail_m) :]) if task.tail_m else (pts, pts[:0])
     )
 
+    # Where the climb from home met the profile on a candidate whose climb was too low.
     climb_m: float | None = None
-    """Where the climb from home met the profile on a candidate whose climb was too low."""
 
     def candidates() -> Iterator[FloatArray]:
         """Shortened with the margin, with three times it; then, when the climb from home

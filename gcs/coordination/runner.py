@@ -112,8 +112,8 @@ MIN_COMMAND_WALL_S = 0.4
 """A command is retried for at least this long (wall s) before it is given up."""
 REPLAN_SEARCH_SHARE = 0.25
 """A re-plan's route search (the ACO) ends with the best routes so far once this share of the
-planning lead, in wall time, is spent: the lead allows one and a half times the last re-plan's
-wall time, and half of it goes to the uploads."""
+planning lead, in wall time, is spent: the lead allows one and a half times the longest
+planning so far (plus 0.3 s), and half of it goes to the uploads."""
 
 
 class InfeasibleRequest(GcsError):
