@@ -31,12 +31,18 @@ lint: $(STAMP)
 typecheck: $(STAMP)
 	$(VENV)/bin/mypy
 
-pytest: $(STAMP)
-	$(VENV)/bin/pytest -q
+# On every core (pytest-xdist): the whole flights (marked slow) are handed out first, one
+# test at a time; a module whose fixture flies once (xdist_group) stays on one worker. The
+# 30 slowest tests are listed at the end.
+TEST_WORKERS ?= auto
+PYTEST := $(VENV)/bin/pytest -q -n $(TEST_WORKERS) --dist loadgroup
 
-# Everything but the whole rehearsals (marked slow): a few minutes less.
+pytest: $(STAMP)
+	$(PYTEST) --durations=30
+
+# Everything but the whole flights and the other long tests (marked slow).
 test-quick: $(STAMP) browser lint typecheck
-	$(VENV)/bin/pytest -q -m "not slow"
+	$(PYTEST) -m "not slow"
 
 demo: $(STAMP)
 	mkdir -p $(OUT)

@@ -24,7 +24,9 @@ __all__ = [
     "ISA_SEA_LEVEL_TEMPERATURE_K",
     "density_kg_m3",
     "eas2tas",
+    "eas2tas_table",
     "mean_eas2tas",
+    "mean_eas2tas_from",
 ]
 
 ISA_SEA_LEVEL_PRESSURE_PA = 101_325.0
@@ -71,6 +73,46 @@ def eas2tas(alt_m: float, *, isa_offset_k: float = 0.0) -> float:
     return math.sqrt(ISA_SEA_LEVEL_DENSITY_KG_M3 / rho)
 
 
+def eas2tas_table(
+    s_m: ArrayLike, alt_m: ArrayLike, *, isa_offset_k: float = 0.0
+) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
+    """A route's EAS-to-TAS ratio tabulated for :func:`mean_eas2tas_from`.
+
+    ``s_m``/``alt_m`` are the route's altitude profile (along path distance ascending, m;
+    altitude AMSL, m), linearly interpolated. Returns the grid along the path (m: its whole
+    length about every 50 m, at most 2000 points), ``1 / r`` at each grid point and the
+    integral of ``ds / r`` from the route's start to each grid point (m, trapezoids).
+    """
+    s = np.asarray(s_m, dtype=np.float64)
+    alt = np.asarray(alt_m, dtype=np.float64)
+    if s.ndim != 1 or s.shape != alt.shape or s.size == 0:
+        raise ValueError("s_m and alt_m must be 1-D arrays of the same non-zero length")
+    start, end = float(s[0]), float(s[-1])
+    n = max(2, min(2000, int((end - start) / 50.0) + 2))
+    grid = np.linspace(start, end, n)
+    inv = np.sqrt(
+        density_kg_m3(np.interp(grid, s, alt), isa_offset_k=isa_offset_k)
+        / ISA_SEA_LEVEL_DENSITY_KG_M3
+    )
+    cum = np.concatenate([[0.0], np.cumsum(0.5 * (inv[1:] + inv[:-1]) * np.diff(grid))])
+    return grid, inv, cum
+
+
+def mean_eas2tas_from(
+    table: tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]],
+    s_from_m: float = 0.0,
+) -> float:
+    """The EAS-to-TAS ratio that times the route of ``table`` (:func:`eas2tas_table`) exactly
+    at a constant EAS from ``s_from_m`` on: ``L / integral(ds / r)``, the harmonic mean of
+    ``r`` along the rest of the path (at the end of the path, ``r`` there)."""
+    grid, inv, cum = table
+    end = float(grid[-1])
+    start = min(max(s_from_m, float(grid[0])), end)
+    if end - start <= 1e-9:
+        return 1.0 / float(np.interp(start, grid, inv))
+    return (end - start) / (float(cum[-1]) - float(np.interp(start, grid, cum)))
+
+
 def mean_eas2tas(
     s_m: ArrayLike, alt_m: ArrayLike, *, s_from_m: float = 0.0, isa_offset_k: float = 0.0
 ) -> float:
@@ -79,22 +121,7 @@ def mean_eas2tas(
     Flying ``ds`` at equivalent airspeed ``v`` takes ``ds / (v * r(s))``; the whole route
     from ``s_from_m`` takes ``L / (v * R)`` with ``R = L / integral(ds / r)`` (the harmonic
     mean of ``r`` along the path). ``s_m``/``alt_m`` are the route's altitude profile (along
-    path distance ascending, m; altitude AMSL, m), linearly interpolated.
+    path distance ascending, m; altitude AMSL, m), linearly interpolated. Asked often of one
+    route, keep its :func:`eas2tas_table` and use :func:`mean_eas2tas_from`.
     """
-    s = np.asarray(s_m, dtype=np.float64)
-    alt = np.asarray(alt_m, dtype=np.float64)
-    if s.ndim != 1 or s.shape != alt.shape or s.size == 0:
-        raise ValueError("s_m and alt_m must be 1-D arrays of the same non-zero length")
-    end = float(s[-1])
-    start = min(max(s_from_m, float(s[0])), end)
-    if end - start <= 1e-9:
-        return eas2tas(float(np.interp(start, s, alt)), isa_offset_k=isa_offset_k)
-    n = max(2, min(2000, int((end - start) / 50.0) + 2))
-    grid = np.linspace(start, end, n)
-    ratio = np.sqrt(
-        ISA_SEA_LEVEL_DENSITY_KG_M3
-        / density_kg_m3(np.interp(grid, s, alt), isa_offset_k=isa_offset_k)
-    )
-    inv = 1.0 / ratio
-    integral = float(np.sum(0.5 * (inv[1:] + inv[:-1]) * np.diff(grid)))
-    return (end - start) / integral
+    return mean_eas2tas_from(eas2tas_table(s_m, alt_m, isa_offset_k=isa_offset_k), s_from_m)

@@ -136,6 +136,25 @@ def _tm_forward(
     return big_a * eta, big_a * xi, k
 
 
+def _tm_forward_point(series: _TmSeries, lat_rad: float, dlon_rad: float) -> tuple[float, float]:
+    """:func:`_tm_forward` for one point in plain floats (x_m, y_m): the per-fix and
+    per-step path of the coordinator and the simulator, where numpy's per-call cost on
+    0-d arrays was most of the time."""
+    tau = math.tan(lat_rad)
+    e = series.e
+    sigma = math.sinh(e * math.atanh(e * tau / math.hypot(1.0, tau)))
+    tau_p = tau * math.hypot(1.0, sigma) - sigma * math.hypot(1.0, tau)
+    cos_l = math.cos(dlon_rad)
+    xi_p = math.atan2(tau_p, cos_l)
+    eta_p = math.asinh(math.sin(dlon_rad) / math.hypot(tau_p, cos_l))
+    xi, eta = xi_p, eta_p
+    for j, alpha_j in enumerate(series.alpha, start=1):
+        xi += alpha_j * math.sin(2 * j * xi_p) * math.cosh(2 * j * eta_p)
+        eta += alpha_j * math.cos(2 * j * xi_p) * math.sinh(2 * j * eta_p)
+    big_a = series.rectifying_radius_m
+    return big_a * eta, big_a * xi
+
+
 def _tm_reverse(
     series: _TmSeries, x_m: FloatArray, y_m: FloatArray
 ) -> tuple[FloatArray, FloatArray]:
@@ -255,6 +274,18 @@ class LocalFrame:
         ValueError
             If an input is not finite or a latitude is outside +-90 deg.
         """
+        if isinstance(lat_deg, float | int) and isinstance(lon_deg, float | int):
+            if not (math.isfinite(lat_deg) and math.isfinite(lon_deg)):
+                raise ValueError(
+                    f"{'lat_deg' if not math.isfinite(lat_deg) else 'lon_deg'} must be finite"
+                )
+            if abs(lat_deg) > 90.0:
+                raise ValueError("lat_deg must be within +-90 deg")
+            dlon_deg = (lon_deg - self.origin_lon_deg + 180.0) % 360.0 - 180.0
+            east, y = _tm_forward_point(
+                _WGS84_SERIES, math.radians(lat_deg), math.radians(dlon_deg)
+            )
+            return east, y - self._origin_y_m
         lat, lon, scalar = _as_float_arrays("lat_deg", lat_deg, "lon_deg", lon_deg)
         if np.any(np.abs(lat) > 90.0):
             raise ValueError("lat_deg must be within +-90 deg")

@@ -32,7 +32,12 @@ from typing import Literal, NamedTuple
 import numpy as np
 from numpy.typing import NDArray
 
-from planner.atmosphere import ISA_SEA_LEVEL_DENSITY_KG_M3, density_kg_m3, mean_eas2tas
+from planner.atmosphere import (
+    ISA_SEA_LEVEL_DENSITY_KG_M3,
+    density_kg_m3,
+    eas2tas_table,
+    mean_eas2tas_from,
+)
 from planner.climbout import ClimbOut
 from planner.flightpath import FlightPath
 from planner.scenario import Scenario
@@ -157,17 +162,14 @@ class VehicleSchedule:
         return float(np.interp(s_m, self.wp_s_m, self.wp_alt_m))
 
     def tas_per_eas(self, s_from_m: float = 0.0) -> float:
-        """True per equivalent airspeed that times the path from ``s_from_m`` (ISA); kept
-        for the next call from the same place (timing a vehicle at each of its cruise speeds
-        asks the same schedule for it again and again)."""
-        memo = self._tas_per_eas
-        if s_from_m not in memo:
-            memo[s_from_m] = mean_eas2tas(self.wp_s_m, self.wp_alt_m, s_from_m=s_from_m)
-        return memo[s_from_m]
+        """True per equivalent airspeed that times the path from ``s_from_m`` (ISA), from
+        the path's table kept with the schedule (it is asked at every cruise speed tried
+        when timing, and at every fix in flight)."""
+        return mean_eas2tas_from(self._eas2tas_table, s_from_m)
 
     @cached_property
-    def _tas_per_eas(self) -> dict[float, float]:
-        return {}
+    def _eas2tas_table(self) -> tuple[FloatArray, FloatArray, FloatArray]:
+        return eas2tas_table(self.wp_s_m, self.wp_alt_m)
 
     @cached_property
     def _track(self) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:

@@ -35,8 +35,11 @@ from pathlib import Path
 
 import numpy as np
 
-STALE_WALL_S = 1.0
-"""An acknowledgement older than this (monotonic wall seconds) holds nothing back."""
+STALE_WALL_S = 3.0
+"""An acknowledgement older than this (monotonic wall seconds) holds nothing back: long
+enough that a ground station its machine keeps busy (two other processes on each core, a
+planning thread holding the interpreter) is still waited for, short enough that a flight
+whose ground station died goes on within seconds."""
 DEFAULT_LEAD_S = 1.0
 """How far (flight seconds) the simulator may run ahead of what the ground station has seen."""
 _SIZE = 40

@@ -46,7 +46,9 @@ class FlightConfig:
     """A vehicle silent this long (mission s) is reported; its mission keeps it flying."""
     link_silence_wall_s: float = 0.025
     """...and at least this long in wall time: at 200x, 3 s of mission is 15 ms, less than a
-    busy two-core machine's scheduling jitter (25 ms wall is 5 s of mission at 200x)."""
+    busy two-core machine's scheduling jitter (25 ms wall is 5 s of mission at 200x). On a
+    pace clock (lock step) this floor is taken at the clock's rate, in mission time (5 s at
+    200x), and wall time is not read: the simulator waits for the coordinator."""
     conflict_horizon_s: float = 30.0
     """Separation is predicted this far ahead of each fix (no further than either vehicle's
     slot), from the two vehicles' present velocities (straight flight: not for a vehicle in a
@@ -111,4 +113,5 @@ class FlightConfig:
     replan_delay_wall_s: float = 0.0
     """Test hook: wall seconds added to every pop-up re-plan job but those from a hold point
     (a re-plan that comes back too late); not counted in the planning time that sets the
-    lead."""
+    lead. On a pace clock it is this many wall seconds at the clock's rate, waited in mission
+    time, so that a busy machine does not shorten the stretch of flight it covers."""

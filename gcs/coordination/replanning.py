@@ -48,6 +48,8 @@ class MissionChanges:
     loiter_lead_s: float
     extra_threats: list[Threat]
     removed_threats: set[str]
+    _zones_built: tuple[Scenario, object, list[ThreatZone]] | None
+    """:meth:`zones` as last built, with the scenario and what it was built from."""
     popups_done: set[str]
     popups_running: set[str]
     pending: dict[str, act.Upload]
@@ -377,14 +379,26 @@ class MissionChanges:
         }
 
     def zones(self) -> list[ThreatZone]:
-        """Every threat of the mission, the operator's included, timed from the launches."""
-        threats = [
-            t
-            for t in (*self.scenario.threats, *self.extra_threats)
-            if t.id not in self.removed_threats
-        ]
-        scenario = self.scenario.model_copy(update={"threats": threats})
-        return build_threats(scenario, self._takeoffs_s())
+        """Every threat of the mission, the operator's included, timed from the launches.
+        Built again only when one of those changes (it is asked at every tick)."""
+        takeoffs = self._takeoffs_s()
+        # The extra threats are only ever appended: their ids stay theirs while listed.
+        key = (
+            tuple(id(t) for t in self.extra_threats),
+            frozenset(self.removed_threats),
+            tuple(sorted(takeoffs.items())),
+        )
+        built = self._zones_built
+        if built is None or built[0] is not self.scenario or built[1] != key:
+            threats = [
+                t
+                for t in (*self.scenario.threats, *self.extra_threats)
+                if t.id not in self.removed_threats
+            ]
+            scenario = self.scenario.model_copy(update={"threats": threats})
+            built = (self.scenario, key, build_threats(scenario, takeoffs))
+            self._zones_built = built
+        return list(built[2])
 
     def in_force(self, t: float) -> list[ThreatZone]:
         return list(active(self.zones(), t))

@@ -613,9 +613,20 @@ class FlightRunner:
         if isinstance(a.job, act.PopupJob):
             self.plan_wall_s = max(self.plan_wall_s, wall)
             if self.config.replan_delay_wall_s > 0.0 and not a.job.holding:
-                await asyncio.sleep(self.config.replan_delay_wall_s)  # the test hook: late
+                await self._late_by(self.config.replan_delay_wall_s)  # the test hook
         self._feed(act.Computed(a.job, result, error, wall))
         self._feed(self._planning_lead())
+
+    async def _late_by(self, wall_s: float) -> None:
+        """Wait ``wall_s`` of wall time, or on a pace clock ``wall_s`` times its rate of
+        mission time: what that wait is at the nominal speed-up, however busy the machine
+        (a loaded machine flies fewer mission seconds in a wall second)."""
+        if not self.clock.paced:
+            await asyncio.sleep(wall_s)
+            return
+        until_s = self.now_s() + wall_s * self.clock.rate
+        while self.now_s() < until_s:
+            await asyncio.sleep(0.002)
 
     # -- before the start -----------------------------------------------------------------------
 
@@ -736,7 +747,9 @@ class FlightRunner:
             )
 
     def _silence_s(self) -> float:
-        """A position gap (mission s) long enough to report: config, with its wall floor."""
+        """A position gap (mission s) long enough to report: config, with its wall floor
+        taken at the clock's rate (on a pace clock the gap is judged in mission time alone:
+        the simulator waits for this process, so a busy machine makes no gap)."""
         cfg = self.config
         return max(cfg.link_silence_s, cfg.link_silence_wall_s * self.clock.rate)
 
@@ -791,8 +804,8 @@ class FlightRunner:
         cfg = self.config
         if (
             m.phase in ("takeoff", "route")
-            and age > cfg.link_silence_s
-            and wall_s > cfg.link_silence_wall_s
+            and age > (self._silence_s() if self.clock.paced else cfg.link_silence_s)
+            and (self.clock.paced or wall_s > cfg.link_silence_wall_s)
         ):
             self._say(
                 EventKind.LINK,

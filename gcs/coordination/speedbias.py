@@ -27,8 +27,6 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-import numpy as np
-
 from planner.wind import Wind
 
 __all__ = ["BiasConfig", "SpeedBiasEstimator"]
@@ -58,8 +56,11 @@ class SpeedBiasEstimator:
 
     def __init__(self, config: BiasConfig | None = None) -> None:
         self.config = config or BiasConfig()
-        self._info = np.zeros((3, 3))
-        self._vec = np.zeros(3)
+        # The normal equations of theta = (k, dwe, dwn), each fix's rows being
+        # (tas sin h, 1, 0) and (tas cos h, 0, 1): their matrix is
+        # [[aa, a, b], [a, n, 0], [b, 0, n]], kept as those four sums, and its right side.
+        self._aa = self._a = self._b = self._n = 0.0
+        self._vec = [0.0, 0.0, 0.0]
         self._last_t_s: float | None = None
         self._scale = 1.0
         self._wind_error = (0.0, 0.0)
@@ -116,20 +117,25 @@ class SpeedBiasEstimator:
         if self._last_t_s is not None:
             dt = max(t_s - self._last_t_s, 0.0)
             decay = math.exp(-dt / cfg.time_constant_s)
-            self._info *= decay
-            self._vec *= decay
+            self._aa *= decay
+            self._a *= decay
+            self._b *= decay
+            self._n *= decay
+            self._vec = [v * decay for v in self._vec]
         self._last_t_s = t_s
         self._ref_tas_m_s = predicted_tas_m_s
         # Along a climb or a descent the horizontal speed is the true airspeed times the cosine
         # of the flight path angle.
         climb = climb_m_s or 0.0
         tas = math.sqrt(max(predicted_tas_m_s**2 - climb**2, 0.0))
-        rows = np.array(
-            [[tas * math.sin(heading_rad), 1.0, 0.0], [tas * math.cos(heading_rad), 0.0, 1.0]]
-        )
-        resid = np.array([ve_m_s - wind.to_east_m_s, vn_m_s - wind.to_north_m_s])
-        self._info += rows.T @ rows
-        self._vec += rows.T @ resid
+        a, b = tas * math.sin(heading_rad), tas * math.cos(heading_rad)
+        re, rn = ve_m_s - wind.to_east_m_s, vn_m_s - wind.to_north_m_s
+        self._aa += a * a + b * b
+        self._a += a
+        self._b += b
+        self._n += 1.0
+        v = self._vec
+        self._vec = [v[0] + a * re + b * rn, v[1] + re, v[2] + rn]
         self.used += 1
         self._solve()
         return True
@@ -137,12 +143,17 @@ class SpeedBiasEstimator:
     def _solve(self) -> None:
         cfg = self.config
         tas = self._ref_tas_m_s
-        prior = np.diag([cfg.prior_fixes * tas * tas, cfg.prior_fixes, cfg.prior_fixes])
-        theta0 = np.array([1.0, 0.0, 0.0])
-        theta = np.linalg.solve(self._info + prior, self._vec + prior @ theta0)
+        # (normal matrix + diag(p tas^2, p, p)) theta = vec + (p tas^2, 0, 0): the last two
+        # rows give dwe and dwn from k, the first then k alone.
+        p = cfg.prior_fixes
+        d = self._n + p
+        v1, v2, v3 = self._vec
+        k = (v1 + p * tas * tas - (self._a * v2 + self._b * v3) / d) / (
+            self._aa + p * tas * tas - (self._a * self._a + self._b * self._b) / d
+        )
         lo, hi = cfg.scale_bounds
-        self._scale = float(min(max(theta[0], lo), hi))
-        de, dn = float(theta[1]), float(theta[2])
+        self._scale = float(min(max(k, lo), hi))
+        de, dn = (v2 - self._a * k) / d, (v3 - self._b * k) / d
         norm = math.hypot(de, dn)
         if norm > cfg.max_wind_error_m_s:
             de, dn = de * cfg.max_wind_error_m_s / norm, dn * cfg.max_wind_error_m_s / norm

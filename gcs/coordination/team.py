@@ -134,6 +134,7 @@ class TeamController(ZoneGuard, TeamTime):
         self.members: dict[str, Member] = {}
         self.extra_threats: list[Threat] = []
         self.removed_threats: set[str] = set()
+        self._zones_built: tuple[Scenario, object, list[ThreatZone]] | None = None
         self.popups_done: set[str] = set()
         self.popups_running: set[str] = set()
         self.threats_appeared: list[dict[str, Any]] = []

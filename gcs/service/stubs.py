@@ -10,6 +10,7 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import os
+import secrets
 import signal
 import socket
 import subprocess
@@ -30,25 +31,30 @@ IDLE_EXIT_S = 120.0
 and did not come back (a service restarted within it reaches the vehicles again)."""
 
 
-def free_tcp_base(n: int) -> int:
-    """A base port with ``n`` free ports at stride 10 (SITL layout)."""
-    for _ in range(50):
-        with socket.socket() as sock:
-            sock.bind(("127.0.0.1", 0))
-            base = int(sock.getsockname()[1])
-        if base + 10 * n > 65000:
-            continue
+PORT_RANGE = (10_000, 32_000)
+"""Where a simulator's ports are looked for: below Linux's ephemeral range (32768-60999), so
+that no outgoing connection of this machine (a client, a link, a database session) is given
+one of them between the look and the simulator's bind; a random base in it, so that two
+processes looking at once (two flights, parallel tests) rarely pick the same."""
+
+
+def free_tcp_base(n: int, stride: int = 10) -> int:
+    """A base port with ``n`` free ports at ``stride`` (10: the SITL layout), each checked by
+    binding it on loopback."""
+    lo, hi = PORT_RANGE
+    for _ in range(200):
+        base = lo + secrets.randbelow(hi - lo - stride * n)
         ok = True
         for i in range(n):
             with socket.socket() as sock:
                 try:
-                    sock.bind(("127.0.0.1", base + 10 * i))
+                    sock.bind(("127.0.0.1", base + stride * i))
                 except OSError:
                     ok = False
                     break
         if ok:
             return base
-    raise GcsError("no free TCP ports for the stub vehicles")
+    raise GcsError(f"no {n} free TCP ports at stride {stride} in {lo}-{hi}")
 
 
 @dataclass

@@ -65,6 +65,8 @@ def _served_openapi() -> dict[str, Any]:
     return doc
 
 
+pytestmark = pytest.mark.slow  # every operation fuzzed: about 25 s, left out of make test-quick
+
 schema = schemathesis.openapi.from_dict(
     _served_openapi(),
     config=schemathesis.Config.from_dict({"seed": SEED, "request-timeout": REQUEST_TIMEOUT_S}),

@@ -330,6 +330,7 @@ def _head_of(url: str, schema: str | None = None) -> str:
     return str(version)
 
 
+@pytest.mark.slow  # several seconds: left out of make test-quick
 async def test_migrate_brings_postgresql_to_the_head_twice_over(
     compose: dict[str, Any], pg_url: str, app_dir: Path
 ) -> None:
@@ -409,6 +410,7 @@ async def _flight_on(c: httpx.AsyncClient, ids: list[str], scenario: Path) -> No
     assert [v["link"]["system_id"] for v in snap["vehicles"]] == [1, 2, 3]
 
 
+@pytest.mark.slow  # several seconds: left out of make test-quick
 async def test_api_answers_health_and_ready_and_reaches_the_sitl_vehicles(
     compose: dict[str, Any], pg_url: str, app_dir: Path
 ) -> None:

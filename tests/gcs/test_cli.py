@@ -140,6 +140,7 @@ def request(seq: int) -> object:
     return decoded
 
 
+@pytest.mark.slow  # several seconds: left out of make test-quick
 async def test_a_slow_upload_and_download_print_progress_on_stderr(tmp_path: Path) -> None:
     """100 ms each way: 120 items take at least 15 round trips of 0.2 s each way, in any load."""
     src = tmp_path / "m.waypoints"

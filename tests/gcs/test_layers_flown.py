@@ -24,7 +24,8 @@ from tests.flightstory import story
 from tests.planner.conftest import crossing_scenario
 from tests.rehearsing import rehearse_data
 
-pytestmark = pytest.mark.slow  # about 20 s of wall time
+# One flight for the module (about 20 s of wall time), flown on one worker under pytest -n.
+pytestmark = [pytest.mark.slow, pytest.mark.xdist_group("layers_flown")]
 
 LAYER_M = 400.0
 GOAL_PASS_M = 150.0

@@ -303,6 +303,7 @@ async def test_200_item_mission_round_trips_unchanged(loss: float) -> None:
             assert team.vehicles[0].link.outbound.lost > 10
 
 
+@pytest.mark.slow  # several seconds: left out of make test-quick
 async def test_upload_outlasting_a_5_s_blackout_completes() -> None:
     items = waypoints(60)
 

@@ -43,6 +43,7 @@ def shifted(items: list[MissionItem], run: int) -> list[MissionItem]:
     return [it if it.seq == 0 else replace(it, x=it.x + 100 * run, z=it.z + run) for it in items]
 
 
+@pytest.mark.slow  # several seconds: left out of make test-quick
 async def test_200_items_up_and_down_at_30_percent_loss_with_defaults_in_20_of_20_runs() -> None:
     """Default options only; 20 runs shared by 4 vehicles of one team, run side by side.
     Every upload is checked against what the stub stores, every download against it."""
@@ -76,6 +77,7 @@ async def test_200_items_up_and_down_at_30_percent_loss_with_defaults_in_20_of_2
     assert len(outcomes) == RUNS and not failed, failed
 
 
+@pytest.mark.slow  # several seconds: left out of make test-quick
 async def test_a_vehicle_that_goes_silent_mid_upload_fails_it_by_the_silence_bound() -> None:
     """Nothing heard for policy.silence_s (default options): MissionTimeout, and the vehicle
     keeps the mission it had."""

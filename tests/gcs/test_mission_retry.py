@@ -227,6 +227,7 @@ def _default_round_trip(seed: int, loss: float) -> tuple[bool, float, float]:
     return True, t_up, t_down
 
 
+@pytest.mark.slow  # several seconds: left out of make test-quick
 def test_200_items_at_30_percent_loss_with_defaults_succeed_in_100_of_100_seeds() -> None:
     outcomes = [_default_round_trip(seed, 0.3) for seed in range(100)]
     assert all(ok for ok, _, _ in outcomes), [s for s, (ok, *_) in enumerate(outcomes) if not ok]

@@ -306,8 +306,12 @@ async def test_two_flights_at_once_on_one_fleet_each_to_its_own_time(tmp_path: P
     while bases[1] == bases[0]:
         bases[1] = free_port_base(3)
     truths = [tmp_path / "a.jsonl", tmp_path / "b.jsonl"]
+    paces = [tmp_path / "a.pace", tmp_path / "b.pace"]
+    # Each simulator in lock step with its own flight: a busy machine slows the flights
+    # instead of making either coordinator answer late in it.
     procs = [
-        await start_stub(ring, b, t, speedup=100.0) for b, t in zip(bases, truths, strict=True)
+        await start_stub(ring, b, t, "--lockstep", str(p), speedup=100.0)
+        for b, t, p in zip(bases, truths, paces, strict=True)
     ]
     conns = [[f"tcp:127.0.0.1:{b + 10 * i}" for i in range(3)] for b in bases]
     try:
@@ -316,8 +320,8 @@ async def test_two_flights_at_once_on_one_fleet_each_to_its_own_time(tmp_path: P
             def flight(k: int, **more: Any) -> RehearsalOptions:
                 return RehearsalOptions(
                     scenario_path=ring, scenario=scenario, connect=conns[k], truth=truths[k],
-                    fleet=fleet, seed=k + 1, quiet=True, json_out=tmp_path / f"flight{k}.json",
-                    **more,
+                    lockstep_file=paces[k], fleet=fleet, seed=k + 1, quiet=True,
+                    json_out=tmp_path / f"flight{k}.json", **more,
                 )  # fmt: skip
 
             first = asyncio.create_task(rehearse(flight(0)))

@@ -118,3 +118,36 @@ def test_the_scale_is_bounded() -> None:
     headings = [math.radians(5.0 * k) for k in range(300)]
     _fly(est, headings, scale=1.6, true_wind=still, reported_wind=still)
     assert est.scale == pytest.approx(est.config.scale_bounds[1])
+
+
+def test_the_estimate_is_the_decayed_least_squares_fit_with_its_prior() -> None:
+    """The estimator's closed form against the same problem solved here by numpy: each fix's
+    two rows weighted by exp(-age / time constant), the prior as that many fixes' worth of
+    ``k = 1, dw = 0`` at the last predicted airspeed."""
+    est = SpeedBiasEstimator()
+    cfg = est.config
+    rng = np.random.default_rng(5)
+    rows, resid, times = [], [], []
+    reported = Wind.from_speed_from(4.0, 200.0)
+    tas = 0.0
+    for k in range(60):
+        t, h, tas = 0.5 * k, float(rng.uniform(0, 2 * math.pi)), float(rng.uniform(18, 26))
+        # 7% fast, the wind off by (1.5, -2) m/s, and noise: within the bounds, not clipped.
+        ve = 1.07 * tas * math.sin(h) + reported.to_east_m_s + 1.5 + float(rng.normal(0, 1))
+        vn = 1.07 * tas * math.cos(h) + reported.to_north_m_s - 2.0 + float(rng.normal(0, 1))
+        assert est.update(
+            t, ve_m_s=ve, vn_m_s=vn, heading_rad=h, predicted_tas_m_s=tas, wind=reported
+        )
+        rows += [[tas * math.sin(h), 1.0, 0.0], [tas * math.cos(h), 0.0, 1.0]]
+        resid += [ve - reported.to_east_m_s, vn - reported.to_north_m_s]
+        times += [t, t]
+    w = np.exp(-(times[-1] - np.array(times)) / cfg.time_constant_s)
+    a, r = np.array(rows), np.array(resid)
+    prior = np.diag([cfg.prior_fixes * tas * tas, cfg.prior_fixes, cfg.prior_fixes])
+    theta = np.linalg.solve(a.T @ (w[:, None] * a) + prior, a.T @ (w * r) + prior @ [1, 0, 0])
+    lo, hi = cfg.scale_bounds
+    assert lo < theta[0] < hi and math.hypot(theta[1], theta[2]) < cfg.max_wind_error_m_s
+    assert est.scale == pytest.approx(theta[0], abs=1e-9)
+    assert (est.wind_error.to_east_m_s, est.wind_error.to_north_m_s) == pytest.approx(
+        (theta[1], theta[2]), abs=1e-9
+    )

@@ -42,7 +42,8 @@ from tests.flightstory import story
 from tests.rehearsing import rehearse_data
 from tests.teams import ring_team
 
-pytestmark = pytest.mark.slow  # one rehearsal for the module: about 25 s of wall time
+# One rehearsal for the module (about 25 s of wall time), flown on one worker under pytest -n.
+pytestmark = [pytest.mark.slow, pytest.mark.xdist_group("swarm_popup_replanned")]
 
 ZONE = "POP30"
 CENTRE_EN_M = (30_000.0, 39_000.0)

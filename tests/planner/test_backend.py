@@ -16,6 +16,8 @@ from planner.scenario import load_scenario, parse_scenario
 from tests.planner.conftest import small_scenario
 
 ROOT = Path(__file__).resolve().parents[2]
+# One local Ray for the module, started on one worker under pytest -n.
+pytestmark = pytest.mark.xdist_group("ray")
 
 
 @pytest.fixture(scope="module")

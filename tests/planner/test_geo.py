@@ -314,6 +314,11 @@ def test_matches_proj_tmerc(origin_lat_deg: float) -> None:
     proj_lon_deg, proj_lat_deg = proj.transform(east_m, north_m, direction="INVERSE")
     np.testing.assert_allclose(proj_lat_deg, lat_deg, atol=1e-11)
     np.testing.assert_allclose(proj_lon_deg, lon_deg, atol=1e-11)
+    # Plain floats take their own path (the per-fix one): as close to PROJ.
+    for k in range(0, 2000, 7):
+        e, n = frame.to_local(float(lat_deg[k]), float(lon_deg[k]))
+        assert type(e) is float and type(n) is float
+        assert (e, n) == pytest.approx((proj_east_m[k], proj_north_m[k]), abs=1e-6)
 
 
 def test_vincenty_matches_proj_geod() -> None:

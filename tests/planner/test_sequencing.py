@@ -148,6 +148,7 @@ def test_a_requested_time_is_not_moved_for_the_separation_and_the_pair_is_refuse
     assert set(info.value.pair) == {"A", "B"}
 
 
+@pytest.mark.slow  # several seconds: left out of make test-quick
 @pytest.mark.parametrize(("n", "assign"), [(10, True), (30, True), (30, False)])
 def test_the_planner_bench_teams_are_separated_with_their_approach_points_shared_out(
     n: int, assign: bool
@@ -203,6 +204,7 @@ def _separated_only_with(
     return partial, s, planned
 
 
+@pytest.mark.slow  # several seconds: left out of make test-quick
 def test_the_first_pass_leaves_a_crowd_in_conflict_and_the_repair_separates_it(
     monkeypatch: pytest.MonkeyPatch,
 ) -> None:
@@ -217,6 +219,7 @@ def test_the_first_pass_leaves_a_crowd_in_conflict_and_the_repair_separates_it(
     assert len(moved) > len([e for e in one_pass.events if e.kind == "separation"])
 
 
+@pytest.mark.slow  # several seconds: left out of make test-quick
 def test_a_crowd_the_pairwise_lifts_leave_too_close_is_timed_on_lanes(
     monkeypatch: pytest.MonkeyPatch,
 ) -> None:

@@ -22,6 +22,7 @@ def database_url(request: pytest.FixtureRequest, tmp_path: Path) -> Iterator[str
         yield from postgres_schema()
 
 
+@pytest.mark.slow  # several seconds: left out of make test-quick
 async def test_scenarios_flights_and_their_events_are_kept_in_the_database(
     database_url: str, tmp_path: Path
 ) -> None:

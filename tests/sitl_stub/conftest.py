@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
-import socket
 import sys
 from collections.abc import AsyncIterator, Callable
 from pathlib import Path
@@ -12,28 +11,15 @@ from typing import Any
 
 from pymavlink.dialects.v20 import ardupilotmega as mavlink2
 
+from gcs.service.stubs import free_tcp_base
+
 Pred = Callable[[Any], bool]
 
 
 def free_port_base(n: int = 1, stride: int = 10) -> int:
-    """A base port with ``n`` free ports at ``stride`` spacing (best effort)."""
-    for _ in range(50):
-        with socket.socket() as s:
-            s.bind(("127.0.0.1", 0))
-            base = int(s.getsockname()[1])
-        if base + stride * n > 65000:
-            continue
-        ok = True
-        for i in range(n):
-            with socket.socket() as s:
-                try:
-                    s.bind(("127.0.0.1", base + stride * i))
-                except OSError:
-                    ok = False
-                    break
-        if ok:
-            return base
-    raise RuntimeError("no free port range")
+    """A base port with ``n`` free ports at ``stride`` spacing, the service's own choice
+    (:func:`gcs.service.stubs.free_tcp_base`: below the ephemeral range, at random)."""
+    return free_tcp_base(n, stride)
 
 
 class Client:

@@ -91,6 +91,7 @@ async def test_cli_serves_two_vehicles_and_stops_cleanly_on_sigint() -> None:
                 await c.close()
 
 
+@pytest.mark.slow  # several seconds: left out of make test-quick
 async def test_idle_exit_stops_a_simulator_whose_clients_are_gone() -> None:
     """--idle-exit S: running while nobody has connected yet and while a client is there;
     stopped (exit 0) S wall seconds after the last client left."""
@@ -124,6 +125,7 @@ async def test_idle_exit_stops_a_simulator_whose_clients_are_gone() -> None:
             await proc.wait()
 
 
+@pytest.mark.slow  # several seconds: left out of make test-quick
 def test_idle_exit_stops_a_simulator_whose_parent_was_killed() -> None:
     """Its stdout and stderr are pipes to a ground station that is SIGKILLed (as a service
     killed mid-flight): writing its last words to the dead pipe must not keep it running."""

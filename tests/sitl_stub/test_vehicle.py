@@ -226,6 +226,7 @@ async def test_out_of_range_latitude_over_tcp_gets_invalid_param5_x(client: Clie
     assert await client.upload(items) == mavlink2.MAV_MISSION_INVALID_PARAM5_X
 
 
+@pytest.mark.slow  # several seconds: left out of make test-quick
 async def test_hundred_items_round_trip_over_30_percent_loss() -> None:
     async with SimTeam.start(homes=[HOME], tcp_base=0, speedup=1.0, mission_timeout_s=0.05) as t:
         t.vehicles[0].link.faults(loss=0.3)
