@@ -21,16 +21,11 @@ def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
     """Every test under its own id, and the long ones (marked ``slow``: the whole flights
     among them) first.
 
-    - Schemathesis names each operation's test ``test_operation[GET /v1/...]`` but leaves
-      them all one node id; pytest-xdist hands tests out by node id and ran one of the 31.
-      Each gets its name in its id, and a session with two tests under one id stops here.
+    - pytest-xdist hands tests out by node id: two tests under one id (schemathesis'
+      operation tests on pytest 9 all had one) would run once, so such a session stops here.
     - On several workers (``pytest -n``) the longest tests then start at once and the short
       ones fill in behind them, instead of one flight starting last.
     """
-    for item in items:
-        named = f"{item.parent.nodeid}::{item.name}" if item.parent is not None else item.nodeid
-        if item.nodeid != named:  # pytest 9 keeps the id apart from the node's name
-            item._id = type(item.id).parse(named)
     seen: set[str] = set()
     for item in items:
         if item.nodeid in seen:

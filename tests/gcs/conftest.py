@@ -22,6 +22,7 @@ from planner.plan import World, build_world, plan
 from planner.retime import build_schedule
 from planner.scenario import Scenario, load_scenario
 from planner.schedule import Schedule
+from tests.flightstory import story
 
 PG_ADMIN = "postgresql+psycopg://postgres@127.0.0.1:5432/test"
 
@@ -100,7 +101,9 @@ def assert_flight_kept(url: str, record: dict[str, Any]) -> None:
     store = Store.open(url, migrate=False)
     try:
         flight = store.flight(record["flight_id"])
-        assert flight.state == "completed"
+        assert flight.state == "completed", (
+            f"{record['state']}: {record['state_reason']}\n{story(record['events'])}"
+        )
         assert flight.resume is not None  # the schedule it was launched on
         planned = [v["id"] for v in flight.resume["schedule"]["vehicles"]]
         assert planned == [v["id"] for v in record["vehicles"]]
