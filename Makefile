@@ -31,9 +31,9 @@ lint: $(STAMP)
 typecheck: $(STAMP)
 	$(VENV)/bin/mypy
 
-# On every core (pytest-xdist): the whole flights (marked slow) are handed out first, one
-# test at a time; a module whose fixture flies once (xdist_group) stays on one worker. The
-# 30 slowest tests are listed at the end.
+# On every core (pytest-xdist): the long tests (marked slow, the whole flights among them)
+# are handed out first, in turn to each worker; a module whose fixture flies once
+# (xdist_group) stays on one worker. The 30 slowest tests are listed at the end.
 TEST_WORKERS ?= auto
 PYTEST := $(VENV)/bin/pytest -q -n $(TEST_WORKERS) --dist loadgroup
 
