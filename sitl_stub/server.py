@@ -364,6 +364,10 @@ class TeamServer:
                 if limit_s < math.inf:
                     due = min(due, max(int((limit_s - clock.sim_time_s) / clock.step_s), 0))
             for k in range(due):
+                if paced is not None and paced.limit_s() - clock.sim_time_s < clock.step_s:
+                    # Acknowledged during the batch (the first acknowledgement, or the first
+                    # after a stale one, came while a batch worked out without one ran).
+                    break
                 self.step_once()
                 if paced is not None:
                     # Each step's packets go out with the pace clock at that step: a ground
