@@ -621,12 +621,10 @@ class FlightRunner:
         """Wait ``wall_s`` of wall time, or on a pace clock ``wall_s`` times its rate of
         mission time: what that wait is at the nominal speed-up, however busy the machine
         (a loaded machine flies fewer mission seconds in a wall second)."""
-        if not self.clock.paced:
+        if self.clock.paced:
+            await self.clock.sleep(wall_s * self.clock.rate)
+        else:
             await asyncio.sleep(wall_s)
-            return
-        until_s = self.now_s() + wall_s * self.clock.rate
-        while self.now_s() < until_s:
-            await asyncio.sleep(0.002)
 
     # -- before the start -----------------------------------------------------------------------
 
