@@ -88,6 +88,8 @@ class Member:
     controller: ArrivalController
     target_s: float
     takeoff_s: float
+    planned_s: float = math.nan
+    """Its slot as the schedule set it before launch (``target_s`` then; mission s)."""
     phase: Phase = "ground"
     arm_sent: bool = False
     """Armed ahead of the takeoff time (:class:`gcs.coordination.actions.Arm` sent)."""

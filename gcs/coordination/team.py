@@ -128,6 +128,8 @@ class TeamController(ZoneGuard, TeamTime):
         self.rng = rng if rng is not None else np.random.default_rng(self.config.seed)
         self.frame = scenario.frame()
         self.team_ref_s: float | None = schedule.required_arrival_s
+        self.planned_ref_s = self.team_ref_s
+        """The team time as the schedule set it before launch."""
         self.start_utc_s: float | None = None
         self.lead_s = self.config.min_lead_s
         self.loiter_lead_s = self.config.min_lead_s
@@ -174,6 +176,7 @@ class TeamController(ZoneGuard, TeamTime):
                 ArrivalController(limits, tolerance_s=self.config.tolerance_s),
                 target,
                 vs.takeoff_s,
+                target,
                 goal_en_m=(goal.east_m, goal.north_m),
             )
             m.planned_paths.append({"label": "initial", "t_s": 0.0, "en_m": path_en(vs)})

@@ -613,6 +613,7 @@ def flight_record(
                 "speed_min_m_s": m.limits.airspeed_min_m_s,
                 "speed_max_m_s": m.limits.airspeed_max_m_s,
                 "target_arrival_utc_s": round(target_utc, 3),
+                "planned_arrival_s": round(m.planned_s, 3),
                 "arrival_utc_s": None if arrival is None else round(arrival, 3),
                 "error_s": None if arrival is None else round(arrival - target_utc, 3),
                 "arrival_source": source,
@@ -660,6 +661,7 @@ def flight_record(
     ids = {v.system_id: vid for vid, v in coord.vehicles.items()}
     zones = zone_clearances(coord, {ids[k]: v for k, v in tracks.items() if k in ids})
     ref = coord.team_ref_s
+    planned_ref = None if coord.team is None else coord.team.planned_ref_s
     return {
         "format": FLIGHT_FORMAT,
         "scenario_file": str(opts.scenario_path),
@@ -668,6 +670,7 @@ def flight_record(
         "start_utc_s": round(start, 3),
         "required_arrival_utc_s": None if ref is None else round(start + ref, 3),
         "required_arrival_s": None if ref is None else round(ref, 3),
+        "planned_arrival_s": None if planned_ref is None else round(planned_ref, 3),
         "separation_m": coord.scenario.separation_m,
         "min_separation_m": None if sep is None else round(sep[0], 1),
         "min_separation_pair": None if sep is None else [ids.get(sep[1]), ids.get(sep[2])],
