@@ -142,7 +142,7 @@ def plot_paths(flight: Flight, world: World, title: str, out: Path) -> None:
 
 def _time_end(flight: Flight) -> float:
     """The last mission time anything in the record refers to."""
-    ends = [flight.required_utc_s]
+    ends = [] if flight.required_utc_s is None else [flight.required_utc_s]
     for v in flight.vehicles:
         ends.append(v.target_utc_s)
         if v.arrival_utc_s is not None:
@@ -270,9 +270,14 @@ def plot_timeline(flight: Flight, title: str, out: Path) -> None:
         seen.add(key)
     for v in flight.vehicles:
         ax.plot(flight.t(v.target_utc_s), y[v.id], "|", color="gray", ms=16, mew=1.5)
-    ax.axvline(
-        flight.t(flight.required_utc_s), color="black", ls="--", lw=1.0, label="required arrival"
-    )
+    if flight.required_utc_s is not None:
+        ax.axvline(
+            flight.t(flight.required_utc_s),
+            color="black",
+            ls="--",
+            lw=1.0,
+            label="required arrival",
+        )
     ax.set_yticks(range(len(rows)), rows)
     ax.set_ylim(-0.7, len(rows) - 0.3)
     lo = min(0.0, *(flight.t(e.utc_s) for e in marks))

@@ -100,7 +100,8 @@ class Flight:
     """The record, validated: times are UTC s (:meth:`t` gives mission time)."""
 
     start_utc_s: float
-    required_utc_s: float
+    required_utc_s: float | None
+    """The team time; None for arrival windows (each vehicle keeps a slot of its own)."""
     separation_m: float | None
     min_separation_m: float | None
     min_separation_pair: tuple[str, ...]
@@ -309,7 +310,9 @@ def parse_flight(record: Mapping[str, Any]) -> Flight:
     if fmt != FLIGHT_FORMAT:
         raise _bad("format", f"expected {FLIGHT_FORMAT!r}, got {fmt!r}")
     start = _number(_get(rec, "start_utc_s", ""), "start_utc_s")
-    required = _number(_get(rec, "required_arrival_utc_s", ""), "required_arrival_utc_s")
+    # Present always; null for arrival windows, which have no team time.
+    _get(rec, "required_arrival_utc_s", "")
+    required = _opt_number(rec, "required_arrival_utc_s", "")
     raw_vehicles = _list(_get(rec, "vehicles", ""), "vehicles")
     if not raw_vehicles:
         raise _bad("vehicles", "empty: the record has no vehicle")

@@ -79,7 +79,11 @@ def _arrival_rows(flight: Flight) -> list[list[str]]:
 
 
 def _summary(flight: Flight) -> str:
-    parts = [f"required arrival {flight.t(flight.required_utc_s):.2f} s"]
+    parts = [
+        "arrival windows (a slot per vehicle)"
+        if flight.required_utc_s is None
+        else f"required arrival {flight.t(flight.required_utc_s):.2f} s"
+    ]
     if flight.min_separation_m is not None:
         sep = f"min separation {flight.min_separation_m:.1f} m"
         detail = []

@@ -313,3 +313,22 @@ def test_a_record_that_carries_its_world_needs_no_scenario_file(
     flight["operator_threats"] = [{"kind": "no_fly", "id": "OP2"}]
     with pytest.raises(GcsError, match=r"flight record: .*polygon"):
         write_report(flight, tmp_path / "report2")
+
+
+def test_a_flight_in_arrival_windows_has_no_team_time_and_is_reported(tmp_path: Path) -> None:
+    """Arrival windows give each vehicle a slot of its own: the record's
+    ``required_arrival_utc_s`` is null (as ``rehearse --json`` writes it), and the report draws
+    and tabulates every vehicle against its own target, with no team line."""
+    flight = _flight()
+    flight["required_arrival_utc_s"] = None
+    for k, v in enumerate(flight["vehicles"]):
+        v["target_arrival_utc_s"] = START + 5900.0 + 60.0 * k
+    files = write_report(flight, tmp_path / "windows", scenario_path=SCENARIO)
+    assert {p.name for p in files} >= {"index.html", "arrivals.md", "timeline.png"}
+    text = (tmp_path / "windows" / "arrivals.md").read_text(encoding="utf-8")
+    assert "arrival windows (a slot per vehicle)" in text
+    assert "required arrival" not in text
+    # The key is still required: a record without it is not one.
+    del flight["required_arrival_utc_s"]
+    with pytest.raises(GcsError, match="required_arrival_utc_s"):
+        write_report(flight, tmp_path / "never", scenario_path=SCENARIO)
