@@ -65,7 +65,9 @@ class EventKind(enum.StrEnum):
     """A vehicle said something critical (STATUSTEXT at MAV_SEVERITY_CRITICAL or worse;
     ``payload``: ``severity``, ``text``), or its route enters a forbidden zone that appeared
     in flight and no route around it is on board in time (``payload``: ``zone``,
-    ``entry_s``, ``time_to_entry_s``, ``why``, ``action``), or a re-plan overran its lead."""
+    ``entry_s``, ``time_to_entry_s``, ``why``, ``action``), or a re-plan overran its lead,
+    or the coordinator's event loop was held while a lock-step simulator flew on without it
+    (``payload``: ``unwatched_s``, flight seconds)."""
     VEHICLE_LOST = "vehicle_lost"
     """A vehicle is lost to the team (``payload``: ``cause`` ``crash`` or ``stall``, ``t_s``
     mission time, ``why``): it reported a crash (STATUSTEXT "Crash ...", HEARTBEAT

@@ -270,6 +270,16 @@ class FlightRunner:
             self.on_event(ev)
         return ev
 
+    def unwatched(self, flight_s: float) -> None:
+        """The lock-step simulator flew ``flight_s`` seconds beyond its lead without this
+        coordinator (its event loop was held longer than the simulator waits): an alarm, as
+        the aircraft flew their missions unwatched and uncorrected meanwhile."""
+        self._say(
+            EventKind.ALARM,
+            f"the coordinator was held: the flight ran {flight_s:.1f} s unwatched",
+            payload={"unwatched_s": round(flight_s, 2)},
+        )
+
     def _say(self, kind: EventKind, reason: str, vehicle: str | None = None, **kw: Any) -> None:
         self._publish(act.Report(kind, reason, vehicle, **kw))
         self._checkpoint(kind in _AT_ONCE)

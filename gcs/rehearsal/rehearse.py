@@ -333,7 +333,7 @@ async def _rehearse(
             sysids: list[int | None] = [None] * len(conns)
             truth_path = opts.truth
             if opts.lockstep_file is not None:
-                pacer = follow_lockstep(opts.lockstep_file, clock)
+                pacer = follow_lockstep(opts.lockstep_file, clock, coord.unwatched)
         else:
             truth_path = opts.truth or Path(tmp.name) / "truth.jsonl"
             stub_start = time.time()
@@ -345,7 +345,7 @@ async def _rehearse(
                 len(opts.scenario.vehicles), args, control=bool(opts.blackouts)
             )
             if opts.lockstep:
-                pacer = follow_lockstep(pace_path, clock)
+                pacer = follow_lockstep(pace_path, clock, coord.unwatched)
             conns = stub.connections
             sysids = [i + 1 for i in range(len(conns))]
         async with contextlib.AsyncExitStack() as stack:
@@ -545,6 +545,8 @@ def _ev_json(ev: FlightEvent, start_utc_s: float) -> dict[str, Any]:
         "strategy": ev.strategy,
         "value": ev.value,
         "reason": ev.reason,
+        # What the event says in numbers (an upload's items are in the store, not here).
+        "payload": {k: v for k, v in ev.payload.items() if k != "items"},
     }
 
 

@@ -491,7 +491,7 @@ class Engine:
             stub = await self.fleet.start_stubs(
                 len(ids), [*stub_args(opts, runner, truth, time.time()), "--lockstep", str(pace)]
             )
-            pacer = follow_lockstep(pace, clock)
+            pacer = follow_lockstep(pace, clock, runner.unwatched)
             conns = dict(zip(ids, stub.connections, strict=True))
             sysids: list[int | None] = list(range(1, len(ids) + 1))
         else:
@@ -567,7 +567,9 @@ class Engine:
             )
             if (flight_dir / LOCKSTEP_FILE).exists():  # its bundled simulator, still flying
                 with contextlib.suppress(OSError, ValueError):
-                    handle.pacer = follow_lockstep(flight_dir / LOCKSTEP_FILE, clock)
+                    handle.pacer = follow_lockstep(
+                        flight_dir / LOCKSTEP_FILE, clock, runner.unwatched
+                    )
             self.flights[fid] = handle
             sysids = [row.vehicles[v.id][2] for v in team.scenario.vehicles]
             handle.task = self._spawn(self._resume(handle, sysids))

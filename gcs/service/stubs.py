@@ -16,7 +16,7 @@ import socket
 import subprocess
 import sys
 import time
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -159,20 +159,37 @@ def _running(pid: int) -> bool:
     return stat.rsplit(")", 1)[-1].split()[0] != "Z"
 
 
-def follow_lockstep(path: Path, clock: MissionClock) -> asyncio.Task[None]:
+def follow_lockstep(
+    path: Path, clock: MissionClock, on_overrun: Callable[[float], None] | None = None
+) -> asyncio.Task[None]:
     """Lock step with the simulator that keeps ``path`` (``sitl_stub --lockstep``): the
     mission clock runs on its pace clock, and a task acknowledges the flight as the event
     loop turns, every millisecond of wall time, so the simulator waits for this process
-    (cancel the task to let it run on by itself)."""
+    (cancel the task to let it run on by itself).
+
+    An event loop held longer than the lock step waits for (:data:`sitl_stub.lockstep.
+    STALE_WALL_S`) lets the simulator fly on without this process: ``on_overrun`` is then
+    called, once the loop turns again, with the flight seconds it ran beyond the lead."""
     pace = Lockstep(path)
     clock.follow(pace.pace_s, pace.lead_s)
-    return asyncio.create_task(_acknowledge(pace))
+    return asyncio.create_task(_acknowledge(pace, on_overrun))
 
 
-async def _acknowledge(pace: Lockstep) -> None:
+OVERRUN_SAID_S = 1.0
+"""Flight seconds beyond the lead that are said (a simulator step or two past it is not)."""
+
+
+async def _acknowledge(pace: Lockstep, on_overrun: Callable[[float], None] | None) -> None:
+    acked_s: float | None = None
     try:
         while True:
-            pace.acknowledge()
+            seen_s = pace.pace_s()
+            if acked_s is not None and on_overrun is not None:
+                beyond_s = (seen_s - acked_s) * pace.speedup - pace.lead_s
+                if beyond_s > OVERRUN_SAID_S:
+                    on_overrun(beyond_s)
+            pace.acknowledge(seen_s)
+            acked_s = seen_s
             await asyncio.sleep(0.001)
     finally:
         pace.release()
