@@ -69,7 +69,11 @@ def eas2tas(alt_m: float, *, isa_offset_k: float = 0.0) -> float:
     """
     if not math.isfinite(alt_m):
         raise ValueError(f"altitude must be a finite number of metres, got {alt_m!r}")
-    rho = float(density_kg_m3(alt_m, isa_offset_k=isa_offset_k))
+    # density_kg_m3 on one float (the per-fix path: numpy on a scalar costs ten times this).
+    alt = min(max(float(alt_m), _FLOOR_M), _TROPOPAUSE_M)
+    temp_isa = ISA_SEA_LEVEL_TEMPERATURE_K - ISA_LAPSE_K_M * alt
+    pressure = ISA_SEA_LEVEL_PRESSURE_PA * (temp_isa / ISA_SEA_LEVEL_TEMPERATURE_K) ** _EXPONENT
+    rho = pressure / (_GAS_CONSTANT_J_KG_K * (temp_isa + isa_offset_k))
     return math.sqrt(ISA_SEA_LEVEL_DENSITY_KG_M3 / rho)
 
 

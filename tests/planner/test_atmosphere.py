@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 
 from planner.atmosphere import (
+    ISA_SEA_LEVEL_DENSITY_KG_M3,
     density_kg_m3,
     eas2tas,
     eas2tas_table,
@@ -86,3 +87,14 @@ def test_the_table_times_the_rest_of_a_route_from_anywhere_on_it(s_from_m: float
         time_s, rel=1e-6, abs=1e-3
     )
     assert mean_eas2tas(s, alt, s_from_m=s_from_m) == mean_eas2tas_from(table, s_from_m)
+
+
+@pytest.mark.parametrize("isa_offset_k", [-20.0, 0.0, 15.0])
+def test_the_scalar_ratio_is_the_density_profile_s(isa_offset_k: float) -> None:
+    """``eas2tas`` on one altitude is ``sqrt(rho0 / rho)`` of :func:`density_kg_m3`, clamped
+    alike below -1,000 m and above the tropopause."""
+    alts = np.array([-3000.0, -1000.0, 0.0, 457.0, 1000.0, 2500.5, 8000.0, 11_000.0, 15_000.0])
+    rho = density_kg_m3(alts, isa_offset_k=isa_offset_k)
+    expected = np.sqrt(ISA_SEA_LEVEL_DENSITY_KG_M3 / rho)
+    got = [eas2tas(float(a), isa_offset_k=isa_offset_k) for a in alts]
+    assert got == pytest.approx(expected.tolist(), rel=1e-12)
