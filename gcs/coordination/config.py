@@ -42,6 +42,14 @@ class FlightConfig:
     at the minimum in wind)."""
     arrival_radius_m: float = 1000.0
     """Goal passages are looked for within this distance of the goal."""
+    resettle_gap_s: float = 10.0
+    """A gap this long (mission s) in a vehicle's fixes (a link gap, a restart of the
+    coordinator) makes it settle again before its lateness moves the team time..."""
+    resettle_s: float = 60.0
+    """...for this long after it is heard again (its wind and airspeed-scale estimates
+    re-learn over about a minute, :class:`~gcs.coordination.speedbias.BiasConfig`): meanwhile
+    a late verdict commands its top speed but moves nothing. On the first fix after a
+    restart a vehicle was seen 47 s late, and on time 40 s later; the team time had moved."""
     link_silence_s: float = 3.0
     """A vehicle silent this long (mission s) is reported; its mission keeps it flying."""
     link_silence_wall_s: float = 0.025

@@ -133,10 +133,15 @@ class Member:
     near_goal: list[TruthSample] = field(default_factory=list)
     goal_en_m: tuple[float, float] = (0.0, 0.0)
     last_fix_s: float | None = None
+    heard_since_s: float = -math.inf
+    """Mission time since which its fixes have come without a gap longer than
+    ``resettle_gap_s`` (the flight's first fixes count from the start)."""
     last_decision: Decision | None = None
     wind: Wind | None = None
     """The wind its last decision was timed in (its estimate, corrected): re-plans and
     re-times in flight count on it instead of the forecast."""
+    wind_reported: bool = False
+    """It has reported its own wind estimate (WIND): timed with that, never a working-out."""
     track_log: list[list[float]] = field(default_factory=list)
     """``[utc_s, east_m, north_m, alt_m, airspeed_m_s, groundspeed_m_s]`` every 2 s."""
     commanded: list[list[Any]] = field(default_factory=list)

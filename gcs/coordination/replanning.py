@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+from collections.abc import Callable, Collection
 from dataclasses import replace
 
 import numpy as np
@@ -19,6 +20,7 @@ from gcs.coordination.arrival import Decision
 from gcs.coordination.config import FlightConfig
 from gcs.coordination.events import EventKind
 from gcs.coordination.member import Member, path_en, route_track
+from gcs.coordination.teamtime import names_of
 from planner.deconflict import loiter_conflict
 from planner.errors import InfeasibleError
 from planner.mission import MAV_CMD_NAV_WAYPOINT
@@ -55,6 +57,8 @@ class MissionChanges:
     pending: dict[str, act.Upload]
     replan_due: dict[str, float]
     replan_overdue: set[str]
+    _cannot_follow: Callable[[float, Collection[str]], list[tuple[str, float]]]
+    """The team-time part's (:meth:`gcs.coordination.teamtime.TeamTime._cannot_follow`)."""
 
     def hold_anchor_s_m(self, m: Member, zone_id: str) -> float | None:
         """Where the vehicle holds short of the zone (m along its path); None: not holding
@@ -552,10 +556,32 @@ class MissionChanges:
         self.popups_running.discard(zone.id)
         outcome: PopupOutcome = r.result
         new_ref = outcome.schedule.required_arrival_s
+        stuck = []
+        if new_ref is not None and self.team_ref_s is not None and new_ref > self.team_ref_s:
+            stuck = self._cannot_follow(new_ref, outcome.affected)
         for ev in outcome.events:
+            if stuck and ev.kind == EventKind.ARRIVAL:
+                continue  # said below: the team time does not move
             # The re-timed team arrival is said with its time (the store keeps it).
             value = new_ref if ev.kind == EventKind.ARRIVAL else None
             out.append(act.Report(EventKind(ev.kind), ev.text, value=value, t_s=t))
+        if stuck:
+            # The re-planned vehicles' routes are longer than the others can wait for (no
+            # slower speed or loiter turns left to them): the team time stays, and the
+            # re-planned vehicles that cannot make it are released from their slots when
+            # their own decisions find them late (an alarm each).
+            assert self.team_ref_s is not None and new_ref is not None
+            out.append(
+                act.Report(
+                    EventKind.ARRIVAL,
+                    f"team arrival stays {self.team_ref_s:.1f} s after {zone.id}: the route "
+                    f"round it would need {new_ref:.1f} s, and {names_of(stuck)} cannot "
+                    "arrive as late",
+                    value=self.team_ref_s,
+                    t_s=t,
+                )
+            )
+            new_ref = self.team_ref_s
         if (
             new_ref is not None
             and self.team_ref_s is not None
@@ -572,6 +598,8 @@ class MissionChanges:
             m.next_decision_s = -math.inf
             if vs is m.schedule or m.vehicle_id not in job.keeps or m.done:
                 continue
+            if stuck and m.vehicle_id not in outcome.affected:
+                continue  # re-timed to a team time that does not come
             if m.vehicle_id in outcome.affected:
                 m.planned_paths.append({"label": f"after {zone.id}", "t_s": t, "en_m": path_en(vs)})
             if m.phase == "ground":

@@ -38,6 +38,11 @@ class BiasConfig:
 
     time_constant_s: float = 60.0
     """Fixes older than this weigh 1/e of a new one."""
+    max_gap_s: float = 2.0
+    """A gap between two fixes used (a link gap, a restart, a stretch of unsettled airspeed)
+    ages the estimate by no more than this: no fix is no news. Aged by the whole gap, what a
+    vehicle had learnt in a 250 s restart fell to 1.5 % of its weight, and the first fix after
+    it, pulled towards the prior, moved the team time by a minute."""
     prior_fixes: float = 4.0
     """The pull towards ``k = 1, dw = 0``, as that many fixes' worth of evidence."""
     scale_bounds: tuple[float, float] = (0.85, 1.15)
@@ -115,7 +120,7 @@ class SpeedBiasEstimator:
             self.skipped += 1
             return False
         if self._last_t_s is not None:
-            dt = max(t_s - self._last_t_s, 0.0)
+            dt = min(max(t_s - self._last_t_s, 0.0), cfg.max_gap_s)
             decay = math.exp(-dt / cfg.time_constant_s)
             self._aa *= decay
             self._a *= decay

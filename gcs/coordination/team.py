@@ -89,8 +89,9 @@ def _resolving(r: Resolution) -> str:
     )
 
 
-def reported_wind(fix: act.Fix) -> Wind:
-    """The vehicle's wind estimate (WIND), else ground velocity minus true airspeed."""
+def reported_wind(fix: act.Fix) -> Wind | None:
+    """The vehicle's wind estimate (WIND), else ground velocity minus true airspeed; None when
+    the fix carries neither (the first fixes from a vehicle heard again)."""
     if fix.wind_speed_m_s is not None and fix.wind_from_deg is not None:
         return Wind.from_speed_from(fix.wind_speed_m_s, fix.wind_from_deg)
     if (
@@ -102,7 +103,7 @@ def reported_wind(fix: act.Fix) -> Wind:
         h = math.radians(fix.heading_deg)
         tas = fix.airspeed_m_s * eas2tas(fix.alt_amsl_m or 0.0)
         return Wind(fix.ve_m_s - tas * math.sin(h), fix.vn_m_s - tas * math.cos(h))
-    return Wind()
+    return None
 
 
 class TeamController(ZoneGuard, TeamTime):
@@ -371,6 +372,8 @@ class TeamController(ZoneGuard, TeamTime):
         if m.last_fix_s is not None and t <= m.last_fix_s:
             return
         dt_s = 0.0 if m.last_fix_s is None else t - m.last_fix_s
+        if m.last_fix_s is not None and dt_s > self.config.resettle_gap_s:
+            m.heard_since_s = t  # heard again after a gap (a link gap, a restart)
         m.last_fix_s = t
         e, n = self.frame.to_local(fix.lat_deg, fix.lon_deg)
         e, n = float(e), float(n)
@@ -778,9 +781,23 @@ class TeamController(ZoneGuard, TeamTime):
         )
 
     def _wind(self, m: Member, fix: act.Fix) -> Wind:
-        """The wind to time with: the vehicle's estimate plus the error learnt in flight."""
-        m.wind = m.bias.corrected(reported_wind(fix))
-        return m.wind
+        """The wind to time with: the vehicle's estimate plus the error learnt in flight.
+
+        A vehicle that reports its wind (WIND) is timed with its latest report; until its
+        first one after a restart or a reconnection, with the one it last had (kept in the
+        checkpoint). Worked out from a single fix instead (ground velocity less true airspeed
+        on the heading), a crab angle or a stale airspeed there made a vehicle in a tailwind
+        look a minute late and moved the team time on one fix. A vehicle that never reports
+        its wind is timed with that working-out, and with the schedule's forecast until a fix
+        allows it."""
+        if fix.wind_speed_m_s is not None and fix.wind_from_deg is not None:
+            m.wind_reported = True
+            m.wind = m.bias.corrected(Wind.from_speed_from(fix.wind_speed_m_s, fix.wind_from_deg))
+        elif not m.wind_reported:
+            worked_out = reported_wind(fix)
+            if worked_out is not None:
+                m.wind = m.bias.corrected(worked_out)
+        return m.schedule.wind if m.wind is None else m.wind
 
     def _learn_bias(self, m: Member, t: float, fix: act.Fix) -> None:
         """Feed one fix to the airspeed-scale and wind-error estimate: predicted from the
@@ -803,7 +820,7 @@ class TeamController(ZoneGuard, TeamTime):
             vn_m_s=fix.vn_m_s,
             heading_rad=math.radians(fix.heading_deg),
             predicted_tas_m_s=fix.airspeed_m_s * eas2tas(fix.alt_amsl_m),
-            wind=reported_wind(fix),
+            wind=reported_wind(fix) or m.schedule.wind,
             airspeed_m_s=fix.airspeed_m_s,
             commanded_m_s=m.level_m_s,
             climb_m_s=fix.climb_m_s or 0.0,

@@ -1,7 +1,9 @@
 """The team's arrival time: who moves it and how. A vehicle late even at its top speed moves
-it later (to its earliest arrival plus a margin), unless another has already arrived (then an
-alarm: moving it would only make the arrived ones miss it); with arrival windows a late
-vehicle's own slot moves within its window. A lost vehicle can bring it earlier; the operator
+it later (to its earliest arrival plus a margin), unless another has already arrived, or
+another could not arrive that late (its minimum speed, and no loiter turns left to splice in
+before its goal): then the late vehicle alone is released from its slot, with an alarm, and
+the others keep theirs; with arrival windows a late vehicle's own slot moves within its
+window. A lost vehicle can bring it earlier; the operator
 moves it (refused with the earliest feasible time). Ground vehicles re-time their takeoff.
 
 :class:`TeamTime` is the part of :class:`~gcs.coordination.team.TeamController` that does
@@ -11,6 +13,7 @@ this; it holds no state of its own.
 from __future__ import annotations
 
 import math
+from collections.abc import Collection
 
 from gcs.coordination import actions as act
 from gcs.coordination.arrival import Decision
@@ -21,7 +24,7 @@ from gcs.errors import GcsError
 from planner.retime import earliest_from_ground_s, takeoff_for
 from planner.scenario import Scenario, Windows
 
-__all__ = ["TeamTime", "TeamTimeRefused"]
+__all__ = ["TeamTime", "TeamTimeRefused", "names_of"]
 
 
 class TeamTimeRefused(GcsError):
@@ -38,6 +41,12 @@ class TeamTimeRefused(GcsError):
         self.vehicle_id = vehicle_id
 
 
+def names_of(stuck: list[tuple[str, float]], shown: int = 5) -> str:
+    """``R02 (at most 571.8 s), ... and 22 more``: the vehicles that cannot follow a move."""
+    names = ", ".join(f"{vid} (at most {follow:.1f} s)" for vid, follow in stuck[:shown])
+    return names + (f" and {len(stuck) - shown} more" if len(stuck) > shown else "")
+
+
 class TeamTime:
     """Late vehicles, lost ones and the operator's moves of the team time."""
 
@@ -51,6 +60,33 @@ class TeamTime:
     def _states(self, out: list[act.Action], now_s: float, only: str | None = None) -> None:
         """Say the states that changed (the controller's)."""
         raise NotImplementedError
+
+    def _keep_seq(self, m: Member, lead_m: float) -> int | None:
+        """The first route waypoint at least ``lead_m`` ahead (the re-planning part's)."""
+        raise NotImplementedError
+
+    def latest_arrival_s(self, m: Member) -> float:
+        """The latest a vehicle still flying to its slot can arrive (mission s): unbounded on
+        the ground (its takeoff moves) or while loiter turns can still be spliced in ahead of
+        it, else its ETA at its minimum speed from its last decision."""
+        if m.phase == "ground" or m.last_decision is None:
+            return math.inf
+        gs_m_s = max(m.groundspeed_m_s, 10.0)
+        if self._keep_seq(m, gs_m_s * self.config.min_lead_s) is not None:
+            return math.inf
+        return m.last_decision.eta_max_s
+
+    def _cannot_follow(self, new_ref: float, movers: Collection[str]) -> list[tuple[str, float]]:
+        """The vehicles other than ``movers`` (the late ones) that a team time of ``new_ref``
+        would make early whatever they do, each with the latest team time it can follow."""
+        out = []
+        for other in self.members.values():
+            if other.vehicle_id in movers or other.done:
+                continue
+            follow_s = self.latest_arrival_s(other) - other.offset_s
+            if new_ref > follow_s + self.config.tolerance_s:
+                out.append((other.vehicle_id, follow_s))
+        return out
 
     def _retime_without(self, lost: Member, now: float, out: list[act.Action]) -> None:
         """The team time moves to the earliest the vehicles still flying to their slots can
@@ -131,6 +167,8 @@ class TeamTime:
         out.append(act.Report(EventKind.ALARM, reason, m.vehicle_id, value=round(late_s, 3), t_s=t))
 
     def _late(self, m: Member, d: Decision, t: float, out: list[act.Action]) -> None:
+        if t - m.heard_since_s < self.config.resettle_s:
+            return  # heard again after a gap: at top speed, its estimates re-learning first
         ref = self.team_ref_s
         if ref is None:
             if isinstance(self.scenario.arrival, Windows):
@@ -147,6 +185,22 @@ class TeamTime:
                 m,
                 f"late by {d.eta_min_s - m.target_s:.1f} s at top speed after "
                 f"{', '.join(arrived)} arrived: the team time stays {ref:.1f} s",
+                d.eta_min_s - m.target_s,
+                t,
+                out,
+            )
+            return
+        if m.late_said:
+            return  # released from its slot already
+        stuck = self._cannot_follow(new_ref, (m.vehicle_id,))
+        if stuck:
+            # Moving the team time would make the others early, with no slower speed or loiter
+            # turns left to them: the late vehicle alone is released from its slot.
+            self._say_late(
+                m,
+                f"late by {d.eta_min_s - m.target_s:.1f} s at top speed: the team time stays "
+                f"{ref:.1f} s, as {names_of(stuck)} cannot arrive as late as "
+                f"{new_ref:.1f} s",
                 d.eta_min_s - m.target_s,
                 t,
                 out,

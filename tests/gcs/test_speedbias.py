@@ -2,12 +2,13 @@
 
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import numpy as np
 import pytest
 
-from gcs.coordination.speedbias import SpeedBiasEstimator
+from gcs.coordination.speedbias import BiasConfig, SpeedBiasEstimator
 from planner.wind import Wind, groundspeed_m_s
 
 
@@ -151,3 +152,36 @@ def test_the_estimate_is_the_decayed_least_squares_fit_with_its_prior() -> None:
     assert (est.wind_error.to_east_m_s, est.wind_error.to_north_m_s) == pytest.approx(
         (theta[1], theta[2]), abs=1e-9
     )
+
+
+def test_a_gap_in_the_fixes_keeps_what_was_learnt() -> None:
+    """A 5 % fast airframe learnt over five minutes, then 250 s with no fix (a restart of the
+    coordinator): the first fix after it finds the estimate where it was, not pulled back to
+    the prior (aged by the whole gap, the evidence fell to 1.5 % of its weight, and one noisy
+    fix with the prior set the scale); a gap ages it by at most ``max_gap_s``."""
+    still = Wind()
+    headings = [math.radians(3.0 * k) for k in range(600)]
+
+    def after_a_gap(est: SpeedBiasEstimator) -> tuple[float, float]:
+        """The scale learnt, and the scale after one fix 250 s later, 1 m/s slow along its
+        heading (noise)."""
+        t = _fly(est, headings, scale=1.05, true_wind=still, reported_wind=still)
+        learnt, h, tas = est.scale, 0.3, 22.0
+        slow = 1.05 * tas - 1.0
+        est.update(
+            t + 250.0,
+            ve_m_s=slow * math.sin(h),
+            vn_m_s=slow * math.cos(h),
+            heading_rad=h,
+            predicted_tas_m_s=tas,
+            wind=still,
+        )
+        return learnt, est.scale
+
+    learnt, after = after_a_gap(SpeedBiasEstimator())
+    assert learnt == pytest.approx(1.05, abs=0.003)
+    assert after == pytest.approx(learnt, abs=0.002)
+    # The same fix after a gap aged in full (a time constant of 60 s) moved it by over 1 %.
+    aged = SpeedBiasEstimator(dataclasses.replace(BiasConfig(), max_gap_s=math.inf))
+    learnt, after = after_a_gap(aged)
+    assert abs(after - learnt) > 0.01
