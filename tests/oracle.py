@@ -14,7 +14,8 @@ geoid's slope over a scenario's tens of kilometres moves a distance by centimetr
 - :func:`separation`: every pair's 3-D distance at every truth sample both are airborne, the
   whole flight long (holds after arrival included).
 - :func:`zone_entries`: true samples inside a forbidden zone, below its ceiling, once it was
-  there.
+  there (:func:`scenario_zones`: a zone that appears after a vehicle's takeoff is there from
+  when the truth has that vehicle leave the ground, :func:`takeoffs`).
 - :func:`planned_slots` and :func:`arrival_misses`: each vehicle's slot as the schedule set it
   before launch (checked against the scenario's arrival rule), and who missed it.
 """
@@ -130,8 +131,17 @@ class Ground:
         return cls(float(o["lat_deg"]), float(o["lon_deg"]))
 
     def local(self, track: Track) -> tuple[Floats, Floats]:
-        e, n = self._to_local.transform(track.lon_deg, track.lat_deg)
+        return self.to_local(track.lat_deg, track.lon_deg)
+
+    def to_local(self, lat_deg: Any, lon_deg: Any) -> tuple[Floats, Floats]:
+        """East and north (m) of points given in degrees (numbers or arrays)."""
+        e, n = self._to_local.transform(lon_deg, lat_deg)
         return np.asarray(e, dtype=np.float64), np.asarray(n, dtype=np.float64)
+
+    def to_geodetic(self, east_m: Any, north_m: Any) -> tuple[Floats, Floats]:
+        """Latitude and longitude (deg) of local points: the inverse of :meth:`to_local`."""
+        lon, lat = self._to_local.transform(east_m, north_m, direction="INVERSE")
+        return np.asarray(lat, dtype=np.float64), np.asarray(lon, dtype=np.float64)
 
 
 _ECEF = Transformer.from_crs("EPSG:4979", "EPSG:4978", always_xy=True)
@@ -276,18 +286,42 @@ def zone_entries(
     return out
 
 
-def scenario_zones(scenario: Mapping[str, Any], start_utc_s: float) -> list[Zone]:
-    """The scenario's forbidden zones there from the start or from a fixed mission time
-    (``appears.at_s``); a zone appearing after another vehicle's takeoff is the caller's."""
+def scenario_zones(
+    scenario: Mapping[str, Any],
+    start_utc_s: float,
+    takeoffs_utc_s: Mapping[str, float | None] | None = None,
+) -> list[Zone]:
+    """The scenario's forbidden zones there from the start, from a fixed mission time
+    (``appears.at_s``) or ``delay_s`` after a vehicle's takeoff (``after_takeoff_of``): that
+    vehicle's takeoff as ``takeoffs_utc_s`` gives it (:func:`takeoffs`: when the truth has it
+    leave the ground). A zone whose vehicle never took off never appeared."""
     out = []
     for t in scenario.get("threats", []):
         if not t.get("forbidden", t["kind"] == "no_fly"):
             continue
         appears = t.get("appears")
-        if appears is not None and appears.get("at_s") is None:
-            raise ValueError(f"{t['id']}: appears after a takeoff; give its time")
-        at_s = 0.0 if appears is None else float(appears["at_s"])
-        out.append(Zone.of(t, start_utc_s + at_s))
+        if appears is None:
+            out.append(Zone.of(t, start_utc_s))
+        elif appears.get("at_s") is not None:
+            out.append(Zone.of(t, start_utc_s + float(appears["at_s"])))
+        else:
+            vid = appears["after_takeoff_of"]
+            if takeoffs_utc_s is None or vid not in takeoffs_utc_s:
+                raise ValueError(f"{t['id']}: appears after {vid}'s takeoff; give its time")
+            took_off = takeoffs_utc_s[vid]
+            if took_off is not None:
+                out.append(Zone.of(t, took_off + float(appears.get("delay_s", 0.0))))
+    return out
+
+
+def takeoffs(tracks: Mapping[str, Track]) -> dict[str, float | None]:
+    """When each vehicle first left the ground (its first airborne true sample), by the
+    truth; None if it never did. A vehicle airborne from the first sample (one taken over in
+    flight) took off then."""
+    out: dict[str, float | None] = {}
+    for vid, tr in tracks.items():
+        up = np.flatnonzero(tr.airborne)
+        out[vid] = float(tr.utc_s[up[0]]) if up.size else None
     return out
 
 
@@ -303,8 +337,9 @@ def planned_slots(scenario: Mapping[str, Any], record: Mapping[str, Any]) -> dic
     """Each vehicle's slot as the schedule set it before launch (the record's
     ``planned_arrival_s``), checked here against the scenario's arrival rule: one team time
     for ``simultaneous``; the interval between consecutive slots for ``spaced`` (in the
-    scenario's ``order`` when it gives one); the wave sizes and gap for ``waves``; inside
-    each vehicle's window for ``windows`` (the slot returned is then the window)."""
+    scenario's ``order``, else in the order its vehicles are given); the waves' groups (or
+    sizes) and gap for ``waves``; inside each vehicle's window for ``windows`` (the slot
+    returned is then the window)."""
     planned = {v["id"]: float(v["planned_arrival_s"]) for v in record["vehicles"]}
     arrival = scenario["arrival"]
     kind = arrival["kind"]
@@ -318,21 +353,24 @@ def planned_slots(scenario: Mapping[str, Any], record: Mapping[str, Any]) -> dic
     ref = record["planned_arrival_s"]
     assert ref is not None, "a team arrival with no planned team time"
     ref = float(ref)
-    order = sorted(planned, key=planned.__getitem__)
     rule: dict[str, float]
     if kind == "simultaneous":
         rule = dict.fromkeys(planned, ref)
     elif kind == "spaced":
-        if arrival.get("order"):
-            order = list(arrival["order"])
+        # The scenario's order, or else the order its vehicles are given in (the format's).
+        order = list(arrival.get("order") or [v["id"] for v in scenario["vehicles"]])
         rule = {v: ref + k * float(arrival["interval_s"]) for k, v in enumerate(order)}
     elif kind == "waves":
-        starts, t, k = {}, ref, 0
-        for size in arrival["sizes"]:
-            starts.update(dict.fromkeys(order[k : k + size], t))
-            k += size
-            t += float(arrival["gap_s"])
-        rule = starts
+        gap_s = float(arrival["gap_s"])
+        groups = arrival.get("groups")
+        if groups is None:
+            # Only the sizes: the planner fills the waves (soonest first); who is in which
+            # is read from the planned times, the sizes and gap checked.
+            order, groups, k = sorted(planned, key=planned.__getitem__), [], 0
+            for size in arrival["sizes"]:
+                groups.append(order[k : k + size])
+                k += size
+        rule = {v: ref + k * gap_s for k, group in enumerate(groups) for v in group}
     else:
         raise ValueError(f"arrival kind {kind!r}")
     off = {v: round(planned[v] - rule[v], 3) for v in planned if abs(planned[v] - rule[v]) > 1e-3}

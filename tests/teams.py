@@ -238,12 +238,15 @@ def landing_scenario(seed: int, n: int = 4) -> tuple[dict[str, Any], tuple[float
 
 async def rehearse_doc(
     doc: dict[str, Any], wind: tuple[float, float], seed: int, directory: Path
-) -> dict[str, Any]:
-    """Rehearse a generated scenario at 200x with 5 % packet loss in ``wind``; the record."""
+) -> tuple[dict[str, Any], Path]:
+    """Rehearse a generated scenario at 200x with 5 % packet loss in ``wind`` (lock step):
+    the record and the simulator's truth log (``truth.jsonl`` in ``directory``). The record
+    is kept as ``flight.json`` beside them for a failure's post-mortem."""
     from gcs.rehearsal.rehearse import RehearsalOptions, rehearse
 
     path = directory / "generated.yaml"
     path.write_text(yaml.safe_dump(doc), encoding="utf-8")
+    truth = directory / "truth.jsonl"
     options = RehearsalOptions(
         scenario_path=path,
         scenario=load_scenario(path),
@@ -251,6 +254,8 @@ async def rehearse_doc(
         wind=wind,
         loss=0.05,
         seed=seed,
+        truth=truth,
+        json_out=directory / "flight.json",
         quiet=True,
     )
-    return await rehearse(options)
+    return await rehearse(options), truth

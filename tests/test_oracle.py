@@ -17,7 +17,7 @@ import pytest
 from pyproj import Geod
 
 from planner.geo import LocalFrame
-from tests import oracle
+from tests import oracle, verdict
 
 ORIGIN = (46.0, 8.0)
 START_UTC = 1_800_000_000.0
@@ -156,6 +156,22 @@ def test_separation_counts_the_whole_flight_after_a_goal_is_passed_too(tmp_path:
     assert found.utc_s == pytest.approx(START_UTC + t + 0.25)
 
 
+def test_a_point_placed_by_the_planner_s_frame_is_found_where_it_was_put() -> None:
+    """Local points 30 km apart placed with :class:`planner.geo.LocalFrame` come back within a
+    millimetre, and back again; a point 1 m off comes back 1 m off."""
+    ground, frame = oracle.Ground(*ORIGIN), LocalFrame(*ORIGIN)
+    east, north = np.array([0.0, 20_000.0, -15_000.0]), np.array([0.0, 25_000.0, 7_500.0])
+    lat, lon = frame.to_geodetic(east, north)
+    e, n = ground.to_local(lat, lon)
+    assert np.abs(e - east).max() < 1e-3 and np.abs(n - north).max() < 1e-3
+    lat2, lon2 = ground.to_geodetic(e, n)
+    assert np.abs(lat2 - lat).max() < 1e-10 and np.abs(lon2 - lon).max() < 1e-10
+    lat_off, lon_off = frame.to_geodetic(20_001.0, 25_000.0)
+    e1, n1 = ground.to_local(lat_off, lon_off)
+    assert float(e1) - 20_000.0 == pytest.approx(1.0, abs=1e-3)
+    assert float(n1) == pytest.approx(25_000.0, abs=1e-3)
+
+
 def test_the_3d_distance_agrees_with_a_geodesic_one(tmp_path: Path) -> None:
     """A pair at one altitude: the ECEF chord against PROJ's geodesic (Karney) on WGS84."""
     record = _record(dict.fromkeys(GOALS, ARRIVE_S))
@@ -198,20 +214,60 @@ def test_a_sample_inside_a_zone_once_it_is_there_and_below_its_ceiling_is_an_ent
     assert oracle.zone_entries(clean, ground, [zone, poly]) == []
 
 
+def test_a_zone_that_appears_after_a_takeoff_is_there_from_the_true_takeoff_on(
+    tmp_path: Path,
+) -> None:
+    """A disc that appears 200 s after A leaves the ground (by the truth: its first airborne
+    sample, at 0 s here), and one sample of B inside it at 200.25 s: an entry; the same disc
+    300 s after a takeoff of A at 0 s, or after a vehicle that never took off, is not there
+    then."""
+    record = _record(dict.fromkeys(GOALS, ARRIVE_S))
+    ground = oracle.Ground.of(_scenario())
+    truth = _write_truth(tmp_path / "in.jsonl", extra=[("B", 200.25, 20_000.0, 21_100.0)])
+    tracks = oracle.tracks_by_vehicle(truth, record)
+    took_off = oracle.takeoffs(tracks)
+    assert took_off == dict.fromkeys(GOALS, START_UTC)
+    disc = {"kind": "radar", "id": "D", "center": {"east_m": 20_000.0, "north_m": 22_000.0},
+            "radius_m": 1_000.0, "forbidden": True,
+            "appears": {"after_takeoff_of": "A", "delay_s": 200.0}}  # fmt: skip
+    scenario = {**_scenario(), "threats": [disc]}
+    with pytest.raises(ValueError, match="A's takeoff"):
+        oracle.scenario_zones(scenario, START_UTC)
+    zones = oracle.scenario_zones(scenario, START_UTC, took_off)
+    assert [z.from_utc_s for z in zones] == [START_UTC + 200.0]
+    assert oracle.zone_entries(tracks, ground, zones) == [("B", "D", START_UTC + 200.25)]
+    later = {**disc, "appears": {"after_takeoff_of": "A", "delay_s": 300.0}}
+    zones = oracle.scenario_zones({**scenario, "threats": [later]}, START_UTC, took_off)
+    assert oracle.zone_entries(tracks, ground, zones) == []
+    never = oracle.scenario_zones(scenario, START_UTC, {**took_off, "A": None})
+    assert never == []
+
+
 def test_planned_slots_must_follow_the_scenario_arrival_rule() -> None:
+    # Spaced with no order: the scenario's vehicles in the order given (A, B, C).
     spaced = _scenario({"kind": "spaced", "interval_s": 60})
-    ok = oracle.planned_slots(spaced, _record({"B": 400.0, "A": 460.0, "C": 520.0}))
-    assert ok == {"B": (400.0, 400.0), "A": (460.0, 460.0), "C": (520.0, 520.0)}
+    ok = oracle.planned_slots(spaced, _record({"A": 400.0, "B": 460.0, "C": 520.0}))
+    assert ok == {"A": (400.0, 400.0), "B": (460.0, 460.0), "C": (520.0, 520.0)}
     with pytest.raises(AssertionError, match="spaced"):
-        oracle.planned_slots(spaced, _record({"B": 400.0, "A": 450.0, "C": 520.0}))
-    ordered = _scenario({"kind": "spaced", "interval_s": 60, "order": ["A", "B", "C"]})
+        oracle.planned_slots(spaced, _record({"A": 400.0, "B": 450.0, "C": 520.0}))
     with pytest.raises(AssertionError, match="spaced"):
-        oracle.planned_slots(ordered, _record({"B": 400.0, "A": 460.0, "C": 520.0}))
+        oracle.planned_slots(spaced, _record({"B": 400.0, "A": 460.0, "C": 520.0}))
+    ordered = _scenario({"kind": "spaced", "interval_s": 60, "order": ["B", "A", "C"]})
+    ok = oracle.planned_slots(ordered, _record({"B": 400.0, "A": 460.0, "C": 520.0}))
+    assert ok["A"] == (460.0, 460.0)
+    with pytest.raises(AssertionError, match="spaced"):
+        oracle.planned_slots(ordered, _record({"A": 400.0, "B": 460.0, "C": 520.0}))
     waves = _scenario({"kind": "waves", "gap_s": 90, "sizes": [1, 2]})
     ok = oracle.planned_slots(waves, _record({"A": 400.0, "B": 490.0, "C": 490.0}))
     assert ok["C"] == (490.0, 490.0)
     with pytest.raises(AssertionError, match="waves"):
         oracle.planned_slots(waves, _record({"A": 400.0, "B": 400.0, "C": 490.0}))
+    # Waves by name: each vehicle in its own group's slot.
+    groups = _scenario({"kind": "waves", "gap_s": 90, "groups": [["B", "C"], ["A"]]})
+    ok = oracle.planned_slots(groups, _record({"A": 490.0, "B": 400.0, "C": 400.0}))
+    assert ok == {"A": (490.0, 490.0), "B": (400.0, 400.0), "C": (400.0, 400.0)}
+    with pytest.raises(AssertionError, match="waves"):
+        oracle.planned_slots(groups, _record({"A": 400.0, "B": 490.0, "C": 400.0}))
     windows = _scenario(
         {"kind": "windows", "windows": [
             {"vehicle": v, "earliest_s": 300.0, "latest_s": 340.0} for v in GOALS
@@ -240,3 +296,64 @@ def test_a_truth_log_that_is_not_one_says_which_line(tmp_path: Path) -> None:
     cut.write_text(good.read_text(encoding="utf-8") + '{"utc_s": 1', encoding="utf-8")
     assert len(oracle.read_tracks(cut)[1]) == len(oracle.read_tracks(good)[1])
     assert math.isfinite(float(oracle.read_tracks(good)[1].terrain_m[0]))
+
+
+def test_the_flight_verdict_says_every_way_a_flight_failed(tmp_path: Path) -> None:
+    """:func:`tests.verdict.judge` on the logs made here: the team on its slots, apart and out
+    of the zones has no problem; a team time moved past its bound, a vehicle 2 s late, a pair
+    100 m apart, a sample in a zone and too short a flight together each is one, by the
+    amount made."""
+    scenario = {**_scenario(), "separation_m": 300.0}
+    record = {
+        **_record(dict.fromkeys(GOALS, ARRIVE_S)),
+        "required_arrival_s": ARRIVE_S,
+        "scenario": scenario,
+        "events": [],
+    }
+    kw: dict[str, Any] = {"tolerance_s": 1.0, "team_shift_max_s": 0.0, "together_min_s": 400.0}
+    clean = _write_truth(tmp_path / "clean.jsonl")
+    judged = verdict.judge(record, clean, **kw)
+    assert judged.problems() == []
+    judged.check()
+    assert judged.together_s == pytest.approx(ARRIVE_S + 60.0 + PERIOD_S)
+    # The team time moved 3 s later: past a bound of 0 s, and everyone 3 s early for it.
+    moved = verdict.judge({**record, "required_arrival_s": ARRIVE_S + 3.0}, clean, **kw)
+    (shifted, early) = moved.problems()
+    assert "moved +3.0 s" in shifted and "'A': -3.0" in early
+    with pytest.raises(AssertionError, match="moved"):
+        moved.check()
+    # Allowed to move 3 s and every one on it: no problem.
+    late = _write_truth(tmp_path / "late.jsonl", late_s=dict.fromkeys(GOALS, 3.0))
+    assert verdict.judge({**record, "required_arrival_s": ARRIVE_S + 3.0}, late,
+                         **{**kw, "team_shift_max_s": 3.0}).problems() == []  # fmt: skip
+    # One 2 s late; a pair 100 m apart; a sample in a disc; too short together.
+    b_late = verdict.judge(record, _write_truth(tmp_path / "b.jsonl", late_s={"B": 2.0}), **kw)
+    assert b_late.problems() == ["off their slots by (s, None: never passed): {'B': 2.0}"]
+    g = GOALS
+    near = {"C": (g["A"][0] - g["C"][0] + 60.0, g["A"][1] - g["C"][1], 80.0)}
+    close = verdict.judge(record, _write_truth(tmp_path / "c.jsonl", offset_m=near), **kw)
+    (c_never, lost) = close.problems()  # C flies A's line: it never passes its own goal
+    assert c_never.endswith("{'C': None}") and lost.startswith("separation lost: 100 m (A, C")
+    disc = {"kind": "radar", "id": "D", "center": {"east_m": 20_000.0, "north_m": 22_000.0},
+            "radius_m": 1_000.0, "forbidden": True}  # fmt: skip
+    inside = _write_truth(tmp_path / "in.jsonl", extra=[("B", 200.25, 20_000.0, 21_100.0)])
+    entered = verdict.judge(record, inside, **kw, extra_zones=[oracle.Zone.of(disc, START_UTC)])
+    assert entered.problems() == [f"inside a forbidden zone: ('B', 'D', {START_UTC + 200.25})"]
+    short = verdict.judge(record, clean, **{**kw, "together_min_s": 600.0})
+    assert short.problems() == [f"a pair flew together only {ARRIVE_S + 60.0 + PERIOD_S:.0f} s"]
+
+
+def test_the_routes_a_disc_lies_across_are_found_between_their_waypoints() -> None:
+    """Two routes 1.5 km either side of a disc's centre, their waypoints 5 km from it: inside
+    a 1.6 km disc, not a 1.4 km one; a later route of B's through the centre, by its label."""
+    record = {"vehicles": [
+        {"id": "A", "planned_paths": [{"label": "initial", "en_m": [[0, 0], [10_000, 0]]}]},
+        {"id": "B", "planned_paths": [
+            {"label": "initial", "en_m": [[0, 3_000], [10_000, 3_000]]},
+            {"label": "after X", "en_m": [[5_000, -5_000], [5_000, 8_000]]},
+        ]},
+    ]}  # fmt: skip
+    centre = (5_000.0, 1_500.0)
+    assert verdict.routes_into_disc(record, "initial", centre, 1_600.0) == {"A", "B"}
+    assert verdict.routes_into_disc(record, "initial", centre, 1_400.0) == set()
+    assert verdict.routes_into_disc(record, "after X", centre, 100.0) == {"B"}

@@ -10,11 +10,17 @@ The WebSocket stream is not in the OpenAPI (tests/api/test_auth.py covers it).
 Each operation's test gets a fresh app (schemathesis ends the app's lifespan after each test);
 requests run on schemathesis' own event loop, where the lifespan runs too, so the engine's tasks
 (schedule jobs, links) live on one loop.
+
+Each operation's test counts the requests it made by schemathesis phase and fails unless the
+fuzzing phase made ``MAX_EXAMPLES`` of them (one for an operation with nothing to vary): a
+fuzz that Hypothesis cut short (a health check, an exhausted or filtered strategy) says so
+instead of passing on a handful of requests.
 """
 
 from __future__ import annotations
 
 import time
+from collections import Counter
 from collections.abc import Iterator
 from pathlib import Path
 from typing import Any, cast
@@ -67,8 +73,9 @@ def _served_openapi() -> dict[str, Any]:
 
 pytestmark = pytest.mark.slow  # every operation fuzzed: about 25 s, left out of make test-quick
 
+SERVED = _served_openapi()
 schema = schemathesis.openapi.from_dict(
-    _served_openapi(),
+    SERVED,
     config=schemathesis.Config.from_dict({"seed": SEED, "request-timeout": REQUEST_TIMEOUT_S}),
 )
 
@@ -87,15 +94,50 @@ def served(tmp_path: Path) -> Iterator[FastAPI]:
         asgi.shutdown_lifespans()
 
 
+def _fixed_requests(doc: dict[str, Any]) -> set[str]:
+    """The operations of ``doc`` with nothing to vary (no parameter, no body, no security
+    scheme whose header could be fuzzed): one request is all Hypothesis can make of each."""
+    return {
+        f"{method.upper()} {path}"
+        for path, ops in doc["paths"].items()
+        for method, op in ops.items()
+        if not (op.get("parameters") or op.get("requestBody") or op.get("security"))
+    }
+
+
+FIXED = _fixed_requests(SERVED)
+
+
+@pytest.fixture
+def requests_made(request: pytest.FixtureRequest) -> Iterator[Counter[str]]:
+    """Counts the requests of one operation's test by schemathesis phase (``examples``,
+    ``coverage``, ``fuzzing``); after every example has run (this fixture lives as long as the
+    whole Hypothesis run), the fuzzing phase must have made ``MAX_EXAMPLES`` requests, or
+    exactly one for an operation in :data:`FIXED`."""
+    made: Counter[str] = Counter()
+    yield made
+    label = request.node.name.partition("[")[2].removesuffix("]")
+    floor = 1 if label in FIXED else MAX_EXAMPLES
+    assert made["fuzzing"] >= floor, (
+        f"{label}: {made['fuzzing']} fuzzed requests, not {floor} ({dict(made)})"
+    )
+
+
 @schema.parametrize()
 @settings(
     max_examples=MAX_EXAMPLES,
     derandomize=True,
     database=None,
     deadline=None,
-    suppress_health_check=list(HealthCheck),
+    # The one health check suppressed: ``served`` and ``requests_made`` are function-scoped
+    # on purpose (one app, and one count, for all of an operation's examples). Every other
+    # check stays on; the count above catches a run cut short however it happens.
+    suppress_health_check=[HealthCheck.function_scoped_fixture],
 )
-def test_operation(case: schemathesis.Case[Any], served: FastAPI) -> None:
+def test_operation(
+    case: schemathesis.Case[Any], served: FastAPI, requests_made: Counter[str]
+) -> None:
+    requests_made[str(case.meta.phase.name) if case.meta is not None else "unknown"] += 1
     case.call_and_validate(app=served, headers=auth("admin"), checks=CHECKS)
 
 

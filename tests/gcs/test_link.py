@@ -113,15 +113,31 @@ async def test_stream_rate_request_raises_position_rate() -> None:
         def count(m: Any, _t: float) -> None:
             counts[m.get_type()] = counts.get(m.get_type(), 0) + 1
 
+        # Counted on the vehicle's own clock (each message's time_boot_ms), not the wall's: a
+        # busy machine delays the messages, it does not change their rate.
+        boot_ms: dict[str, list[int]] = {}
+
+        def stamp(m: Any, _t: float) -> None:
+            if m.get_type() in ("GLOBAL_POSITION_INT", "SYSTEM_TIME"):
+                boot_ms.setdefault(m.get_type(), []).append(int(m.time_boot_ms))
+
         rates = {"GLOBAL_POSITION_INT": 10.0}
         async with Link.open(f"tcp:127.0.0.1:{port}", message_rates_hz=rates) as link:
             await link.wait_vehicle(1)
-            await asyncio.sleep(0.5)  # let the request take effect
             link.add_listener(count)
-            await asyncio.sleep(2.0)
-        # The stub's default is 2 Hz; the request asks for 10 Hz (simulated = wall at 1x).
-        assert counts.get("GLOBAL_POSITION_INT", 0) >= 15, counts
-        assert counts.get("SYSTEM_TIME", 0) <= 4, counts
+            link.add_listener(stamp)
+            for _ in range(600):  # 30 s of wall at most, however busy the machine
+                if len(boot_ms.get("GLOBAL_POSITION_INT", ())) >= 40:
+                    break
+                await asyncio.sleep(0.05)
+        # The stub's default is 2 Hz; the request asks for 10 Hz: the last 20 (the request
+        # took effect well before: the first come within the first 2 s of its clock).
+        fixes = boot_ms["GLOBAL_POSITION_INT"][-21:]
+        span_s = (fixes[-1] - fixes[0]) / 1000.0
+        assert (len(fixes) - 1) / span_s == pytest.approx(10.0, rel=0.15), (len(fixes), span_s)
+        clock = [t for t in boot_ms.get("SYSTEM_TIME", []) if fixes[0] <= t <= fixes[-1]]
+        assert len(clock) <= span_s * 1.0 + 1, (clock, span_s)  # its own 1 Hz, unchanged
+        assert counts["GLOBAL_POSITION_INT"] >= len(fixes)
 
 
 # -- hand-driven vehicles: reconnect, garbage, sequence gaps ---------------------------------

@@ -11,6 +11,7 @@ then ``plane.set_guided_WP()``), as the stub does (``sitl_stub/commands.py``
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from collections.abc import Sequence
 
@@ -75,6 +76,22 @@ class Flight:
                 return float(s)
         return None
 
+    def fix(self, vid: str, s_m: float, t: float) -> act.Fix:
+        """A fix ``s_m`` along the planned route; past its end (the goal), straight on along
+        its last heading, as the run-out waypoint beyond the goal takes the aircraft."""
+        m = self.team.members[vid]
+        end_m = m.schedule.path.length_m
+        at = fix(self.team, vid, min(s_m, end_m), t, self.speed[vid])
+        if s_m <= end_m:
+            return at
+        pose = m.schedule.path.pose_at(end_m)
+        past_m = s_m - end_m
+        lat, lon = self.team.frame.to_geodetic(
+            pose.east_m + past_m * math.sin(pose.heading_rad),
+            pose.north_m + past_m * math.cos(pose.heading_rad),
+        )
+        return dataclasses.replace(at, lat_deg=float(lat), lon_deg=float(lon))
+
     def step(self, t: float, answer_holds: bool = True) -> list[act.Action]:
         out: list[act.Action] = []
         for vid in self.team.members:
@@ -83,7 +100,7 @@ class Flight:
                 s_m = self.s[vid] = s_m + self.gs(vid) * 2.0
             else:  # round its hold point: to and fro along the route, 150 m either side
                 s_m += 150.0 * math.sin(0.2 * t)
-            got = self.team.handle(fix(self.team, vid, s_m, t, self.speed[vid]), t)
+            got = self.team.handle(self.fix(vid, s_m, t), t)
             for h in of(got, act.Hold):
                 self.held[vid] = h
                 if answer_holds:
@@ -231,9 +248,13 @@ def test_a_route_clear_of_the_zone_is_never_held(team: TeamController) -> None:
     flight = Flight(team, t_p - 2.0)
     team.handle(act.Tick(), t_p)  # the re-plan never comes back
     t = t_p
+    # One fix each 2 s, as the flight flies them (each step is 2 s of its route), until UAV3
+    # is done: its planned arrival is under 4000 s after the zone appears.
     while t < t_p + 4000.0 and not team.members["UAV3"].done:
-        t += 5.0
+        t += 2.0
         out = flight.step(t)
         assert not [a for a in of(out, act.Hold) if a.vehicle_id == "UAV3"]
         assert not [r for r in reports(out, EventKind.ALARM) if r.vehicle == "UAV3"]
+    # It flew its route to the end (not cut short by the time limit) without a hold.
+    assert team.members["UAV3"].done, (t, team.members["UAV3"].state)
     assert all(x.entry_s_m is None for x in team.exposures.get("UAV3", {}).values())

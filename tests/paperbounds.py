@@ -1,0 +1,75 @@
+"""How far a flight of the paper scenario (``scenarios/paper_three_uav.yaml``) may move its
+team time later, worked out here for the flight tests that fly it in a wind
+(tests/service, tests/web, tests/gcs/test_restart.py): a test states this bound and asserts
+the move against it, so a coordinator that moved the team time to cover a late vehicle
+would not pass on the oracle's slots moved by as much.
+
+The schedule sets the team time before launch in still air; in flight it moves later only
+when a vehicle cannot make it even at its top speed:
+
+- the wind: each vehicle's planned route flown at its top airspeed in the rehearsal's wind,
+  against the same in still air (the test's own plan of the scenario, seed 1 as the flights
+  are planned; the top equivalent airspeed taken as the true one, which only overstates what
+  a headwind costs);
+- the pop-up (POPUP1, a 15 km disc across UAV1's and UAV2's routes): going round the disc
+  instead of across it is at most half its circumference instead of its diameter,
+  (pi - 2) x 15 km, flown at the slowest top speed of the two straight into the wind;
+- ``SLACK_S`` for the late margin a moved team time keeps and the ETA estimates' error.
+"""
+
+from __future__ import annotations
+
+import functools
+import math
+
+import numpy as np
+
+from planner.plan import build_world, plan
+from planner.retime import build_schedule
+from planner.scenario import Scenario, load_scenario
+from planner.schedule import Schedule
+from tests.gcs.conftest import PAPER
+
+POPUP_RADIUS_M = 15_000.0
+POPUP_VEHICLES = ("UAV1", "UAV2")
+SLACK_S = 60.0
+"""The late margin (2 s a move) and the arrival estimates' error over the flight."""
+
+
+@functools.cache
+def paper_schedule(seed: int = 1) -> tuple[Scenario, Schedule]:
+    """The paper scenario and its schedule as the service plans it with ``seed``."""
+    scenario = load_scenario(PAPER)
+    world = build_world(scenario)
+    p = plan(scenario, rng=np.random.default_rng(seed), world=world)
+    return scenario, build_schedule(scenario, p, world=world)
+
+
+def wind_cost_s(vehicle_id: str, wind_m_s: float, wind_from_deg: float) -> float:
+    """How much longer (s; negative: shorter) the vehicle's planned route takes at its top
+    airspeed in the wind than in still air: every 20 m of it at the ground speed the wind
+    triangle gives on its heading there."""
+    scenario, schedule = paper_schedule()
+    vs = schedule.vehicle(vehicle_id)
+    assert vs is not None, vehicle_id
+    v_m_s = scenario.vehicle(vehicle_id).speed_max_m_s
+    length_m = vs.path.length_m
+    edges = np.linspace(0.0, length_m, int(length_m / 20.0) + 2)
+    ds = np.diff(edges)
+    heading = np.array([vs.path.pose_at(float(s)).heading_rad for s in edges[:-1] + ds / 2])
+    to_rad = math.radians(wind_from_deg + 180.0)
+    we, wn = wind_m_s * math.sin(to_rad), wind_m_s * math.cos(to_rad)
+    along = we * np.sin(heading) + wn * np.cos(heading)
+    cross = we * np.cos(heading) - wn * np.sin(heading)
+    ground = np.sqrt(v_m_s**2 - cross**2) + along
+    return float((ds / ground).sum() - length_m / v_m_s)
+
+
+def team_time_move_max_s(wind_m_s: float = 0.0, wind_from_deg: float = 0.0) -> float:
+    """The most the team time may move later in a flight of the paper scenario in this wind
+    (the module's list)."""
+    scenario, _ = paper_schedule()
+    wind = max(0.0, *(wind_cost_s(v.id, wind_m_s, wind_from_deg) for v in scenario.vehicles))
+    v_m_s = min(scenario.vehicle(v).speed_max_m_s for v in POPUP_VEHICLES)
+    popup = (math.pi - 2.0) * POPUP_RADIUS_M / (v_m_s - wind_m_s)
+    return wind + popup + SLACK_S
