@@ -123,8 +123,13 @@ def _errors(app: FastAPI) -> None:
     @app.exception_handler(ServiceError)
     async def service_error(request: Request, err: ServiceError) -> JSONResponse:
         if isinstance(err, Infeasible):
+            extra = {} if err.latest_s is None else {"latest_feasible_s": err.latest_s}
             return problem(
-                err.status, str(err), earliest_feasible_s=err.earliest_s, vehicle=err.vehicle
+                err.status,
+                str(err),
+                earliest_feasible_s=err.earliest_s,
+                vehicle=err.vehicle,
+                **extra,
             )
         if isinstance(err, InvalidInput):
             return problem(err.status, str(err), errors=err.errors or None)

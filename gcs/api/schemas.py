@@ -35,6 +35,9 @@ class Problem(BaseModel):
     errors: list[dict[str, Any]] | None = None
     earliest_feasible_s: float | None = None
     """For an infeasible time: the earliest one every vehicle can make (mission s)."""
+    latest_feasible_s: float | None = None
+    """For a team time later than some vehicle can wait (no slower speed or loiter turns
+    left to it): the latest one every vehicle can make (mission s)."""
     vehicle: str | None = None
     """For an infeasible time: the vehicle that forces it."""
 

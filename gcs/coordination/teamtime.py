@@ -29,15 +29,32 @@ __all__ = ["TeamTime", "TeamTimeRefused", "names_of"]
 
 class TeamTimeRefused(GcsError):
     """A team arrival time that some vehicle cannot make: names the earliest feasible time
-    and the vehicle that forces it."""
+    (too early) or the latest (too late) and the vehicle that forces it."""
 
-    def __init__(self, requested_s: float, earliest_s: float, vehicle_id: str, why: str) -> None:
-        super().__init__(
-            f"team arrival {requested_s:.1f} s refused: {vehicle_id} cannot arrive before "
-            f"{earliest_s + 0.0:.1f} s ({why}); earliest feasible {earliest_s:.1f} s"
-        )
+    def __init__(
+        self,
+        requested_s: float,
+        earliest_s: float | None,
+        vehicle_id: str,
+        why: str,
+        *,
+        latest_s: float | None = None,
+    ) -> None:
+        if latest_s is None:
+            assert earliest_s is not None
+            text = (
+                f"team arrival {requested_s:.1f} s refused: {vehicle_id} cannot arrive before "
+                f"{earliest_s + 0.0:.1f} s ({why}); earliest feasible {earliest_s:.1f} s"
+            )
+        else:
+            text = (
+                f"team arrival {requested_s:.1f} s refused: {vehicle_id} cannot arrive after "
+                f"{latest_s + 0.0:.1f} s ({why}); latest feasible {latest_s:.1f} s"
+            )
+        super().__init__(text)
         self.requested_s = requested_s
         self.earliest_s = earliest_s
+        self.latest_s = latest_s
         self.vehicle_id = vehicle_id
 
 
@@ -282,7 +299,8 @@ class TeamTime:
         Raises
         ------
         TeamTimeRefused
-            A vehicle cannot arrive by then (the earliest feasible time and that vehicle).
+            A vehicle cannot arrive by then (the earliest feasible time and that vehicle), or
+            a vehicle cannot wait that long (the latest feasible time and that vehicle).
         GcsError
             ``version`` is not the current one (someone moved it first), or the team has no
             common arrival time (per-vehicle windows).
@@ -301,6 +319,16 @@ class TeamTime:
         earliest, vid, why = self.earliest_team_time_s(now_s)
         if arrival_s < earliest - 1e-6:
             raise TeamTimeRefused(arrival_s, earliest, vid, why)
+        stuck = self._cannot_follow(arrival_s, ()) if arrival_s > self.team_ref_s else []
+        if stuck:
+            vid, latest = min(stuck, key=lambda x: x[1])
+            raise TeamTimeRefused(
+                arrival_s,
+                None,
+                vid,
+                "at its minimum speed, with no loiter turns left to splice in before its goal",
+                latest_s=latest,
+            )
         out: list[act.Action] = []
         old = self.team_ref_s
         self._set_team_time(

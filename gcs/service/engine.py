@@ -78,11 +78,19 @@ class Conflict(ServiceError):
 
 
 class Infeasible(Conflict):
-    """A time no vehicle set can make: names the earliest feasible time and the vehicle."""
+    """A time no vehicle set can make: names the earliest (or latest) feasible time and the
+    vehicle that forces it."""
 
-    def __init__(self, message: str, earliest_s: float | None, vehicle: str | None) -> None:
+    def __init__(
+        self,
+        message: str,
+        earliest_s: float | None,
+        vehicle: str | None,
+        latest_s: float | None = None,
+    ) -> None:
         super().__init__(message)
         self.earliest_s = earliest_s
+        self.latest_s = latest_s
         self.vehicle = vehicle
 
 
@@ -802,7 +810,7 @@ class Engine:
         try:
             handle.runner.move_team_time(arrival_s, version=version)
         except TeamTimeRefused as err:
-            raise Infeasible(str(err), err.earliest_s, err.vehicle_id) from None
+            raise Infeasible(str(err), err.earliest_s, err.vehicle_id, err.latest_s) from None
         except GcsError as err:
             raise Conflict(str(err)) from None
         return self.team_time(flight_id)

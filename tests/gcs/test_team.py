@@ -1347,3 +1347,29 @@ def test_a_vehicle_heard_again_after_a_gap_moves_the_team_time_only_once_settled
             break
     assert moved_at is not None and moved_at - t0 >= cfg.resettle_s, moved_at
     assert team.team_ref_s is not None and ref is not None and team.team_ref_s > ref
+
+
+def test_the_operator_cannot_move_the_team_time_later_than_a_vehicle_can_wait(
+    team: TeamController,
+) -> None:
+    """UAV1 is a minute from its goal with no loiter turns left to splice in: the operator's
+    later team time is refused naming UAV1 and the latest it can make (its ETA at its minimum
+    speed, less its offset); a move within that is taken."""
+    first = team.members["UAV1"]
+    for vid in ("UAV1", "UAV2", "UAV3"):
+        airborne(team, vid, team.members[vid].takeoff_s)
+    s_near = first.track.length_m - 1_500.0
+    t_near = first.target_s - 1_500.0 / (25.0 * first.schedule.tas_per_eas(s_near))
+    team.handle(fix(team, "UAV1", s_near, t_near, 25.0), t_near)
+    ref = team.team_ref_s
+    assert ref is not None and first.last_decision is not None
+    latest = first.last_decision.eta_max_s - first.offset_s
+    assert ref < latest < ref + 120.0
+    with pytest.raises(TeamTimeRefused) as refused:
+        team.move_team_time(ref + 300.0, t_near)
+    assert refused.value.vehicle_id == "UAV1" and refused.value.earliest_s is None
+    assert refused.value.latest_s == pytest.approx(latest)
+    assert "latest feasible" in str(refused.value) and team.team_ref_s == ref
+    within = ref + 0.5 * (latest - ref)
+    team.move_team_time(within, t_near)
+    assert team.team_ref_s == within

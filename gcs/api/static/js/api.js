@@ -90,6 +90,10 @@ export function describeError(err) {
     text += `\nThe earliest time every vehicle can make is ${b.earliest_feasible_s.toFixed(1)} s`;
     text += b.vehicle ? ` (${b.vehicle} forces it).` : ".";
   }
+  if (b.latest_feasible_s !== undefined && b.latest_feasible_s !== null) {
+    text += `\nThe latest time every vehicle can make is ${b.latest_feasible_s.toFixed(1)} s`;
+    text += b.vehicle ? ` (${b.vehicle} cannot wait longer).` : ".";
+  }
   if (Array.isArray(b.errors) && b.errors.length > 1) {
     text += `\n(${b.errors.length} problems; the first is shown)`;
   }
