@@ -38,6 +38,7 @@ import yaml
 from gcs.__main__ import main
 from gcs.coordination.bus import EventBus
 from gcs.rehearsal.rehearse import RehearsalOptions, rehearse
+from gcs.rehearsal.report import write_report
 from gcs.service.fleet import Fleet, VehicleBusy
 from planner.plan import build_world, plan
 from planner.retime import build_schedule
@@ -626,14 +627,21 @@ async def test_windows_each_vehicle_arrives_in_its_own_window(tmp_path: Path) ->
             ],
         },
     )
-    truth = tmp_path / "truth.jsonl"
-    opts = _demo_run(seed=1, truth=truth)
+    truth, out, report = tmp_path / "truth.jsonl", tmp_path / "flight.json", tmp_path / "report"
+    opts = _demo_run(seed=1, truth=truth, json_out=out)
     record = await rehearse(
         RehearsalOptions(
             **{**opts.__dict__, "scenario_path": path, "scenario": load_scenario(path)}
         )
     )
     assert record["required_arrival_s"] is None  # no team time: a slot per vehicle
+    # The record as written (no team time) is read back, and reported, like any other (as
+    # `rehearse --json --report` does).
+    assert json.loads(out.read_text(encoding="utf-8")) == record
+    assert record["required_arrival_utc_s"] is None and record["planned_arrival_s"] is None
+    write_report(json.loads(out.read_text(encoding="utf-8")), report)
+    said = (report / "arrivals.md").read_text(encoding="utf-8")
+    assert "arrival windows (a slot per vehicle)" in said, said
     # Each true passage inside its own window (within 1 s), planned inside it before launch.
     verdict = _paper_verdict(record, truth, scenario=yaml.safe_load(path.read_text()))
     assert verdict.slots_s == own
