@@ -66,6 +66,7 @@ bench: $(STAMP)
 	$(PY) bench/bench_gcs_mission_loss.py
 	$(PY) bench/bench_gcs_ingest.py
 	$(PY) bench/bench_framing.py
+	$(PY) bench/bench_geometry.py
 	$(PY) bench/bench_swarm.py --vehicles 100 --speedup 20
 
 clean:

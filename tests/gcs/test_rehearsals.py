@@ -43,6 +43,7 @@ from gcs.service.fleet import Fleet, VehicleBusy
 from planner.plan import build_world, plan
 from planner.retime import build_schedule
 from planner.scenario import Scenario, load_scenario, parse_scenario
+from sitl_stub.lockstep import DEFAULT_LEAD_S
 from tests import oracle
 from tests.flightstory import story
 from tests.gcs.conftest import assert_flight_kept, free_udp_port, start_stub
@@ -155,8 +156,11 @@ async def test_paper_rehearsal_absorbs_airspeed_errors_and_wrong_clocks_with_a_s
     _paper_verdict(record, truth)
     said = {e["vehicle"]: e["value"] for e in record["events"] if e["kind"] == "clock"}
     assert said.keys() == {"UAV2", "UAV3"}, said
-    assert said["UAV2"] == pytest.approx(7.0, abs=0.3)
-    assert said["UAV3"] == pytest.approx(-4.0, abs=0.3)
+    # In lock step a report may be read up to the lead (flight s) after the simulator sent
+    # it: an offset, found from the least delayed reports, is known to within that (seen
+    # within 0.3 s on a quiet machine, 0.5 s beside two busy loops).
+    assert said["UAV2"] == pytest.approx(7.0, abs=DEFAULT_LEAD_S)
+    assert said["UAV3"] == pytest.approx(-4.0, abs=DEFAULT_LEAD_S)
 
 
 async def test_spaced_rehearsal_meets_each_60_s_slot_with_an_operator_threat(
