@@ -572,14 +572,41 @@ class FlightRunner:
         transfer (a vehicle may drop a stalled one) twice.
 
         In flight the new mission must be on board before the vehicle reaches the splice
-        point, the planning lead ahead: the attempts together get half of that lead in wall
-        seconds, so a lossy link either delivers in time or fails early enough for the
+        point, the planning lead ahead: the attempts together get half of that lead (in wall
+        seconds at the clock's rate; on a pace clock in flight seconds, however slowly the
+        flight goes), so a lossy link either delivers in time or fails early enough for the
         fallback (the vehicle keeps flying the mission it has).
         """
         v = self.vehicles[a.vehicle_id]
         loop = asyncio.get_running_loop()
         lead = self._loiter_lead_s() if a.what == "loiter inserted" else self._lead_s()
+        if a.in_flight and self.clock.paced:
+            # On a pace clock the budget is flight time: a busy machine slows the flight, and
+            # half the lead in wall seconds at the clock's rate ran out with only seconds of
+            # it flown (seen: 0.233 s of wall, a route round a pop-up never installed).
+            attempts = asyncio.ensure_future(self._upload_attempts(v, a, None))
+            budget = asyncio.ensure_future(self.clock.sleep(0.5 * lead))
+            try:
+                await asyncio.wait({attempts, budget}, return_when=asyncio.FIRST_COMPLETED)
+            except BaseException:
+                budget.cancel()
+                attempts.cancel()
+                raise
+            budget.cancel()
+            expired = budget.done() and not budget.cancelled() and budget.exception() is None
+            if not attempts.done() and expired:
+                attempts.cancel()
+                with contextlib.suppress(asyncio.CancelledError):
+                    await attempts
+                raise GcsError(f"mission upload not finished within {0.5 * lead:.0f} s of flight")
+            await attempts  # done, or the budget could not be timed: the attempts decide
+            return
         end_s = loop.time() + 0.5 * lead / self.clock.rate if a.in_flight else None
+        await self._upload_attempts(v, a, end_s)
+
+    async def _upload_attempts(self, v: Vehicle, a: act.Upload, end_s: float | None) -> None:
+        """Up to three attempts, the later ones only while ``end_s`` (loop time) allows."""
+        loop = asyncio.get_running_loop()
         for attempt in range(3):
             within_s = None if end_s is None else end_s - loop.time()
             try:
