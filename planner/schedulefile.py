@@ -37,6 +37,8 @@ from planner.timing import flyable_loiter_radius_m
 
 SCHEDULE_FORMAT = "tcgcs-schedule/1"
 _MERGE_M = 1.0
+_ALONG_PATH_COMMANDS = frozenset({MAV_CMD_NAV_WAYPOINT, MAV_CMD_DO_CHANGE_SPEED})
+"""The items that mark the path itself; any other one at a waypoint's distance follows it."""
 
 
 def _num(x: float, digits: int = 3) -> float | None:
@@ -224,7 +226,8 @@ def splice_mission(old: PathMission, keep_through_seq: int, new: PathMission) ->
 
     The vehicle keeps flying the leg it is on (the items it has, up to ``keep_through_seq``,
     are unchanged, so an autopilot in AUTO carries on at its current index); from the kept
-    waypoint it flies the new speeds, loiters and route. The new mission must pass through the
+    waypoint it flies the new speeds, loiters and route, the turns the new mission has at the
+    kept waypoint itself included (they follow it). The new mission must pass through the
     kept waypoint (re-plans start there; re-timings keep the path).
 
     Raises
@@ -244,21 +247,39 @@ def splice_mission(old: PathMission, keep_through_seq: int, new: PathMission) ->
         raise PlannerError(f"splice: item {keep_through_seq} is not a route waypoint")
     items = list(old.items[: keep_through_seq + 1])
     item_s: list[float | None] = list(old.item_s_m[: keep_through_seq + 1])
+    tail = _tail_start(new, s_k)
     speed: MissionItem | None = None
-    for it, s in zip(new.items, new.item_s_m, strict=True):
-        if it.command == MAV_CMD_DO_CHANGE_SPEED and s is not None and s <= s_k + _MERGE_M:
+    for it, s in zip(new.items[:tail], new.item_s_m[:tail], strict=True):
+        if it.command == MAV_CMD_DO_CHANGE_SPEED and s is not None:
             speed = it
     if speed is not None:
         items.append(speed)
         item_s.append(s_k)
-    for it, s in zip(new.items, new.item_s_m, strict=True):
-        if s is not None and s > s_k + _MERGE_M:
-            items.append(it)
-            item_s.append(s)
+    items.extend(new.items[tail:])
+    item_s.extend(new.item_s_m[tail:])
     return PathMission(
         tuple(replace(it, seq=i) for i, it in enumerate(items)),
         tuple(item_s),
     )
+
+
+def _tail_start(new: PathMission, s_k_m: float) -> int:
+    """The index of the first item of ``new`` flown after its waypoint at ``s_k_m`` (m along
+    the path): a loiter (or other item) that waypoint carries, else the first item beyond it.
+
+    A loiter sits at its waypoint's path distance: it belongs to what follows the waypoint,
+    like the new speeds and route. Items are in path order, so the rest of ``new`` follows.
+    """
+    for k in range(new.first_route_seq, len(new.items)):
+        s = new.item_s_m[k]
+        if s is None:
+            continue
+        if s > s_k_m + _MERGE_M:
+            return k
+        at_waypoint = s >= s_k_m - _MERGE_M
+        if at_waypoint and new.items[k].command not in _ALONG_PATH_COMMANDS:
+            return k
+    return len(new.items)
 
 
 def _item_json(it: MissionItem) -> dict[str, Any]:
