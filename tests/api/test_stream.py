@@ -44,3 +44,23 @@ async def test_telemetry_comes_when_due_while_a_backlog_of_events_is_read() -> N
     batches = [i for i, k in enumerate(kinds) if k == "telemetry" and i > first_event]
     assert batches and batches[0] < len(kinds) - 1, "no telemetry until the backlog was read"
     assert len(batches) >= int((loop.time() - t0) / TELEMETRY_WALL_S) - 1
+
+
+async def test_a_stream_resumed_after_the_flight_ended_replays_every_event_it_missed() -> None:
+    """A client that read 20 events and came back after the flight ended (with ``after_seq``
+    20) gets every later event, then the end: none is cut off by the end."""
+    bus = EventBus()
+    n = 100
+    for k in range(n):
+        bus.publish(FlightEvent(1.0, float(k), "UAV1", EventKind.SPEED, f"event {k}"))
+    engine = _Engine(bus)
+    engine.handle.runner.state = FlightState.COMPLETED
+    engine.handle.record = {"state": "completed"}
+    seqs: list[int] = []
+    kinds: list[str] = []
+    async for msg in stream(engine, "f", 20):  # type: ignore[arg-type]
+        kinds.append(msg["type"])
+        if msg["type"] == "event":
+            seqs.append(msg["data"]["seq"])
+    assert seqs == list(range(21, n + 1)), seqs[:5]
+    assert kinds[0] == "snapshot" and kinds[-1] == "end", kinds

@@ -211,6 +211,12 @@ async def stream(engine: Engine, flight_id: str, after_seq: int) -> AsyncIterato
             snap = engine.snapshot(flight_id, max_age_s=TELEMETRY_WALL_S / 2)
             yield {"type": "telemetry", "data": _telemetry(snap)}
             if handle.runner.state in ENDED and handle.record is not None:
+                # Every event still queued goes out before the end (a stream resumed after
+                # the flight is over replays all it missed).
+                while (rest := sub.get_nowait()) is not None:
+                    if rest.seq > last:
+                        last = rest.seq
+                        yield {"type": "event", "data": event_json(rest)}
                 yield {"type": "end", "data": {"state": handle.runner.state.value}}
                 return
     finally:
