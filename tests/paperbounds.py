@@ -1,5 +1,6 @@
-"""How far a flight of the paper scenario (``scenarios/paper_three_uav.yaml``) may move its
-team time later, worked out here for the flight tests that fly it in a wind
+"""How far a flight of the paper scenario (``scenarios/paper_three_uav.yaml``, or its compact
+form, :func:`tests.teams.compact_paper`: ``scenario_name="compact"``) may move its team time
+later, worked out here for the flight tests that fly it in a wind
 (tests/service, tests/web, tests/gcs/test_restart.py): a test states this bound and asserts
 the move against it, so a coordinator that moved the team time to cover a late vehicle
 would not pass on the oracle's slots moved by as much.
@@ -11,9 +12,10 @@ when a vehicle cannot make it even at its top speed:
   against the same in still air (the test's own plan of the scenario, seed 1 as the flights
   are planned; the top equivalent airspeed taken as the true one, which only overstates what
   a headwind costs);
-- the pop-up (POPUP1, a 15 km disc across UAV1's and UAV2's routes): going round the disc
-  instead of across it is at most half its circumference instead of its diameter,
-  (pi - 2) x 15 km, flown at the slowest top speed of the two straight into the wind;
+- the pop-up (POPUP1, a 15 km disc across UAV1's and UAV2's routes; 3.75 km across UAV2's in
+  the compact form): going round the disc instead of across it is at most half its
+  circumference instead of its diameter, (pi - 2) x its radius, flown at the slowest top speed
+  of the vehicles whose planned routes it crosses, straight into the wind;
 - ``SLACK_S`` for the late margin a moved team time keeps and the ETA estimates' error.
 """
 
@@ -26,30 +28,37 @@ import numpy as np
 
 from planner.plan import build_world, plan
 from planner.retime import build_schedule
-from planner.scenario import Scenario, load_scenario
+from planner.scenario import Radar, Scenario, load_scenario, parse_scenario
 from planner.schedule import Schedule
 from tests.gcs.conftest import PAPER
+from tests.teams import compact_paper
 
-POPUP_RADIUS_M = 15_000.0
-POPUP_VEHICLES = ("UAV1", "UAV2")
+POPUP = "POPUP1"
 SLACK_S = 60.0
 """The late margin (2 s a move) and the arrival estimates' error over the flight."""
 
 
 @functools.cache
-def paper_schedule(seed: int = 1) -> tuple[Scenario, Schedule]:
-    """The paper scenario and its schedule as the service plans it with ``seed``."""
-    scenario = load_scenario(PAPER)
+def paper_schedule(seed: int = 1, scenario_name: str = "paper") -> tuple[Scenario, Schedule]:
+    """The paper scenario (``scenario_name`` "paper", or "compact") and its schedule as the
+    service plans it with ``seed``."""
+    if scenario_name == "compact":
+        scenario = parse_scenario(compact_paper())
+    else:
+        assert scenario_name == "paper", scenario_name
+        scenario = load_scenario(PAPER)
     world = build_world(scenario)
     p = plan(scenario, rng=np.random.default_rng(seed), world=world)
     return scenario, build_schedule(scenario, p, world=world)
 
 
-def wind_cost_s(vehicle_id: str, wind_m_s: float, wind_from_deg: float) -> float:
+def wind_cost_s(
+    vehicle_id: str, wind_m_s: float, wind_from_deg: float, scenario_name: str = "paper"
+) -> float:
     """How much longer (s; negative: shorter) the vehicle's planned route takes at its top
     airspeed in the wind than in still air: every 20 m of it at the ground speed the wind
     triangle gives on its heading there."""
-    scenario, schedule = paper_schedule()
+    scenario, schedule = paper_schedule(1, scenario_name)
     vs = schedule.vehicle(vehicle_id)
     assert vs is not None, vehicle_id
     v_m_s = scenario.vehicle(vehicle_id).speed_max_m_s
@@ -65,11 +74,35 @@ def wind_cost_s(vehicle_id: str, wind_m_s: float, wind_from_deg: float) -> float
     return float((ds / ground).sum() - length_m / v_m_s)
 
 
-def team_time_move_max_s(wind_m_s: float = 0.0, wind_from_deg: float = 0.0) -> float:
-    """The most the team time may move later in a flight of the paper scenario in this wind
-    (the module's list)."""
-    scenario, _ = paper_schedule()
-    wind = max(0.0, *(wind_cost_s(v.id, wind_m_s, wind_from_deg) for v in scenario.vehicles))
-    v_m_s = min(scenario.vehicle(v).speed_max_m_s for v in POPUP_VEHICLES)
-    popup = (math.pi - 2.0) * POPUP_RADIUS_M / (v_m_s - wind_m_s)
+def popup_crossed(scenario_name: str = "paper") -> tuple[float, list[str]]:
+    """POPUP1's radius (m) and the vehicles whose planned routes (seed 1) enter its disc."""
+    scenario, schedule = paper_schedule(1, scenario_name)
+    (zone,) = [z for z in scenario.threats if z.id == POPUP]
+    assert isinstance(zone, Radar), zone
+    crossed = []
+    for vs in schedule.vehicles:
+        s_m = np.linspace(0.0, vs.path.length_m, 2000)
+        poses = [vs.path.pose_at(float(s)) for s in s_m]
+        near_m = min(
+            math.hypot(q.east_m - zone.center.east_m, q.north_m - zone.center.north_m)
+            for q in poses
+        )
+        if near_m < zone.radius_m:
+            crossed.append(vs.vehicle_id)
+    return zone.radius_m, crossed
+
+
+def team_time_move_max_s(
+    wind_m_s: float = 0.0, wind_from_deg: float = 0.0, scenario_name: str = "paper"
+) -> float:
+    """The most the team time may move later in a flight of the paper scenario (or the
+    compact one) in this wind (the module's list)."""
+    scenario, _ = paper_schedule(1, scenario_name)
+    wind = max(
+        0.0,
+        *(wind_cost_s(v.id, wind_m_s, wind_from_deg, scenario_name) for v in scenario.vehicles),
+    )
+    radius_m, crossed = popup_crossed(scenario_name)
+    v_m_s = min(scenario.vehicle(v).speed_max_m_s for v in crossed)
+    popup = (math.pi - 2.0) * radius_m / (v_m_s - wind_m_s)
     return wind + popup + SLACK_S

@@ -259,3 +259,45 @@ async def rehearse_doc(
         quiet=True,
     )
     return await rehearse(options), truth
+
+
+def compact_paper(scale: float = 0.25) -> dict[str, Any]:
+    """The paper's scenario drawn ``scale`` times as large about its target: the same three
+    vehicles, threats, pop-up and holding areas, in an area ``scale`` as wide, so the flight
+    lasts about ``scale`` as long (some 1,300 s at 0.25, against 5,500 s).
+
+    Kept at full size: the goals (1.5-2 km short of the target, so that a simultaneous
+    arrival keeps d_s), the speeds and turn radii, the altitudes. Scaled: the launch sites,
+    the area and its grid, the hills' heights (the slopes stay the paper's), the zones, the
+    holding areas (not under 1.2 km across, for a loiter of 300 m), the takeoff windows and the
+    pop-up's delay. At this scale POPUP1 lies across UAV2's route only.
+    """
+    doc = yaml.safe_load(PAPER.read_text(encoding="utf-8"))
+    tx, ty = TARGET
+
+    def scaled(p: dict[str, Any]) -> dict[str, Any]:
+        east, north = tx + (p["east_m"] - tx) * scale, ty + (p["north_m"] - ty) * scale
+        return {**p, "east_m": round(east), "north_m": round(north)}
+
+    area = doc["area"]
+    area["min_east_m"] = round(tx - (tx - area["min_east_m"]) * scale)
+    area["min_north_m"] = round(ty - (ty - area["min_north_m"]) * scale)
+    for key in ("width_m", "height_m", "resolution_m"):
+        area[key] = round(area[key] * scale)
+    doc["terrain"]["peak_m"] = round(doc["terrain"]["peak_m"] * scale)
+    for v in doc["vehicles"]:
+        v["start"] = scaled(v["start"])
+        v["takeoff_window_s"] = [round(t * scale) for t in v["takeoff_window_s"]]
+    for z in doc["threats"]:
+        if "center" in z:
+            z["center"] = scaled(z["center"])
+            z["radius_m"] = round(z["radius_m"] * scale)
+        if "polygon" in z:
+            z["polygon"] = [scaled(p) for p in z["polygon"]]
+        if "appears" in z:
+            z["appears"]["delay_s"] = round(z["appears"]["delay_s"] * scale)
+    for b in doc["buffers"]:
+        b["center"] = scaled(b["center"])
+        b["radius_m"] = max(1_200, round(b["radius_m"] * scale))
+    doc["name"] = f"paper_three_uav at {scale:g} scale"
+    return doc
