@@ -111,6 +111,10 @@ class Lockstep:
         self._slots[_ACK] = self.pace_s() if pace_s is None else pace_s
         self._slots[_ACK_WALL] = time.monotonic()
 
+    def acknowledged_s(self) -> float:
+        """The pace time (s) the ground station last acknowledged (-inf before any)."""
+        return float(self._slots[_ACK])
+
     def release(self) -> None:
         """The ground station holds the simulator back no longer."""
         self._slots[_ACK_WALL] = -math.inf

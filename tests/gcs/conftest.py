@@ -22,6 +22,7 @@ from planner.plan import World, build_world, plan
 from planner.retime import build_schedule
 from planner.scenario import Scenario, load_scenario
 from planner.schedule import Schedule
+from sitl_stub.lockstep import Lockstep
 from tests.flightstory import story
 
 PG_ADMIN = "postgresql+psycopg://postgres@127.0.0.1:5432/test"
@@ -57,6 +58,24 @@ async def start_stub(
         line = await proc.stdout.readline()
     assert b"ready" in line, line
     return proc
+
+
+async def hold_while_away(pace_path: Path, away_s: float) -> None:
+    """Stand in for a ground station that is away (killed, starting again) for ``away_s``
+    seconds of flight: the simulator in lock step on ``pace_path`` flies that far past where
+    it is now and waits there, however long the restart takes in wall time (a busy machine
+    then sets no verdict), until a ground station acknowledges again (any pace time other
+    than the one held here)."""
+    pace = Lockstep(pace_path)
+    try:
+        held_s = (pace.pace_s() * pace.speedup + away_s - pace.lead_s) / pace.speedup
+        while True:
+            pace.acknowledge(held_s)
+            await asyncio.sleep(0.05)
+            if pace.acknowledged_s() != held_s:
+                return
+    finally:
+        pace.close()
 
 
 def postgres_schema() -> Iterator[str]:

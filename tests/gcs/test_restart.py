@@ -22,7 +22,7 @@ from gcs.coordination.team import TeamController
 from gcs.store.repository import Store
 from sitl_stub.lockstep import Lockstep
 from tests.flightstory import story_of_lines
-from tests.gcs.conftest import PAPER, start_stub
+from tests.gcs.conftest import PAPER, hold_while_away, start_stub
 from tests.paperbounds import team_time_move_max_s
 from tests.sitl_stub.conftest import free_port_base
 from tests.verdict import assert_flown
@@ -32,11 +32,16 @@ pytestmark = pytest.mark.slow  # about 45 s of wall time
 TOLERANCE_S = 2.0
 """The arrival tolerance the engine is run with (``--tolerance``), and the one judged: a
 goal passage (the truth's) within it of the planned slot moved by the team time's move."""
+AWAY_S = 300.0
+"""How long (flight s) the engine is away: the simulator flies this far past the kill and
+waits for the engine started again (:func:`tests.gcs.conftest.hold_while_away`), however long
+its start takes on a busy machine."""
 RESUMED_MOVE_MAX_S = 30.0
 """How far the team time may move after the restart. The vehicle that sets it (UAV2, on the
 longest route and late by then) had been commanded its top speed, or a step under it, before
-the kill, and flew on at that unwatched: the gap (200-400 s of flight) costs it at most one
-step (1 m/s of 30), under 15 s; 30 s leaves as much again for its arrival estimate. A team
+the kill, and flew on at that unwatched: the gap (:data:`AWAY_S` of flight, and the lead)
+costs it at most one step (1 m/s of 30), under 15 s; 30 s leaves as much again for its
+arrival estimate. A team
 time lost in the restart would move by the pop-up's 100 s and more (and its version start
 again)."""
 CHECKPOINT_WITHIN_S = 200.0
@@ -91,6 +96,7 @@ async def test_engine_killed_after_the_popup_resumes_on_the_same_database(tmp_pa
     base = free_port_base(3)
     truth, counters = tmp_path / "truth.jsonl", tmp_path / "counters.json"
     db = f"sqlite:///{tmp_path / 'tcgcs.db'}"
+    away: asyncio.Task[None] | None = None
     stub = await start_stub(
         PAPER, base, truth, "--counters", str(counters), "--wind", "5,270", "--loss", "0.05",
         "--seed", "2", "--lockstep", str(tmp_path / "pace"),
@@ -137,6 +143,7 @@ async def test_engine_killed_after_the_popup_resumes_on_the_same_database(tmp_pa
             pace.close()
             first.send_signal(signal.SIGKILL)
             await first.wait()
+            away = asyncio.create_task(hold_while_away(tmp_path / "pace", AWAY_S))
             await reader
         finally:
             store.close()
@@ -170,8 +177,12 @@ async def test_engine_killed_after_the_popup_resumes_on_the_same_database(tmp_pa
         )
         async with asyncio.timeout(150):
             stdout, stderr = await second.communicate()
+        async with asyncio.timeout(30):
+            await away  # ended when the second engine took the simulator's clock over
         assert second.returncode == 0, (story_of_lines(stdout.decode()), stderr.decode()[-3000:])
     finally:
+        if away is not None:
+            away.cancel()
         if stub.returncode is None:
             stub.send_signal(signal.SIGINT)
         async with asyncio.timeout(20):

@@ -19,6 +19,7 @@ import pytest
 
 from gcs.store.repository import Store
 from tests.flightstory import story
+from tests.gcs.conftest import hold_while_away
 from tests.paperbounds import team_time_move_max_s
 from tests.service.conftest import serve
 from tests.service.test_flights_http import (
@@ -34,11 +35,15 @@ from tests.verdict import assert_flown
 
 pytestmark = pytest.mark.slow  # about 45 s of wall time
 
+AWAY_S = 300.0
+"""How long (flight s) the service is away: its simulator flies this far past the kill and
+waits for the service started again (:func:`tests.gcs.conftest.hold_while_away`), however
+long its start takes on a busy machine."""
 RESUMED_MOVE_MAX_S = 30.0
 """How far the team time may move after the restart. The vehicle that sets it (UAV2, on the
 longest route and late by then) had been commanded its top speed, or a step under it, before
-the kill, and flew on at that unwatched: the gap (200-400 s of flight) costs it at most one
-step (1 m/s of 30), under 15 s; 30 s leaves as much again for its arrival estimate. A team
+the kill, and flew on at that unwatched: the gap (:data:`AWAY_S` of flight) costs it at most
+one step (1 m/s of 30), under 15 s; 30 s leaves as much again for its arrival estimate. A team
 time lost in the restart would move by the pop-up's 100 s and more (and its version start
 again). The arrivals are then judged as in test_flights_http: the resumed coordinator has
 thousands of seconds to correct what the gap cost."""
@@ -131,7 +136,23 @@ async def _kill_and_restart(data: Path) -> None:
             await asyncio.sleep(0.05)
         first.proc.send_signal(signal.SIGKILL)
         await first.proc.wait()
-    assert {e["kind"] for e in before} >= {"launch", "replan"}
+        away = asyncio.create_task(hold_while_away(data / "flights" / fid / "pace", AWAY_S))
+    try:
+        assert {e["kind"] for e in before} >= {"launch", "replan"}
+        await _resumed(data, fid, said, said_seq, before)
+    finally:
+        away.cancel()
+
+
+async def _resumed(
+    data: Path,
+    fid: str,
+    said: tuple[float, int],
+    said_seq: int,
+    before: list[dict[str, Any]],
+) -> None:
+    """The service started again on ``data``: it resumes flight ``fid`` (killed when it had
+    said team time ``said`` at event ``said_seq``, events ``before``) and flies it home."""
     async with serve(data) as second, second.client() as client:
         flights = _ok(await client.get("/v1/flights"))
         assert [f["id"] for f in flights] == [fid]
