@@ -34,6 +34,7 @@ from planner.dubins import Pose
 from planner.errors import ArrivalTimeError, InfeasibleError
 from planner.flightpath import FlightPath
 from planner.layers import Lane, lanes, lift_team
+from planner.loiterflight import loiter_flight
 from planner.plan import Plan, World, build_world, required_arrival_s
 from planner.scenario import Scenario, Spaced, Vehicle, Waves, Windows
 from planner.schedule import (
@@ -123,7 +124,10 @@ def find_loiter_site(
     A circle tangent to the path at a path point, entirely inside a buffer, is preferred (the
     paper keeps the added path within ``2 r_min`` of the planned one); among those, the first
     stretch of the path that allows one, at its deepest point. Otherwise a circle in the
-    buffer nearest the path, reached by a straight detour from the nearest path point.
+    buffer nearest the path, reached by a straight detour from the nearest path point; its
+    ``detour_m`` is all that ArduPlane flies there besides the whole turns (out to the circle,
+    the line-up on the route's course after the turns, and back: see
+    :func:`~planner.loiterflight.loiter_flight`), the way round that adds less.
     """
     frame = scenario.frame()
     buffers = [
@@ -165,12 +169,24 @@ def find_loiter_site(
         d = [math.hypot(p.east_m - be, p.north_m - bn) for p in poses]
         k = int(np.argmin(d))
         p = poses[k]
-        ux, uy = (p.east_m - be) / d[k], (p.north_m - bn) / d[k]
+        if d[k] > 0.0:
+            ux, uy = (p.east_m - be) / d[k], (p.north_m - bn) / d[k]
+        else:
+            ux, uy = math.cos(p.heading_rad), -math.sin(p.heading_rad)
         ce, cn = be + ux * (br - radius_m), bn + uy * (br - radius_m)
-        ee, en = ce + ux * radius_m, cn + uy * radius_m
-        length = 2.0 * math.hypot(p.east_m - ee, p.north_m - en)
-        if clear(ce, cn) and (detour is None or length < detour.detour_m):
-            detour = _Site(float(s_values[k]), (ce, cn), (ee, en), True, length, bid)
+        if not clear(ce, cn):
+            continue
+        for clockwise in (True, False):
+            # What the loiter adds as ArduPlane flies it from the waypoint at p: out to the
+            # circle, the line-up on the route's course after the turns, and back.
+            flight = loiter_flight(
+                p.east_m, p.north_m, p.heading_rad, ce, cn, radius_m, clockwise=clockwise
+            )
+            length = flight.added_m
+            if detour is None or length < detour.detour_m:
+                at = flight.counted_from_rad
+                entry = (ce + radius_m * math.sin(at), cn + radius_m * math.cos(at))
+                detour = _Site(float(s_values[k]), (ce, cn), entry, clockwise, length, bid)
     return detour
 
 

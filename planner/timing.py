@@ -235,7 +235,8 @@ class Piece:
 class LoiterSite:
     """Where a loiter can be flown: ``at_m`` ahead along the remaining path.
 
-    ``detour_m`` is the extra flying to and from the circle when it cannot touch the path.
+    ``detour_m`` is the extra flying besides the turns when the circle cannot touch the path
+    (out to it, the line-up on the path's course after the turns, and back).
     """
 
     at_m: float

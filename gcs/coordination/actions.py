@@ -144,6 +144,14 @@ class Resumed:
 
 
 @dataclass(frozen=True)
+class LoiterLeft:
+    """The outcome of :class:`LeaveLoiter` (``error`` None: it flies the item after)."""
+
+    leave: LeaveLoiter
+    error: str | None = None
+
+
+@dataclass(frozen=True)
 class PlanningLead:
     """How far ahead (mission s) a changed mission may start: the runner's measure of
     planning plus upload time at the clock's rate."""
@@ -246,6 +254,18 @@ class Resume:
 
 
 @dataclass(frozen=True)
+class LeaveLoiter:
+    """Out of the loiter turns now: mission item ``seq`` (the one after the
+    NAV_LOITER_TURNS) becomes the current one (MISSION_SET_CURRENT; ArduPlane starts it
+    where the aircraft is, AP_Mission::set_current_cmd)."""
+
+    vehicle_id: str
+    seq: int
+    reason: str
+    decided_s: float
+
+
+@dataclass(frozen=True)
 class Stop:
     """The flight is over for the controller (every vehicle done, or it overran)."""
 
@@ -339,6 +359,19 @@ Input = (
     | Computed
     | HoldTaken
     | Resumed
+    | LoiterLeft
     | PlanningLead
 )
-Action = Report | Arm | Launch | CommandSpeed | Upload | SetMode | Hold | Resume | Stop | Compute
+Action = (
+    Report
+    | Arm
+    | Launch
+    | CommandSpeed
+    | Upload
+    | SetMode
+    | Hold
+    | Resume
+    | LeaveLoiter
+    | Stop
+    | Compute
+)

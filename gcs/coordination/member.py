@@ -123,6 +123,9 @@ class Member:
     loiter_flown_m: float = 0.0
     """Ground distance flown since then (each fix's groundspeed times the time since the one
     before, link gaps included: the aircraft flew on)."""
+    leaving_seq: int | None = None
+    """The item after the loiter it is being taken out of (a
+    :class:`~gcs.coordination.actions.LeaveLoiter` on its way)."""
     arrival_s: float | None = None
     """Mission time it passed its goal (from its own telemetry)."""
     landing_due: bool = False

@@ -64,7 +64,8 @@ class LoiterSpec:
 
     ``s_m`` is the along-path distance (m) of the path point where the loiter is entered; the
     circle (``centre_east_m``, ``centre_north_m``, ``radius_m`` in m) is flown ``turns`` times,
-    clockwise or not, then ``detour_m`` of straight out-and-back, at the same airspeed.
+    clockwise or not, plus ``detour_m`` (the way out to a circle off the route, the line-up on
+    the route's course after the turns and the way back), at the same airspeed.
     """
 
     s_m: float

@@ -474,6 +474,8 @@ class FlightRunner:
                     self._spawn(self._hold(a))
                 case act.Resume():
                     self._spawn(self._resume(a))
+                case act.LeaveLoiter():
+                    self._spawn(self._leave_loiter(a))
                 case act.Stop():
                     self._stopped = True
         if changed:
@@ -566,6 +568,13 @@ class FlightRunner:
     async def _resume(self, a: act.Resume) -> None:
         err = await self._outcome(self._auto_at(a))
         self._feed(act.Resumed(a, err))
+
+    async def _leave_loiter(self, a: act.LeaveLoiter) -> None:
+        """MISSION_SET_CURRENT to the item after the loiter, in AUTO: ArduPlane leaves the
+        turns and starts that item at once (AP_Mission::set_current_cmd)."""
+        v = self.vehicles[a.vehicle_id]
+        err = await self._outcome(v.set_current_item(a.seq, **self._command(v)))
+        self._feed(act.LoiterLeft(a, err))
 
     async def _upload(self, a: act.Upload) -> None:
         """Upload with the adaptive retry policy (:mod:`gcs.mavlink.retry`), restarting the whole
@@ -987,6 +996,7 @@ class FlightRunner:
         # What was under way when the process died is gone: decided again, re-planned again.
         for m in team.members.values():
             m.busy_command = m.busy_mission = False
+            m.leaving_seq = None
             m.link_silent = False
         team.popups_done -= team.popups_running
         team.popups_running.clear()

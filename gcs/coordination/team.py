@@ -262,6 +262,8 @@ class TeamController(ZoneGuard, TeamTime):
                 self._hold_taken(event, now_s, out)
             case act.Resumed():
                 self._resumed(event, now_s, out)
+            case act.LoiterLeft():
+                self._loiter_left(event, now_s, out)
             case act.PlanningLead(lead_s=lead, loiter_lead_s=loiter_lead):
                 self.lead_s = max(self.config.min_lead_s, lead)
                 self.loiter_lead_s = max(
@@ -871,27 +873,125 @@ class TeamController(ZoneGuard, TeamTime):
     def _decide_in_loiter(self, m: Member, t: float, fix: act.Fix, out: list[act.Action]) -> None:
         """In loiter turns: the rest of the turns (those flown counted from the ground
         distance since it entered them) and the route after, timed as anywhere else; its
-        airspeed is trimmed (ArduPlane flies the turns at the commanded airspeed), and one
-        that would be late even at top speed moves the team time now, while the others can
-        still follow, not when it comes out."""
+        airspeed is trimmed (ArduPlane flies the turns at the commanded airspeed).
+
+        One that the rest of its turns would make late even at top speed is taken out of them
+        (:meth:`_leave_loiter`) once leaving would not make it early at its minimum speed
+        (until then it flies the turns at the speed the route after them asks for); one late
+        even leaving now moves the team time now, for the route without the turns, while the
+        others can still follow (for the turns left, when leaving would gain nothing)."""
+        if m.leaving_seq is not None:
+            return  # being taken out of the turns: timed again once it is
         k = m.loiters_done()
         if k >= len(m.track.loiters):
             return
         lo = m.track.loiters[k]
+        wind = self._wind(m, fix)
         d = m.controller.decide(
             m.track,
             s_m=lo.s_m,
             now_s=t,
             target_s=m.target_s,
-            wind=self._wind(m, fix),
+            wind=wind,
             current_level_m_s=m.level_m_s,
             loiters_done=k,
             loiter_flown_m=min(m.loiter_flown_m, lo.length_m),
             tas_per_eas=m.tas_per_eas(lo.s_m),
         )
-        self._apply_decision(m, d, t, out)
-        if d.verdict == "late":
+        if d.verdict != "late":
+            self._apply_decision(m, d, t, out)
+            return
+        # Out of the turns now, it flies on from where it is: the route from its position
+        # located on it (a circle off the route is left towards the waypoint after).
+        s = lo.s_m if m.s_m is None else m.s_m
+        left = m.controller.decide(
+            m.track,
+            s_m=s,
+            now_s=t,
+            target_s=m.target_s,
+            wind=wind,
+            current_level_m_s=m.level_m_s,
+            loiters_done=k + 1,
+            tas_per_eas=m.tas_per_eas(s),
+        )
+        if left.eta_min_s >= d.eta_min_s:
+            # Nothing to gain by leaving (its turns are as good as flown): late as anywhere.
+            self._apply_decision(m, d, t, out)
             self._late(m, d, t, out)
+            return
+        self._apply_decision(m, left, t, out)
+        if left.verdict != "early":
+            self._leave_loiter(m, d, left, t, out)
+        if left.verdict == "late":
+            self._late(m, left, t, out)
+
+    def _leave_loiter(
+        self, m: Member, d: Decision, left: Decision, t: float, out: list[act.Action]
+    ) -> None:
+        """Take the vehicle out of its loiter turns: the item after the NAV_LOITER_TURNS made
+        current (ArduPlane leaves the circle for it at once). ``d`` timed it with the turns
+        left, ``left`` without them."""
+        seq = m.last_seq
+        if seq is None or seq + 1 >= len(m.mission.items) or not m.in_loiter():
+            return
+        m.leaving_seq = seq + 1
+        hi = m.limits.airspeed_max_m_s
+        rest = (
+            f"still {left.eta_min_s - m.target_s:.1f} s late at {hi:g} m/s"
+            if left.verdict == "late"
+            else f"on time from there, {left.required_m_s:.2f} m/s required"
+        )
+        why = (
+            f"the rest of its loiter would make it {d.eta_min_s - m.target_s:.1f} s late even "
+            f"at {hi:g} m/s: out of the turns at {t:.1f} s, on to item {seq + 1} ({rest})"
+        )
+        out.append(
+            act.Report(
+                EventKind.LOITER,
+                why,
+                m.vehicle_id,
+                t_s=t,
+                payload={
+                    "action": "leave",
+                    "seq": seq + 1,
+                    "late_s": round(d.eta_min_s - m.target_s, 1),
+                    "loiter_flown_m": round(m.loiter_flown_m, 1),
+                },
+            )
+        )
+        out.append(act.LeaveLoiter(m.vehicle_id, seq + 1, why, t))
+
+    def _loiter_left(self, r: act.LoiterLeft, now: float, out: list[act.Action]) -> None:
+        """The vehicle flies the item after its loiter (or it was not taken out: asked again
+        at its next decision). Its turns count as flown: it is timed on its route again."""
+        leave = r.leave
+        m = self.members[leave.vehicle_id]
+        m.leaving_seq = None
+        m.next_decision_s = -math.inf
+        if r.error is not None:
+            out.append(
+                act.Report(
+                    EventKind.LOITER,
+                    f"not taken out of its turns ({r.error}); deciding again",
+                    m.vehicle_id,
+                    t_s=now,
+                    payload={"action": "leave_failed", "seq": leave.seq},
+                )
+            )
+            return
+        if m.last_seq is not None and m.last_seq < leave.seq:
+            m.last_seq = leave.seq
+        m.loiter_entered_s, m.loiter_flown_m = None, 0.0
+        m.progress = None
+        out.append(
+            act.Report(
+                EventKind.LOITER,
+                f"out of its turns: flying item {leave.seq} on, timed on its route",
+                m.vehicle_id,
+                t_s=now,
+                payload={"action": "left", "seq": leave.seq},
+            )
+        )
 
     def _apply_decision(self, m: Member, d: Decision, t: float, out: list[act.Action]) -> None:
         """Keep the decision, time the next one, and command the airspeed it asks for (one

@@ -17,6 +17,8 @@ import pytest
 from pymavlink.dialects.v20 import ardupilotmega as mavlink2
 from sqlalchemy import create_engine, text
 
+from gcs.coordination.config import FlightConfig
+from gcs.coordination.team import TeamController
 from gcs.store.repository import Store
 from planner.plan import World, build_world, plan
 from planner.retime import build_schedule
@@ -39,6 +41,19 @@ def paper() -> tuple[Scenario, World, Schedule]:
     world = build_world(scenario)
     p = plan(scenario, rng=np.random.default_rng(1), world=world)
     return scenario, world, build_schedule(scenario, p, world=world)
+
+
+START_UTC = 1_800_000_000.0
+"""The UTC (s) the controller tests start their flights at."""
+
+
+@pytest.fixture
+def team(paper: tuple[Scenario, World, Schedule]) -> TeamController:
+    """The paper team's controller, started at :data:`START_UTC` (seed 3)."""
+    scenario, world, schedule = paper
+    t = TeamController(scenario, schedule, world, FlightConfig(), rng=np.random.default_rng(3))
+    t.start(START_UTC)
+    return t
 
 
 async def start_stub(

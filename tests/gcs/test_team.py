@@ -22,6 +22,7 @@ from gcs.coordination import actions as act
 from gcs.coordination.config import FlightConfig
 from gcs.coordination.events import EventKind
 from gcs.coordination.member import Member, VehicleState
+from gcs.coordination.routetrack import LoiterSpec
 from gcs.coordination.separation import Position, SeparationWatch
 from gcs.coordination.team import TeamController, TeamTimeRefused
 from gcs.errors import GcsError
@@ -38,16 +39,7 @@ from planner.scenario import Scenario, Threat, parse_scenario
 from planner.schedule import Schedule
 from planner.schedulefile import PathMission
 from planner.threats import build_threats
-
-START_UTC = 1_800_000_000.0
-
-
-@pytest.fixture
-def team(paper: tuple[Scenario, World, Schedule]) -> TeamController:
-    scenario, world, schedule = paper
-    t = TeamController(scenario, schedule, world, FlightConfig(), rng=np.random.default_rng(3))
-    t.start(START_UTC)
-    return t
+from tests.gcs.conftest import START_UTC
 
 
 def of(actions: Sequence[act.Action], kind: type) -> list:  # type: ignore[type-arg]
@@ -92,6 +84,20 @@ def fix(team: TeamController, vid: str, s_m: float, t_s: float, airspeed_m_s: fl
         mission_seq=seq_ahead(team, vid, s_m),
         wind_speed_m_s=0.0,
         wind_from_deg=0.0,
+    )
+
+
+def on_loiter_circle(team: TeamController, base: act.Fix, lo: LoiterSpec, i: int) -> act.Fix:
+    """Fix ``i`` (2 s apart after ``base``) round the loiter circle ``lo`` at ``base``'s
+    ground speed."""
+    gs = base.groundspeed_m_s
+    assert gs is not None
+    a = (1.0 if lo.clockwise else -1.0) * 2.0 * i * gs / lo.radius_m
+    e = lo.centre_east_m + lo.radius_m * math.sin(a)
+    n = lo.centre_north_m + lo.radius_m * math.cos(a)
+    lat, lon = team.frame.to_geodetic(e, n)
+    return dataclasses.replace(
+        base, utc_s=base.utc_s + 2.0 * i, lat_deg=float(lat), lon_deg=float(lon)
     )
 
 
@@ -1089,12 +1095,14 @@ def test_loiter_turns_splice_at_the_loiter_lead_not_the_team_re_plan_lead(
     assert s0 + gs * 90.0 <= job.s_m <= s0 + gs * 90.0 + spacing + 1.0
 
 
-def test_a_vehicle_in_its_loiter_turns_is_timed_and_a_late_one_moves_the_team_time_at_once(
+def test_a_vehicle_in_its_loiter_turns_is_timed_and_a_late_one_leaves_them_and_moves_the_team_time(
     team: TeamController,
 ) -> None:
     """In loiter turns the vehicle is still timed (the turns left from the ground distance
-    flown in them): its airspeed trimmed, and when the team time comes too soon for the turns
-    left even at top speed it moves now, not when the vehicle comes out."""
+    flown in them): its airspeed trimmed; when the team time comes too soon for the turns
+    left even at top speed it is taken out of them now (the item after the loiter made
+    current), and as the route alone is too long for it too, the team time moves now, for
+    the route from where it is, not when the vehicle comes out."""
     vid = "UAV3"
     m = team.members[vid]
     t0, _, job = _early(team, vid)
@@ -1107,23 +1115,13 @@ def test_a_vehicle_in_its_loiter_turns_is_timed_and_a_late_one_moves_the_team_ti
         k for k, it in enumerate(m.mission.items) if it.command == MAV_CMD_NAV_LOITER_TURNS
     )
     t1 = t0 + 600.0
-    base = fix(team, vid, lo.s_m, t1, 20.0)
-    for c in of(team.handle(dataclasses.replace(base, mission_seq=k_loiter), t1), act.CommandSpeed):
+    base = dataclasses.replace(fix(team, vid, lo.s_m, t1, 20.0), mission_seq=k_loiter)
+    for c in of(team.handle(base, t1), act.CommandSpeed):
         team.handle(act.SpeedCommanded(vid, c.airspeed_m_s, c.reason, c.decided_s), t1)
     assert m.in_loiter() and m.loiter_entered_s == t1
-    gs = base.groundspeed_m_s
-    assert gs is not None
 
     def on_circle(i: int) -> act.Fix:
-        """Fix ``i`` (2 s apart) round the loiter circle at the fixes' ground speed."""
-        a = (1.0 if lo.clockwise else -1.0) * 2.0 * i * gs / lo.radius_m
-        e = lo.centre_east_m + lo.radius_m * math.sin(a)
-        n = lo.centre_north_m + lo.radius_m * math.cos(a)
-        lat, lon = team.frame.to_geodetic(e, n)
-        return dataclasses.replace(
-            base, utc_s=base.utc_s + 2.0 * i, lat_deg=float(lat), lon_deg=float(lon),
-            mission_seq=k_loiter,
-        )  # fmt: skip
+        return on_loiter_circle(team, base, lo, i)
 
     # 200 s in the turns (fixes every 2 s).
     trims = []
@@ -1134,7 +1132,7 @@ def test_a_vehicle_in_its_loiter_turns_is_timed_and_a_late_one_moves_the_team_ti
             team.handle(act.SpeedCommanded(vid, c.airspeed_m_s, c.reason, c.decided_s), t1 + 2 * i)
     assert m.phase == "route"
     assert m.last_decision is not before and m.next_decision_s > t1  # timed in the turns
-    assert m.loiter_flown_m == pytest.approx(100 * 2.0 * gs)
+    assert m.loiter_flown_m == pytest.approx(100 * 2.0 * base.groundspeed_m_s)
     t2 = t1 + 200.0
     left_m = lo.length_m - m.loiter_flown_m + m.track.length_m - lo.s_m
     assert left_m > 10_000.0
@@ -1146,37 +1144,44 @@ def test_a_vehicle_in_its_loiter_turns_is_timed_and_a_late_one_moves_the_team_ti
         x.next_decision_s = -math.inf
     team.team_ref_s = t2 + 60.0
     out = team.handle(on_circle(101), t2 + 2.0)
+    (leave,) = of(out, act.LeaveLoiter)
+    assert leave.vehicle_id == vid and leave.seq == k_loiter + 1
     (moved,) = reports(out, EventKind.ARRIVAL)
     assert moved.vehicle == vid and "cannot arrive before" in moved.reason
-    # Where it moves to, worked out here: from fix 101 (t2 + 2 s) the turns left (the loiter
-    # less the ground flown in it: 101 fixes 2 s apart at gs) and the rest of the route, at
-    # the top equivalent airspeed in still air, plus the late margin (the config's, or 2 % of
-    # the time still to fly if that is less). The controller times all of it at one true
-    # airspeed per equivalent: the harmonic mean of the ISA ratio along the rest of the
-    # route (it times the route exactly), integrated here by scipy over the route's own
-    # altitude profile with the ISA worked out here (:func:`_isa_tas_per_eas`).
+    # Where it moves to, worked out here: from fix 101 (t2 + 2 s), out of the turns, the
+    # route from the point of it nearest the fix (found here by sampling the path every
+    # 0.1 m), at the top equivalent airspeed in still air, plus the late margin (the
+    # config's, or 2 % of the time still to fly if that is less). The controller times the
+    # route at one true airspeed per equivalent: the harmonic mean of the ISA ratio along
+    # it, integrated here by scipy over the route's own altitude profile with the ISA worked
+    # out here (:func:`_isa_tas_per_eas`).
     v_max = m.limits.airspeed_max_m_s
     t_fix = t2 + 2.0
-    turns_left_m = lo.length_m - 101 * 2.0 * gs
+    here = on_circle(101)
+    he, hn = team.frame.to_local(here.lat_deg, here.lon_deg)
+    near = np.arange(max(lo.s_m - 3_000.0, 0.0), min(lo.s_m + 3_000.0, m.track.length_m), 0.1)
+    poses = [m.schedule.path.pose_at(float(x)) for x in near]
+    gap = [math.hypot(p.east_m - float(he), p.north_m - float(hn)) for p in poses]
+    s_fix = float(near[int(np.argmin(gap))])
     s_wp, alt_wp = np.asarray(m.schedule.wp_s_m), np.asarray(m.schedule.wp_alt_m)
     end_m = m.track.length_m
     route_per_eas_s = quad(
         lambda s: 1.0 / _isa_tas_per_eas(float(np.interp(s, s_wp, alt_wp))),
-        lo.s_m,
+        s_fix,
         end_m,
-        points=[s for s in s_wp if lo.s_m < s < end_m],
+        points=[s for s in s_wp if s_fix < s < end_m],
         limit=200,
     )[0]
-    route_ratio = (end_m - lo.s_m) / route_per_eas_s
-    eta_s = t_fix + (turns_left_m + end_m - lo.s_m) / (v_max * route_ratio)
+    eta_s = t_fix + route_per_eas_s / v_max
     margin_s = min(team.config.late_margin_s, 0.02 * (eta_s - t_fix))
-    # 10 ms: the integral against the route's 50 m table of the ratio (a millionth of the
-    # 3,100 s), nothing else being approximate. The turns flown at the loiter's own altitude
-    # would take about 1 s less than that mean ratio makes them (the figure is that much on
-    # the late side: the team time moves 1 s further than the physics needs).
+    # 10 ms: the integral against the route's 50 m table of the ratio and the 0.1 m search.
     assert moved.value == pytest.approx(eta_s - m.offset_s + margin_s, abs=0.01)
     (cmd,) = of(out, act.CommandSpeed)
     assert cmd.airspeed_m_s == m.limits.airspeed_max_m_s
+    # Out of them: no longer in a loiter, its turns counted as flown, timed on its route.
+    out = team.handle(act.LoiterLeft(leave), t_fix + 1.0)
+    assert [r.payload["action"] for r in reports(out, EventKind.LOITER)] == ["left"]
+    assert not m.in_loiter() and m.loiters_done() == 1 and m.next_decision_s == -math.inf
 
 
 def _isa_tas_per_eas(alt_m: float) -> float:

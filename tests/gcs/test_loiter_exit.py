@@ -1,0 +1,166 @@
+"""A vehicle in its loiter turns that the rest of them would make late is taken out of them
+(MISSION_SET_CURRENT to the item after the NAV_LOITER_TURNS) once leaving would not make it
+early, and the coordinator counts the turns as flown from then on. Through
+:meth:`TeamController.handle` with a fake clock, as in ``test_team.py``."""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from collections.abc import Callable
+
+from gcs.coordination import actions as act
+from gcs.coordination.events import EventKind
+from gcs.coordination.member import Member
+from gcs.coordination.routetrack import LoiterSpec
+from gcs.coordination.team import TeamController
+from planner.mission import MAV_CMD_NAV_LOITER_TURNS
+from tests.gcs.test_team import _early, fix, of, on_loiter_circle, reports
+
+SETTLED = 40
+"""Fixes round the circle (2 s apart) before a test's own."""
+
+
+def _in_turns(
+    team: TeamController, vid: str
+) -> tuple[Member, LoiterSpec, int, float, Callable[[int], act.Fix]]:
+    """``vid`` given loiter turns (installed) and flying them from ``t1``, settled: the
+    member, its loiter, the loiter's item, ``t1`` and fix ``i`` (at ``t1 + 2 i``) round the
+    circle; fixes up to :data:`SETTLED` have been handled."""
+    m = team.members[vid]
+    t0, _, job = _early(team, vid)
+    (up,) = of(team.handle(act.Computed(job, job.run()), t0 + 1), act.Upload)
+    team.handle(act.Installed(up), t0 + 2)
+    if m.busy_command:
+        team.handle(act.SpeedCommanded(vid, 15.0, "early", t0), t0 + 2)
+    (lo,) = [x for x in m.track.loiters if x.s_m > job.s_m - 1.0]
+    k = next(k for k, it in enumerate(m.mission.items) if it.command == MAV_CMD_NAV_LOITER_TURNS)
+    t1 = t0 + 600.0
+    base = dataclasses.replace(fix(team, vid, lo.s_m, t1, 20.0), mission_seq=k)
+    for c in of(team.handle(base, t1), act.CommandSpeed):
+        team.handle(act.SpeedCommanded(vid, c.airspeed_m_s, c.reason, c.decided_s), t1)
+    assert m.in_loiter()
+
+    def on_circle(i: int) -> act.Fix:
+        return on_loiter_circle(team, base, lo, i)
+
+    # Settled in them: heard without a gap for longer than ``resettle_s`` (its lateness
+    # moves the team time from then on).
+    for i in range(1, SETTLED + 1):
+        _answered(team, vid, team.handle(on_circle(i), t1 + 2.0 * i), t1 + 2.0 * i)
+    assert t1 + 2.0 * SETTLED - m.heard_since_s > team.config.resettle_s
+    return m, lo, k, t1, on_circle
+
+
+def _answered(team: TeamController, vid: str, out: list[act.Action], t: float) -> None:
+    for c in of(out, act.CommandSpeed):
+        team.handle(act.SpeedCommanded(vid, c.airspeed_m_s, c.reason, c.decided_s), t)
+
+
+def _retarget(team: TeamController, ref_s: float) -> None:
+    """The team time (and every slot) moved to ``ref_s``, decided again at the next fix."""
+    for x in team.members.values():
+        x.target_s = ref_s + x.offset_s
+        x.next_decision_s = -math.inf
+    team.team_ref_s = ref_s
+
+
+def test_turns_that_would_make_it_late_are_left_once_leaving_is_on_time(
+    team: TeamController,
+) -> None:
+    """The team time comes too soon for the turns left even at top speed, yet leaving at
+    once would make the vehicle early even at its minimum speed: it stays in the turns,
+    flying the minimum, and the team time stays. As the turns go on, leaving comes on time:
+    then the item after the loiter is made current and it is said, the team time still
+    where it was."""
+    vid = "UAV3"
+    m, lo, k, t1, on_circle = _in_turns(team, vid)
+    i = SETTLED + 1
+    t = t1 + 2.0 * i
+    # The route after the loiter at the speed range's ends, and the turns left at the top
+    # speed, worked out here in still air at the route's true airspeed per equivalent there.
+    ratio = m.schedule.tas_per_eas(lo.s_m)
+    v_min = m.limits.airspeed_min_m_s * ratio
+    v_max = m.limits.airspeed_max_m_s * ratio
+    route_m = m.track.length_m - lo.s_m
+    turns_left_m = lo.length_m - i * 2.0 * m.groundspeed_m_s
+    # Late by 60 s with the turns at top speed; early by more than 60 s leaving now at the
+    # minimum (the turns left are long enough for both).
+    ref = t + (turns_left_m + route_m) / v_max - 60.0 - m.offset_s
+    assert t + route_m / v_min < ref + m.offset_s - 60.0
+    _retarget(team, ref)
+    out = team.handle(on_circle(i), t)
+    assert of(out, act.LeaveLoiter) == [] and reports(out, EventKind.ARRIVAL) == []
+    assert team.team_ref_s == ref and m.in_loiter()
+    # Timed for the route after the turns: its minimum airspeed.
+    d = m.last_decision
+    assert d is not None and d.verdict == "early" and d.level_m_s == m.limits.airspeed_min_m_s
+    _answered(team, vid, out, t)
+    # On round the circle, deciding at each fix: out of the turns once leaving is not early.
+    left: list[act.LeaveLoiter] = []
+    while not left and i < 400:
+        i += 1
+        t = t1 + 2.0 * i
+        m.next_decision_s = -math.inf
+        out = team.handle(on_circle(i), t)
+        _answered(team, vid, out, t)
+        assert reports(out, EventKind.ARRIVAL) == []
+        left = of(out, act.LeaveLoiter)
+    (leave,) = left
+    assert leave.vehicle_id == vid and leave.seq == k + 1
+    (said,) = [r for r in reports(out, EventKind.LOITER) if r.payload["action"] == "leave"]
+    assert said.payload["seq"] == k + 1 and "out of the turns" in said.reason
+    # Leaving now is on time: from where it is, the route at the speed range's ends
+    # brackets the slot (the located point is within a loiter diameter of the entry).
+    d = m.last_decision
+    assert d is not None and d.verdict == "on_time"
+    assert team.team_ref_s == ref
+    # While the command is on its way nothing more is asked.
+    m.next_decision_s = -math.inf
+    assert of(team.handle(on_circle(i + 1), t + 2.0), act.LeaveLoiter) == []
+    out = team.handle(act.LoiterLeft(leave), t + 3.0)
+    assert [r.payload["action"] for r in reports(out, EventKind.LOITER)] == ["left"]
+    assert not m.in_loiter() and m.leaving_seq is None
+    assert m.loiters_done() == sum(
+        1 for it in m.mission.items[: k + 1] if it.command == MAV_CMD_NAV_LOITER_TURNS
+    )
+
+
+def test_a_vehicle_not_taken_out_of_its_turns_says_so_and_is_asked_again(
+    team: TeamController,
+) -> None:
+    vid = "UAV3"
+    m, _, k, t1, on_circle = _in_turns(team, vid)
+    i = SETTLED + 1
+    t = t1 + 2.0 * i
+    _retarget(team, t + 30.0)  # far too soon for anything: out of the turns at once
+    (leave,) = of(team.handle(on_circle(i), t), act.LeaveLoiter)
+    out = team.handle(act.LoiterLeft(leave, "MISSION_SET_CURRENT timed out"), t + 1.0)
+    (said,) = reports(out, EventKind.LOITER)
+    assert said.payload["action"] == "leave_failed" and "timed out" in said.reason
+    assert m.in_loiter() and m.leaving_seq is None
+    (again,) = of(team.handle(on_circle(i + 1), t + 2.0), act.LeaveLoiter)
+    assert again.seq == k + 1
+
+
+def test_a_vehicle_whose_turns_are_as_good_as_flown_is_not_taken_out_of_them(
+    team: TeamController,
+) -> None:
+    """Late, with all of its loiter flown by the coordinator's count and the vehicle on the
+    circle behind its entry point: leaving would gain nothing (it would fly the route from
+    there), so it stays in the turns and the team time moves for what is left."""
+    vid = "UAV3"
+    m, lo, _, t1, on_circle = _in_turns(team, vid)
+    i = SETTLED + 1
+    m.loiter_flown_m = lo.length_m
+    p = m.schedule.path.pose_at(lo.s_m)
+    e = lo.centre_east_m - lo.radius_m * math.sin(p.heading_rad)
+    n = lo.centre_north_m - lo.radius_m * math.cos(p.heading_rad)
+    lat, lon = team.frame.to_geodetic(e, n)
+    behind = dataclasses.replace(on_circle(i), lat_deg=float(lat), lon_deg=float(lon))
+    t = t1 + 2.0 * i
+    _retarget(team, t + 60.0)
+    out = team.handle(behind, t)
+    assert of(out, act.LeaveLoiter) == [] and m.in_loiter()
+    (moved,) = reports(out, EventKind.ARRIVAL)
+    assert moved.vehicle == vid and "cannot arrive before" in moved.reason

@@ -1,0 +1,107 @@
+"""What a loiter adds to the route as ArduPlane flies it (:mod:`planner.loiterflight`): known
+answers, tangent circles adding nothing, and the buffer site reached by a detour timed with
+it (:func:`planner.retime.find_loiter_site`)."""
+
+from __future__ import annotations
+
+import math
+
+import pytest
+from hypothesis import given
+from hypothesis import strategies as st
+
+from planner.dubins import Pose
+from planner.flightpath import straight
+from planner.loiterflight import LINED_UP_RAD, loiter_flight
+from planner.retime import _tangent_centre, find_loiter_site
+from planner.scenario import parse_scenario
+from tests.planner.conftest import small_scenario
+
+R = 250.0
+
+
+@given(
+    heading=st.floats(-math.pi, math.pi),
+    radius=st.floats(50.0, 2000.0),
+    clockwise=st.booleans(),
+)
+def test_a_circle_tangent_to_the_route_at_its_waypoint_adds_nothing(
+    heading: float, radius: float, clockwise: bool
+) -> None:
+    """Entered on the circle, turning the route's way: after whole turns the course is the
+    route's again, so it leaves where it came in."""
+    ce, cn = _tangent_centre(Pose(1000.0, -500.0, heading), radius, clockwise)
+    f = loiter_flight(1000.0, -500.0, heading, ce, cn, radius, clockwise=clockwise)
+    assert f.entry_m == pytest.approx(0.0, abs=1e-6 * radius)
+    assert f.line_up_m == 0.0
+    assert f.exit_m == pytest.approx(0.0, abs=1e-6 * radius)
+    assert f.added_m == pytest.approx(0.0, abs=1e-6 * radius)
+
+
+@pytest.mark.parametrize("clockwise", [True, False])
+def test_a_circle_on_the_route_behind_the_waypoint_costs_out_a_three_quarter_line_up_and_back(
+    clockwise: bool,
+) -> None:
+    """The route northwards through the circle's centre, the waypoint d past it: straight
+    back to the circle (d - r), counted from its north point, three quarters of a turn less
+    the tolerance to point north again (either way round), and from there, r sin(10 deg)
+    short of the centre's abreast, back past the waypoint."""
+    d = 1148.0
+    f = loiter_flight(0.0, d, 0.0, 0.0, 0.0, R, clockwise=clockwise)
+    assert f.entry_m == pytest.approx(d - R)
+    assert f.counted_from_rad == pytest.approx(0.0)
+    assert f.line_up_m == pytest.approx((1.5 * math.pi - LINED_UP_RAD) * R)
+    assert f.exit_m == pytest.approx(d + R * math.sin(LINED_UP_RAD))
+    # What the loiter used to be timed with: out to the circle and back, 1,796 m; flown,
+    # 3,224 m (as the simulator flies it, within 50 m: tests/sitl_stub/test_loiter_entry.py).
+    assert f.added_m == pytest.approx(3224.0, abs=1.0)
+    assert f.added_m - 2.0 * (d - R) > 5.0 * R
+
+
+def test_a_circle_ahead_on_the_route_is_flown_into_and_left_beside_its_centre() -> None:
+    """The centre 1 km ahead: straight in to its near point, a quarter turn less the
+    tolerance to point along the route, and away from beside the centre, 1 km less r
+    sin(10 deg) ahead of the waypoint: the loiter adds a little over half a radius."""
+    f = loiter_flight(0.0, 0.0, 0.0, 0.0, 1000.0, R, clockwise=True)
+    assert f.entry_m == pytest.approx(1000.0 - R)
+    assert f.line_up_m == pytest.approx((0.5 * math.pi - LINED_UP_RAD) * R)
+    assert f.exit_m == pytest.approx(-(1000.0 - R * math.sin(LINED_UP_RAD)))
+    tol = LINED_UP_RAD
+    assert f.added_m == pytest.approx(R * (0.5 * math.pi - tol - 1.0 + math.sin(tol)))
+    assert 0.5 * R < f.added_m < 0.6 * R
+
+
+def test_the_waypoint_inside_the_circle_counts_from_there() -> None:
+    """Inside the circle the L1 loiter law is in force at once: no entry."""
+    f = loiter_flight(0.0, 139.0, 0.0, 0.0, 0.0, R, clockwise=True)
+    assert f.entry_m == 0.0
+    assert f.line_up_m == pytest.approx((1.5 * math.pi - LINED_UP_RAD) * R)
+
+
+def test_a_radius_must_be_positive() -> None:
+    with pytest.raises(ValueError, match="radius_m"):
+        loiter_flight(0.0, 0.0, 0.0, 0.0, 0.0, 0.0, clockwise=True)
+
+
+def test_a_buffer_behind_the_allowed_stretch_is_timed_as_the_loiter_is_flown() -> None:
+    """The route runs north through a buffer's centre, but turns may only start 1 km past
+    where the vehicle is (beyond the buffer): the circle goes in the buffer at its edge
+    nearest the first allowed point, on the route behind it. Its ``detour_m`` is what the
+    aircraft flies besides the turns (out to it, the line-up and back), not twice the way
+    out."""
+    data = small_scenario(threats=[])
+    data["buffers"] = [{"id": "B", "center": {"east_m": 20000, "north_m": 20000}, "radius_m": 1250}]
+    scenario = parse_scenario(data)
+    vehicle = scenario.vehicle("A")
+    path = straight(20000.0, 10000.0, 20000.0, 30000.0)
+    s_from = 10000.0 + 1100.0 - 1000.0  # the first allowed point: 1.1 km past the centre
+    site = find_loiter_site(scenario, vehicle, path, s_from, R)
+    assert site is not None and site.buffer_id == "B"
+    assert site.s_m == pytest.approx(11100.0)
+    assert site.centre == pytest.approx((20000.0, 21000.0))
+    d = 100.0  # from the centre to the waypoint
+    flown = loiter_flight(20000.0, 21100.0, 0.0, 20000.0, 21000.0, R, clockwise=site.clockwise)
+    assert site.detour_m == pytest.approx(flown.added_m)
+    assert site.detour_m > 2.0 * d + 4.0 * R
+    # Counted from where the route meets the circle.
+    assert site.entry == pytest.approx((20000.0, 21000.0 + R))
