@@ -24,14 +24,10 @@ from gcs.coordination.member import VehicleState
 from gcs.coordination.team import TeamController
 from planner.popup import popup_zones
 from planner.threats import RadarSite, build_threats
-from tests.gcs import test_team
 from tests.gcs.test_team import airborne, fix, of, reports
 
 TOUCHED = ("UAV1", "UAV2")
 """The paper's POPUP1 lies across these two routes (tests/gcs/test_team.py shows it)."""
-
-
-team = test_team.team  # the paper team, started (the fixture)
 
 
 def popup(team: TeamController) -> tuple[RadarSite, float]:
