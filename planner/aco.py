@@ -222,7 +222,8 @@ def route_figures(
     for k, (lo, hi) in enumerate(itertools.pairwise(node_bounds)):
         first = not allclose_2d(first_nodes[k], task.start_m)
         last = not allclose_2d(last_nodes[k], task.goal_m)
-        pieces.extend([start[: int(first)], coords[lo:hi], goal[: int(last)], tail])
+        # A first node at the start is the start itself.
+        pieces.extend([start, coords[lo + int(not first) : hi], goal[: int(last)], tail])
         point_bounds.append(point_bounds[-1] + int(first) + (hi - lo) + int(last) + len(tail))
     points = np.concatenate(pieces)
     step = np.diff(points, axis=0)

@@ -437,37 +437,122 @@ def _box_gap_m(a: tuple[float, float, float, float], b: tuple[float, float, floa
     return math.hypot(gap_east, gap_north)
 
 
-def refine_corners(points_m: FloatArray, radius_m: float) -> FloatArray:
+STRAIGHT_ON_RAD = 1e-9
+""":func:`refine_corners` takes a vertex turning less than this (rad) for one on a straight
+line (round-off only: the flight path gives such a corner no arc either)."""
+MIN_PIECE_M = 1.0
+""":func:`refine_corners` leaves no piece of a leg shorter than this (m): a split nearer a
+corner belongs to a turn too slight for the smoothing to cut inside it (a turn of round-off
+only, on a straight line through grid nodes, would give one nanometres from the corner: a
+repeated point), and a piece at least this long has a well-defined heading."""
+
+
+def _fillet_m(turn_rad: FloatArray, radius_m: float) -> FloatArray:
+    """Distance (m) from a corner at which its fillet arc at ``radius_m`` begins, with 5 %
+    to spare (turns beyond 170 degrees counted as 170)."""
+    result: FloatArray = 1.05 * radius_m * np.tan(np.minimum(turn_rad, np.radians(170.0)) / 2.0)
+    return result
+
+
+def _join_m(turn_rad: float, radius_m: float) -> float:
+    """Distance (m) along a line from a vehicle on it, heading ``turn_rad`` off it, to the
+    nearest point at which a Dubins path at ``radius_m`` joins it without a loop, with 5 % to
+    spare: two arcs, toward the line and back onto it, ``r (sin theta + 2 sin beta)`` with
+    ``cos beta = (1 + cos theta) / 2``."""
+    beta_rad = math.acos(0.5 * (1.0 + math.cos(turn_rad)))
+    return 1.05 * radius_m * (math.sin(turn_rad) + 2.0 * math.sin(beta_rad))
+
+
+def _turn_between_rad(a_rad: float, b_rad: float) -> float:
+    """Absolute heading change from ``a_rad`` to ``b_rad``, in [0, pi] (rad)."""
+    return abs((b_rad - a_rad + math.pi) % (2.0 * math.pi) - math.pi)
+
+
+def _turns_rad(points_m: FloatArray) -> FloatArray:
+    """Absolute heading change at each interior vertex (rad)."""
+    legs = np.diff(points_m, axis=0)
+    heading = np.arctan2(legs[:, 0], legs[:, 1])
+    return np.asarray(np.abs((np.diff(heading) + np.pi) % (2 * np.pi) - np.pi), dtype=np.float64)
+
+
+def refine_corners(
+    points_m: FloatArray, radius_m: float, start_heading_rad: float | None = None
+) -> FloatArray:
     """Add collinear points near each corner so midpoint smoothing hugs the corner.
 
     Section 3.2 joins the midpoints of adjacent legs by a Dubins path. On legs much longer
     than the turn radius that path is nearly the straight chord between the midpoints and cuts
     far inside the corner. Splitting each leg at twice the fillet tangent distance
     ``r tan(theta / 2)`` from its corners puts the midpoints where the Dubins path becomes the
-    fillet arc itself; the long middle part of each leg stays straight.
+    fillet arc itself; the long middle part of each leg stays straight. With a heading at the
+    start, the first leg is split at twice the distance the turn from that heading onto the
+    leg takes (:func:`_join_m`). No piece is left shorter than :data:`MIN_PIECE_M`.
+
+    Vertices that go straight on (turning less than :data:`STRAIGHT_ON_RAD`: grid nodes in a
+    row) are left out, so that a corner's splits are measured along the whole straight run
+    beside it, not along its leg to the next node in the row.
     """
     pts = np.asarray(points_m, dtype=np.float64)
     if len(pts) < 3:
         return pts
+    corner = np.concatenate([[True], _turns_rad(pts) >= STRAIGHT_ON_RAD, [True]])
+    pts = np.asarray(pts[corner], dtype=np.float64)
+    if len(pts) < 3:
+        return pts
     legs = np.diff(pts, axis=0)
     length = np.hypot(legs[:, 0], legs[:, 1])
-    heading = np.arctan2(legs[:, 0], legs[:, 1])
-    turn = np.abs((np.diff(heading) + np.pi) % (2 * np.pi) - np.pi)
-    tangent = 1.05 * radius_m * np.tan(np.minimum(turn, np.radians(170.0)) / 2.0)
+    tangent = _fillet_m(_turns_rad(pts), radius_m)
+    join_m = 0.0
+    if start_heading_rad is not None:
+        first_rad = math.atan2(legs[0, 0], legs[0, 1])
+        join_m = _join_m(_turn_between_rad(start_heading_rad, first_rad), radius_m)
     # Distance to split at, from the start and from the end of each leg.
-    at_start = np.concatenate([[0.0], 2.0 * tangent])
+    at_start = np.concatenate([[2.0 * join_m], 2.0 * tangent])
     at_end = np.concatenate([2.0 * tangent, [0.0]])
     out = [pts[0]]
     for k in range(len(legs)):
         a, b, d = pts[k], pts[k + 1], length[k]
         unit = legs[k] / d
         first, last = at_start[k], d - at_end[k]
-        if first > 0.0 and first + 1.0 < last:
+        if first >= MIN_PIECE_M and first + MIN_PIECE_M < last:
             out.append(a + unit * first)
-        if last < d and first + 1.0 < last:
+        if at_end[k] >= MIN_PIECE_M and first + MIN_PIECE_M < last:
             out.append(a + unit * last)
         out.append(b)
     return np.asarray(out, dtype=np.float64)
+
+
+ONTO_ROUTE_REACH = 6.0
+""":func:`onto_route` keeps every vertex at least this many turn radii from the start: as far
+as the longest turn onto a leg takes, twice (:func:`_join_m`, at most about 3 radii); a
+sharper turn farther on is the route's own (round the tip of a zone), not the start's."""
+
+
+def onto_route(points_m: FloatArray, radius_m: float, start_heading_rad: float) -> FloatArray:
+    """The polyline without the vertices after its start that a vehicle there, heading
+    ``start_heading_rad``, is too near to fly by smoothing (the last vertex is always kept).
+
+    A route re-planned in flight starts where the vehicle is, anywhere near the grid node the
+    search snapped it to: its first leg may be metres long, point back behind the vehicle, or
+    off its heading. Midpoint smoothing (section 3.2) turns through a vertex between the
+    midpoints of its legs, and from the start to the first midpoint: when that midpoint is
+    nearer than the start turn needs (:func:`_join_m`) or than the fillet of the turn at the
+    leg's end (:func:`_fillet_m`), the Dubins path there is a loop of nearly a full circle
+    instead of the turn. The start flies straight on to the next vertex until one is far
+    enough for both, or :data:`ONTO_ROUTE_REACH` turn radii away.
+    """
+    pts = np.asarray(points_m, dtype=np.float64)
+    while len(pts) > 2:
+        leg = pts[1] - pts[0]
+        first_m = float(np.hypot(*leg))
+        start_turn_rad = _turn_between_rad(start_heading_rad, math.atan2(leg[0], leg[1]))
+        need_m = max(
+            _join_m(start_turn_rad, radius_m), float(_fillet_m(_turns_rad(pts[:3]), radius_m)[0])
+        )
+        if first_m >= 2.0 * need_m or first_m >= ONTO_ROUTE_REACH * radius_m:
+            break
+        pts = np.delete(pts, 1, axis=0)
+    return pts
 
 
 @dataclass(frozen=True)
@@ -756,7 +841,9 @@ def finish_route(
     """Simplify, smooth, profile and check one grid route.
 
     A vehicle that starts on the ground (``start_alt_m`` None and not ``airborne``) has its
-    climb from home checked too (:func:`climb_out_violation`).
+    climb from home checked too (:func:`climb_out_violation`). One re-planned in flight
+    (``start_heading_rad`` given) flies on from where it is past the vertices it is too near
+    to turn at (:func:`onto_route`).
 
     Raises
     ------
@@ -808,8 +895,12 @@ def finish_route(
         yield pts
 
     for candidate in candidates():
+        if start_heading_rad is not None:
+            head_m = candidate[: len(candidate) - len(tail)]
+            head_m = onto_route(head_m, v.min_turn_radius_m, start_heading_rad)
+            candidate = np.concatenate([head_m, tail])
         path = smooth_polyline(
-            refine_corners(candidate, v.min_turn_radius_m),
+            refine_corners(candidate, v.min_turn_radius_m, start_heading_rad),
             v.min_turn_radius_m,
             start_heading_rad=start_heading_rad,
         )

@@ -78,15 +78,16 @@ class Problem:
 
     def route_points(self, index: int, nodes: Sequence[int] | IntArray) -> FloatArray:
         """Polyline (K, 2) in metres: the exact start, the grid nodes, the exact goal (and the
-        task's tail after it)."""
+        task's tail after it). A first node at the start (to :func:`allclose_2d`) is the start
+        itself: a re-plan's route begins exactly where the path flown so far ends."""
         task = self.tasks[index]
         pts = task.cost_map.grid.node_coords(nodes)
         start = np.array([task.start_m])
         goal = np.array([task.goal_m])
-        if allclose_2d(pts[0], task.start_m):
-            start = start[:0]
         if allclose_2d(pts[-1], task.goal_m):
             goal = goal[:0]
+        if allclose_2d(pts[0], task.start_m):
+            pts = pts[1:]
         tail = np.array(task.tail_m, dtype=np.float64).reshape(-1, 2)
         return np.concatenate([start, pts, goal, tail])
 
