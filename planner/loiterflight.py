@@ -17,6 +17,14 @@ whole turns a loiter adds:
 * the exit: from where it leaves the circle back to abreast of the waypoint (negative when
   it leaves ahead of it).
 
+A waypoint inside the circle (a buffer's circle centred near the route) is reached at its
+turn distance, min(WP_RADIUS, the L1 distance), before it: the item starts there, near the
+centre, and the turns are counted from that bearing. Heading at the centre, the loiter law
+turns the aircraft against the loiter's direction at the roll limit until it heads straight
+out, and the bearing it sweeps on the way through the centre counts towards the turns
+(ArduPlane's ``loiter_angle_update``): the loiter then adds the way out, less the route it
+cuts short and the part of the turns counted on the way (so its line-up may be negative).
+
 The route after the waypoint is taken as straight along its heading there and the next
 waypoint as far (its bearing from the circle is the route's heading); the turn onto the
 entry line at the waypoint, flown at the autopilot's roll limit, is left out. Conventions:
@@ -32,6 +40,14 @@ from dataclasses import dataclass
 __all__ = ["LINED_UP_RAD", "LoiterFlight", "loiter_flight"]
 
 _TAU = 2.0 * math.pi
+_G = 9.80665
+WP_RADIUS_M = 90.0
+"""ArduPlane's default WP_RADIUS, m."""
+L1_PERIOD_S = 17.0
+L1_DAMPING = 0.75
+"""ArduPlane's default NAVL1_PERIOD, s, and NAVL1_DAMPING."""
+ROLL_LIMIT_RAD = math.radians(45.0)
+"""ArduPlane's default roll limit (ROLL_LIMIT_DEG)."""
 LINED_UP_RAD = math.radians(10.0)
 """How far off the next waypoint's bearing the course may be for ArduPlane to leave the
 circle after its turns (``isHeadingLinedUp``: 10 degrees, wider only after a whole circle of
@@ -69,6 +85,7 @@ def loiter_flight(
     radius_m: float,
     *,
     clockwise: bool,
+    ground_speed_m_s: float = 20.0,
 ) -> LoiterFlight:
     """How ArduPlane flies a loiter entered at a route waypoint (see the module docstring).
 
@@ -93,26 +110,86 @@ def loiter_flight(
     sign = 1.0 if clockwise else -1.0
     de, dn = entry_east_m - centre_east_m, entry_north_m - centre_north_m
     d = math.hypot(de, dn)
-    # Straight at the centre from outside; from inside the L1 circle law holds at once and
-    # the turns are counted from there (the spiral out is inside the first turn).
-    entry_m = max(d - radius_m, 0.0)
-    # At the centre itself: counted from where the route's course is the circle's.
-    on_centre = d <= 1e-9 * radius_m
-    counted = heading_rad - sign * 0.5 * math.pi if on_centre else math.atan2(de, dn)
+    if d < radius_m * (1.0 - 1e-6):
+        return _from_inside(de, dn, heading_rad, radius_m, sign, ground_speed_m_s)
+    # Straight at the centre from outside.
+    entry_m = d - radius_m
+    counted = math.atan2(de, dn)
+    sweep, leaves = _line_up(counted, heading_rad, sign)
+    along_m = _along(de, dn, heading_rad, radius_m, leaves)
+    return LoiterFlight(entry_m, sweep * radius_m, -along_m, _wrap(counted), _wrap(leaves))
+
+
+def _wrap(a: float) -> float:
+    return math.atan2(math.sin(a), math.cos(a))
+
+
+def _line_up(counted: float, heading_rad: float, sign: float) -> tuple[float, float]:
+    """The arc (rad) after the whole turns, counted from ``counted``, until the course is
+    within the tolerance of the route's; and the bearing it leaves the circle at."""
     course = counted + sign * 0.5 * math.pi
-    # The arc, the loiter's way round, until the course is within the tolerance of the route.
     ahead = (sign * (heading_rad - course)) % _TAU
     sweep = 0.0 if ahead <= LINED_UP_RAD or ahead >= _TAU - LINED_UP_RAD else ahead - LINED_UP_RAD
-    leaves = counted + sign * sweep
-    xe = centre_east_m + radius_m * math.sin(leaves)
-    xn = centre_north_m + radius_m * math.cos(leaves)
-    along_m = (xe - entry_east_m) * math.sin(heading_rad) + (xn - entry_north_m) * math.cos(
-        heading_rad
-    )
+    return sweep, counted + sign * sweep
+
+
+def _along(de: float, dn: float, heading_rad: float, radius_m: float, at_rad: float) -> float:
+    """How far along the route the circle's point at bearing ``at_rad`` is past the point
+    (de, dn) off the centre, m."""
+    xe = radius_m * math.sin(at_rad) - de
+    xn = radius_m * math.cos(at_rad) - dn
+    return xe * math.sin(heading_rad) + xn * math.cos(heading_rad)
+
+
+def _from_inside(
+    de: float, dn: float, heading_rad: float, radius_m: float, sign: float, ground_speed_m_s: float
+) -> LoiterFlight:
+    """The waypoint (de, dn) off the centre, inside the circle (see the module docstring)."""
+    ue, un = math.sin(heading_rad), math.cos(heading_rad)
+    # Where the item starts: the waypoint is reached its turn distance before it.
+    to_centre = math.atan2(-de, -dn) if math.hypot(de, dn) > 1e-9 * radius_m else heading_rad
+    turn = abs(math.remainder(to_centre - heading_rad, _TAU))
+    l1_m = L1_DAMPING * L1_PERIOD_S * ground_speed_m_s / math.pi
+    early_m = min(WP_RADIUS_M, l1_m) * min(turn, 0.5 * math.pi) / (0.5 * math.pi)
+    pe, pn = de - early_m * ue, dn - early_m * un
+    if math.hypot(pe, pn) <= 1e-9 * radius_m:
+        counted = heading_rad - sign * 0.5 * math.pi
+    else:
+        counted = math.atan2(pe, pn)
+    # Headed at the centre, the circle law turns it against the loiter's way round at the roll
+    # limit until it heads straight out: the centre passes on the loiter's side.
+    rho = ground_speed_m_s**2 / (_G * math.tan(ROLL_LIMIT_RAD))
+    course, way_m, gained, bearing = heading_rad, 0.0, 0.0, counted
+    step = min(1.0, 0.02 * rho)
+    toward = pe * math.sin(course) + pn * math.cos(course) < 0.0
+    # Until it heads out (or, just past the centre, turning would only head it farther off).
+    while (
+        toward
+        and way_m < _TAU * rho
+        and (
+            pe * math.sin(course) + pn * math.cos(course) < 0.0
+            or sign * math.remainder(course - math.atan2(pe, pn), _TAU) > math.radians(1.0)
+        )
+    ):
+        pe, pn = pe + step * math.sin(course), pn + step * math.cos(course)
+        course -= sign * step / rho
+        way_m += step
+        now = math.atan2(pe, pn)
+        gained += sign * math.remainder(now - bearing, _TAU)
+        bearing = now
+    # Straight on to the circle.
+    ce, cn = math.sin(course), math.cos(course)
+    b = pe * ce + pn * cn
+    out_m = max(-b + math.sqrt(max(b * b - (pe * pe + pn * pn - radius_m**2), 0.0)), 0.0)
+    qe, qn = pe + out_m * ce, pn + out_m * cn
+    gained += sign * math.remainder(math.atan2(qe, qn) - bearing, _TAU)
+    way_m += out_m
+    sweep, leaves = _line_up(counted, heading_rad, sign)
+    along_m = _along(de, dn, heading_rad, radius_m, leaves)
     return LoiterFlight(
-        entry_m,
-        sweep * radius_m,
+        way_m - early_m,
+        (sweep - gained) * radius_m,
         -along_m,
-        math.atan2(math.sin(counted), math.cos(counted)),
-        math.atan2(math.sin(leaves), math.cos(leaves)),
+        _wrap(counted),
+        _wrap(leaves),
     )

@@ -72,10 +72,25 @@ def test_a_circle_ahead_on_the_route_is_flown_into_and_left_beside_its_centre() 
 
 
 def test_the_waypoint_inside_the_circle_counts_from_there() -> None:
-    """Inside the circle the L1 loiter law is in force at once: no entry."""
+    """Inside the circle the L1 loiter law is in force at once: the turns are counted from
+    where the item starts, 81 m (its turn distance at 20 m/s) short of the waypoint, 58 m past
+    the centre; it flies straight out to the circle (192 m, 81 m of it instead of the route)."""
     f = loiter_flight(0.0, 139.0, 0.0, 0.0, 0.0, R, clockwise=True)
-    assert f.entry_m == 0.0
+    early = 0.75 * 17.0 * 20.0 / math.pi
+    assert f.entry_m == pytest.approx(R - (139.0 - early) - early, abs=1.5)
     assert f.line_up_m == pytest.approx((1.5 * math.pi - LINED_UP_RAD) * R)
+
+
+def test_a_loiter_started_behind_the_centre_counts_its_way_through_it() -> None:
+    """The waypoint 58 m past the centre, just off it: ArduPlane starts the item its turn
+    distance (81 m at 20 m/s) before the waypoint, 23 m short of the centre; the circle law
+    turns it off the centre and straight out, and the half turn the bearing swings through
+    counts. It adds under a radius, not the three-quarter line-up and more (1,223 m)."""
+    f = loiter_flight(0.0, 58.0, 0.0, -3.0, 0.0, R, clockwise=True)
+    assert f.counted_from_rad == pytest.approx(math.pi, abs=0.2)
+    assert f.entry_m == pytest.approx(191.0, abs=5.0)
+    assert f.line_up_m < 0.0
+    assert f.added_m == pytest.approx(86.0, abs=5.0)
 
 
 def test_a_radius_must_be_positive() -> None:

@@ -66,6 +66,9 @@ def _added_m(centre_n: float, centre_e: float, clockwise: bool, turns: int = 2) 
         pytest.param(WAYPOINT_N, R, True, id="tangent"),
         pytest.param(WAYPOINT_N, -R, False, id="tangent-ccw"),
         pytest.param(WAYPOINT_N - 139.0, 0.0, True, id="waypoint-inside"),
+        # The waypoint 58 m past the centre, reached 80-odd m before it: the item starts behind
+        # the centre, the turns counted from there (the UAV3 loiter of the quarter-scale team).
+        pytest.param(WAYPOINT_N - 58.0, -3.0, True, id="started-behind-the-centre"),
         pytest.param(WAYPOINT_N + 1000.0, 0.0, True, id="ahead"),
         pytest.param(WAYPOINT_N - 600.0, 400.0, True, id="aside-behind"),
     ],
