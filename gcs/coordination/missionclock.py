@@ -147,6 +147,10 @@ class MissionClock:
         self.paced = False
         """Its monotonic clock is the simulator's pace clock (:meth:`follow`)."""
         self._paced_lead_s = 0.0
+        self.held_pace_s: float | None = None
+        """While set, the lock step acknowledges no pace time past it: the simulator waits
+        there (:meth:`hold`, :func:`gcs.service.stubs.follow_lockstep`)."""
+        self._holds = 0
 
     def follow(self, pace_s: Callable[[], float], lead_s: float = 0.0) -> None:
         """Read the simulator's pace clock (flight time / speed-up, :mod:`sitl_stub.lockstep`)
@@ -176,6 +180,24 @@ class MissionClock:
     def monotonic(self) -> float:
         """The clock's monotonic time now (the pace clock when :attr:`paced`)."""
         return self._monotonic()
+
+    def hold(self) -> None:
+        """On a pace clock: the simulator waits where it is now until as many :meth:`release`
+        (a planning job then takes no flight time, however busy the machine). Nothing
+        otherwise: real vehicles do not wait."""
+        if not self.paced:
+            return
+        if self._holds == 0:
+            self.held_pace_s = self._monotonic()
+        self._holds += 1
+
+    def release(self) -> None:
+        """One :meth:`hold` ended; the last lets the simulator fly on."""
+        if self._holds == 0:
+            return
+        self._holds -= 1
+        if self._holds == 0:
+            self.held_pace_s = None
 
     # -- input -------------------------------------------------------------------------------
 

@@ -110,6 +110,10 @@ PACED_TIMEOUT_MAX_FLIGHT_S = 2.0
 timeout a lost command cost up to 47 s of flight at 200x, a takeoff that late)."""
 MIN_COMMAND_WALL_S = 0.4
 """A command is retried for at least this long (wall s) before it is given up."""
+PACED_PLAN_WALL_S = 0.2
+"""A re-plan's planning time (wall s) on a pace clock, where the simulator waits while it
+plans: what the paper's re-plan takes on a quiet machine, so the lead (150 s of flight at
+200x) is the same however busy the machine is."""
 REPLAN_SEARCH_SHARE = 0.25
 """A re-plan's route search (the ACO) ends with the best routes so far once this share of the
 planning lead, in wall time, is spent: the lead allows one and a half times the longest
@@ -362,14 +366,18 @@ class FlightRunner:
         return schedule, world
 
     def _lead_s(self) -> float:
-        """How far ahead (mission s) a changed mission may start: planning and upload time."""
-        wall = self.plan_wall_s + 0.3
-        return max(self.config.min_lead_s, 1.5 * wall * self.clock.rate)
+        """How far ahead (mission s) a changed mission may start: planning and upload time.
+        On a pace clock the simulator waits while a job plans (:meth:`MissionClock.hold`):
+        the planning is taken at :data:`PACED_PLAN_WALL_S`, not as long as a busy machine
+        made it."""
+        plan_s = PACED_PLAN_WALL_S if self.clock.paced else self.plan_wall_s
+        return max(self.config.min_lead_s, 1.5 * (plan_s + 0.3) * self.clock.rate)
 
     def _loiter_lead_s(self) -> float:
         """The same for loiter turns: one vehicle re-timed (milliseconds) and its upload (a
         second allowed)."""
-        return max(self.config.min_lead_s, 1.5 * (self.loiter_wall_s + 1.0) * self.clock.rate)
+        plan_s = 0.0 if self.clock.paced else self.loiter_wall_s
+        return max(self.config.min_lead_s, 1.5 * (plan_s + 1.0) * self.clock.rate)
 
     def _planning_lead(self) -> act.PlanningLead:
         return act.PlanningLead(self._lead_s(), self._loiter_lead_s())
@@ -642,17 +650,21 @@ class FlightRunner:
         result: Any = None
         error: Exception | None = None
         job = a.job
-        if isinstance(job, act.PopupJob):
+        if isinstance(job, act.PopupJob) and not self.clock.paced:
             # The route search ends with its best routes so far once a share of the lead's
-            # wall time is spent: the rest is for finishing, re-timing and the uploads.
+            # wall time is spent: the rest is for finishing, re-timing and the uploads (on a
+            # pace clock the simulator waits for the whole search).
             end_s = t0 + REPLAN_SEARCH_SHARE * job.lead_s / self.clock.rate
             job = replace(job, time_up=lambda: time.perf_counter() >= end_s)
+        self.clock.hold()  # a simulator in lock step waits for the plan
         try:
             result = await asyncio.to_thread(job.run)
         except Exception as err:
             if not isinstance(err, GcsError | ValueError):
                 log.exception("planning job failed")
             error = err
+        finally:
+            self.clock.release()
         wall = time.perf_counter() - t0
         if isinstance(a.job, act.LoiterJob):
             self.loiter_wall_s = max(self.loiter_wall_s, wall)

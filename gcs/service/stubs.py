@@ -169,17 +169,21 @@ def follow_lockstep(
 
     An event loop held longer than the lock step waits for (:data:`sitl_stub.lockstep.
     STALE_WALL_S`) lets the simulator fly on without this process: ``on_overrun`` is then
-    called, once the loop turns again, with the flight seconds it ran beyond the lead."""
+    called, once the loop turns again, with the flight seconds it ran beyond the lead. While
+    the clock holds the flight (:meth:`MissionClock.hold`: a planning job) nothing past that
+    pace time is acknowledged."""
     pace = Lockstep(path)
     clock.follow(pace.pace_s, pace.lead_s)
-    return asyncio.create_task(_acknowledge(pace, on_overrun))
+    return asyncio.create_task(_acknowledge(pace, clock, on_overrun))
 
 
 OVERRUN_SAID_S = 1.0
 """Flight seconds beyond the lead that are said (a simulator step or two past it is not)."""
 
 
-async def _acknowledge(pace: Lockstep, on_overrun: Callable[[float], None] | None) -> None:
+async def _acknowledge(
+    pace: Lockstep, clock: MissionClock, on_overrun: Callable[[float], None] | None
+) -> None:
     acked_s: float | None = None
     try:
         while True:
@@ -188,6 +192,9 @@ async def _acknowledge(pace: Lockstep, on_overrun: Callable[[float], None] | Non
                 beyond_s = (seen_s - acked_s) * pace.speedup - pace.lead_s
                 if beyond_s > OVERRUN_SAID_S:
                     on_overrun(beyond_s)
+            held_s = clock.held_pace_s
+            if held_s is not None:
+                seen_s = min(seen_s, held_s)
             pace.acknowledge(seen_s)
             acked_s = seen_s
             await asyncio.sleep(0.001)
