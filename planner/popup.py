@@ -157,6 +157,7 @@ def apply_popup(
     anchors: Anchors | None = None,
     loiter_margin_m_s: float = 0.0,
     time_up: Callable[[], bool] | None = None,
+    others_may_stay: bool = False,
 ) -> PopupOutcome:
     """Re-plan around one new threat from where the team is at ``at_s`` and re-time it.
 
@@ -182,11 +183,18 @@ def apply_popup(
         Ends the route search with the best routes so far when it says so (asked between
         its iterations: :attr:`planner.aco.AcoOptions.time_up`); the routes are finished and
         checked as always.
+    others_may_stay
+        In flight: when no arrival time remains common to the re-planned vehicles and the
+        others (those others cannot wait as long), the re-planned ones are timed among
+        themselves and the others keep their schedules, said in an ``arrival`` event. The
+        coordinator then keeps the team time (the re-planned that cannot make it are
+        released, each with an alarm) rather than leave them on routes into the threat.
 
     Raises
     ------
     InfeasibleError
-        A re-plan fails, or no common arrival time remains; names the vehicle.
+        A re-plan fails, or no common arrival time remains (for the re-planned vehicles
+        alone, with ``others_may_stay``); names the vehicle.
     """
     scenario = current.scenario
     anchors = anchors or {}
@@ -230,7 +238,16 @@ def apply_popup(
         if where[v.id][0] != "arrived"
     ]
     natural = {vs.vehicle_id: vs.arrival_s for vs in current.vehicles}
-    targets, ref, reason = arrival_targets(scenario, windows, current.required_arrival_s, natural)
+    try:
+        targets, ref, reason = arrival_targets(
+            scenario, windows, current.required_arrival_s, natural
+        )
+    except InfeasibleError as err:
+        if not others_may_stay:
+            raise
+        own = [w for w in windows if w.vehicle_id in affected]
+        targets, ref, reason = arrival_targets(scenario, own, current.required_arrival_s, natural)
+        reason = f"{reason}; with the others none remains ({err}): they keep their schedules"
     events.append(Event(at_s, "arrival", f"team arrival {format_arrival(ref)}: {reason}"))
     # Fig. 9: the constant speed each vehicle would now need, in range or not.
     need: dict[str, tuple[SpeedSpan, ...]] = {}

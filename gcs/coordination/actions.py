@@ -338,6 +338,7 @@ class PopupJob:
             anchors=dict(self.anchors),
             loiter_margin_m_s=self.loiter_margin_m_s,
             time_up=self.time_up,
+            others_may_stay=True,
         )
 
 

@@ -16,7 +16,7 @@ from gcs.__main__ import main
 from gcs.coordination.missionclock import MissionClock
 from gcs.coordination.runner import FlightRunner, InfeasibleRequest
 from planner.atmosphere import eas2tas
-from planner.errors import PlannerError
+from planner.errors import InfeasibleError, PlannerError
 from planner.mission import (
     MAV_CMD_DO_CHANGE_SPEED,
     MAV_CMD_NAV_LOITER_TURNS,
@@ -317,3 +317,42 @@ def test_on_a_pace_clock_a_command_waits_one_to_two_seconds_of_flight_whatever_t
     flight_s = options["timeout_s"] * 200.0
     assert 1.0 - 1e-9 <= flight_s <= 2.0 + 1e-9
     assert options["timeout_s"] * (options["retries"] + 1) >= 0.4
+
+
+def test_a_re_plan_the_others_cannot_wait_for_times_the_re_planned_among_themselves(
+    paper: tuple[Scenario, World, Schedule],
+) -> None:
+    """UAV3 2 km short of its goal when POPUP1 appears (past its buffer: it cannot wait until
+    the re-planned UAV1 and UAV2 can arrive): no common time remains, and a re-plan offline
+    says so. In flight (``others_may_stay``) the re-planned two are timed among themselves,
+    routed round the zone, and UAV3 keeps its schedule, said in the arrival event."""
+    scenario, world, schedule = paper
+    threats = build_threats(scenario, {vs.vehicle_id: vs.takeoff_s for vs in schedule.vehicles})
+    zone = popup_zones(threats)[0]
+    t_p = float(zone.appears_at_s or 0.0)
+    w = replace(world, threats=tuple(threats))
+    uav3 = schedule.vehicle("UAV3")
+    anchors = {"UAV3": Anchor(uav3.path.length_m - 2_000.0, 20.0, t_p)}
+
+    def outcome(others_may_stay: bool) -> PopupOutcome:
+        return apply_popup(
+            schedule, zone, at_s=t_p, world=w, threats=active(threats, t_p),
+            rng=np.random.default_rng(7), anchors=anchors, others_may_stay=others_may_stay,
+        )  # fmt: skip
+
+    with pytest.raises(InfeasibleError, match="UAV3"):
+        outcome(False)
+    out = outcome(True)
+    assert set(out.affected) == {"UAV1", "UAV2"}
+    assert out.schedule.vehicle("UAV3") is uav3
+    ref = out.schedule.required_arrival_s
+    assert ref is not None and ref > t_p + 2_000.0 / 15.0 + 600.0  # far past UAV3's latest
+    for vid in out.affected:
+        vs = out.schedule.vehicle(vid)
+        assert vs.arrival_s == pytest.approx(ref, abs=0.5), vid
+        _, s0, _ = vs.state_at(t_p)
+        s = np.arange(s0, vs.path.length_m, 50.0)
+        pts = np.array([(p.east_m, p.north_m) for p in map(vs.path.pose_at, s)])
+        assert float(zone.distance_m(pts[:, 0], pts[:, 1]).min()) > 0.0, vid
+    (said,) = [e.text for e in out.events if e.kind == "arrival"]
+    assert "they keep their schedules" in said and "UAV3" in said, said
