@@ -1,10 +1,12 @@
-"""Whole rehearsals at 200x against stub vehicles over loopback (about 35 s wall each).
+"""Whole rehearsals at 200x against stub vehicles over loopback.
 
-- the paper scenario: wind, 10% loss, the pop-up threat, all three strategies; again with
-  airspeed sensor errors and wrong clocks;
+- the paper scenario (some 30 s of wall time each): wind, 10% loss, the pop-up threat, all
+  three strategies; in spaced slots 60 s apart, with a threat the operator adds in flight;
+  with a pop-up re-plan that comes late;
+- the same team at a quarter of the size (:func:`tests.teams.compact_paper`, a quarter of the
+  flight time): with airspeed sensor errors and wrong clocks; in waves; in windows; with one
+  vehicle's link dark for 10 s, through the CLI (the blackout goes to the stub's stdin);
 - two flights at once on one fleet (a generated ring of three);
-- spaced arrivals 60 s apart, with a threat the operator adds in flight;
-- one vehicle's link dark for 10 s, through the CLI (the blackout goes to the stub's stdin);
 - ``--connect`` to a simulator started on its own, one vehicle behind MAVProxy: nothing in the
   loop knows it is the stub, and the arrivals come from telemetry (checked against the
   simulator's truth log);
@@ -16,7 +18,7 @@ truth log and the scenario, not from the coordinator's own figures: each goal pa
 the slot the schedule set before launch, moved by the team time's shift (bounded by each test,
 with why), every pair in 3-D at every truth sample both are airborne the whole flight long
 (at least the scenario's separation), and every forbidden zone (the scenario's, POPUP1 from
-1200 s after UAV1 left the ground by the truth, and the operator's) against every airborne
+its delay after UAV1 left the ground by the truth, and the operator's) against every airborne
 true sample from when it is there.
 """
 
@@ -48,10 +50,10 @@ from tests import oracle
 from tests.flightstory import story
 from tests.gcs.conftest import assert_flight_kept, free_udp_port, start_stub
 from tests.sitl_stub.conftest import free_port_base, mavproxy_router
-from tests.teams import ring_team
+from tests.teams import compact_paper, ring_team
 from tests.verdict import Verdict, assert_flown, judge, routes_into_disc
 
-pytestmark = pytest.mark.slow  # about 35 s of wall time each
+pytestmark = pytest.mark.slow  # 8-30 s of wall time each
 
 SCENARIOS = Path(__file__).resolve().parents[2] / "scenarios"
 PAPER = SCENARIOS / "paper_three_uav.yaml"
@@ -66,29 +68,50 @@ by at most (pi - 2) times its radius and the margin kept from it, some 17.5 km: 
 at their top speed of 30 m/s over the ground."""
 PAPER_TOGETHER_MIN_S = 1_000.0
 """The three fly together for over an hour once the last is up: at least this long."""
+PAPER_BOUNDS = {"team_shift_max_s": PAPER_SHIFT_MAX_S, "together_min_s": PAPER_TOGETHER_MIN_S}
+COMPACT_SHIFT_MAX_S = 300.0
+"""How far the compact team's time (:func:`tests.teams.compact_paper`) may move, and only
+later: POPUP1 (3.75 km, 300 s after UAV1's takeoff) lies across UAV2's route, which round it is
+longer by at most (pi - 2) times its radius and the margin kept from it, some 7 km: under
+300 s at 30 m/s over the ground."""
+COMPACT_TOGETHER_MIN_S = 600.0
+"""The compact three fly together for some 1,000 s once the last is up: at least this long."""
+COMPACT_BOUNDS = {
+    "team_shift_max_s": COMPACT_SHIFT_MAX_S,
+    "together_min_s": COMPACT_TOGETHER_MIN_S,
+}
+
+
+def _compact(directory: Path, arrival: dict[str, Any] | None = None) -> Path:
+    """The paper's scenario at a quarter of its size (:func:`tests.teams.compact_paper`: a
+    flight of some 1,300 s instead of 5,500 s), with ``arrival`` if given, as
+    ``compact.yaml`` in ``directory``."""
+    doc = compact_paper()
+    if arrival is not None:
+        doc["arrival"] = arrival
+    path = directory / "compact.yaml"
+    path.write_text(yaml.safe_dump(doc, sort_keys=False), encoding="utf-8")
+    return path
 
 
 def _paper_verdict(record: dict[str, Any], truth: Path, **more: Any) -> Verdict:
-    """The paper team's flight judged from its truth log (:func:`tests.verdict.assert_flown`):
-    on its slots within 1 s, the team time moved later by no more than
-    :data:`PAPER_SHIFT_MAX_S`, apart, out of SAM1, NFZ1 and POPUP1."""
-    kw: dict[str, Any] = {
-        "tolerance_s": TOLERANCE_S,
-        "team_shift_max_s": PAPER_SHIFT_MAX_S,
-        "together_min_s": PAPER_TOGETHER_MIN_S,
-    }
+    """The paper team's flight (full size, or compact with :data:`COMPACT_BOUNDS` in
+    ``more``) judged from its truth log (:func:`tests.verdict.assert_flown`): on its slots
+    within 1 s, the team time moved later by no more than :data:`PAPER_SHIFT_MAX_S`, apart,
+    out of SAM1, NFZ1 and POPUP1."""
+    kw: dict[str, Any] = {"tolerance_s": TOLERANCE_S, **PAPER_BOUNDS}
     verdict = assert_flown(record, truth, **{**kw, **more})
     assert verdict.shift_s >= 0.0, f"the team time moved earlier: {verdict}"
     assert {z.id for z in verdict.zones} >= {"SAM1", "NFZ1", "POPUP1"}, verdict.zones
     return verdict
 
 
-def _demo_run(**stub: Any) -> RehearsalOptions:
-    """The demo's flight (paper scenario, 200x, wind 5 m/s from 270, 10 % loss), quiet, with
-    more stub options (give it ``truth``)."""
+def _demo_run(path: Path = PAPER, **stub: Any) -> RehearsalOptions:
+    """The demo's flight (the paper scenario or ``path``, 200x, wind 5 m/s from 270, 10 %
+    loss), quiet, with more stub options (give it ``truth``)."""
     return RehearsalOptions(
-        scenario_path=PAPER,
-        scenario=load_scenario(PAPER),
+        scenario_path=path,
+        scenario=load_scenario(path),
         speedup=200.0,
         wind=(5.0, 270.0),
         loss=0.1,
@@ -131,17 +154,19 @@ async def test_paper_rehearsal_holds_the_arrival_time(tmp_path: Path) -> None:
 async def test_paper_rehearsal_absorbs_airspeed_errors_and_wrong_clocks_with_a_stalled_reader(
     tmp_path: Path,
 ) -> None:
-    """The demo's flight with what real autopilots get wrong. UAV2 (the one that sets the team
-    time, at its top speed) flies 5 % faster than its airspeed sensor says, UAV1 5 % slower:
-    the loop learns each scale from the fixes. Simulators started apart: UAV2's UTC runs 7 s
-    ahead, UAV3's 4 s behind: both offsets are found and said. An event subscriber that never
-    reads rides along: its drops are counted and the loop does not wait for it. The arrivals,
-    judged on true UTC from the simulator's truth log, are within 1 s of the team time."""
+    """The demo's flight, compact (:func:`_compact`), with what real autopilots get wrong.
+    UAV2 (the one that sets the team time, at its top speed) flies 5 % faster than its
+    airspeed sensor says, UAV1 5 % slower: the loop learns each scale from the fixes.
+    Simulators started apart: UAV2's UTC runs 7 s ahead, UAV3's 4 s behind: both offsets are
+    found and said. An event subscriber that never reads rides along: its drops are counted
+    and the loop does not wait for it. The arrivals, judged on true UTC from the simulator's
+    truth log, are within 1 s of the team time."""
     bus = EventBus()
     stalled = bus.subscribe(maxsize=5)
     truth = tmp_path / "truth.jsonl"
     record = await rehearse(
         _demo_run(
+            _compact(tmp_path),
             seed=2,
             speed_bias={"UAV2": 0.05, "UAV1": -0.05},
             utc_offsets_s={"UAV2": 7.0, "UAV3": -4.0},
@@ -153,7 +178,7 @@ async def test_paper_rehearsal_absorbs_airspeed_errors_and_wrong_clocks_with_a_s
     assert stalled.dropped == bus.published - 5 > 50
     assert [e["seq"] for e in record["events"]] == list(range(1, bus.published + 1))
     assert record["state"] == "completed", record["state_reason"]
-    _paper_verdict(record, truth)
+    _paper_verdict(record, truth, **COMPACT_BOUNDS)
     said = {e["vehicle"]: e["value"] for e in record["events"] if e["kind"] == "clock"}
     assert said.keys() == {"UAV2", "UAV3"}, said
     # In lock step a report may be read up to the lead (flight s) after the simulator sent
@@ -240,13 +265,14 @@ async def test_spaced_rehearsal_meets_each_60_s_slot_with_an_operator_threat(
 def test_blackout_rehearsal_from_the_cli_recovers_and_arrives(
     tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
-    """UAV2's link is dark for 10 s of mission time mid-flight; the rehearsal tells the stub
-    over its control input, the coordinator reports the silence and the recovery. The flight
-    is kept in a SQLite file as it happens (``--db``)."""
+    """UAV2's link is dark for 10 s of mission time mid-flight (the compact paper flight,
+    :func:`_compact`); the rehearsal tells the stub over its control input, the coordinator
+    reports the silence and the recovery. The flight is kept in a SQLite file as it happens
+    (``--db``)."""
     out, truth = tmp_path / "flight.json", tmp_path / "truth.jsonl"
     db = f"sqlite:///{tmp_path / 'tcgcs.db'}"
-    argv = ["rehearse", str(PAPER), "--wind", "5,270", "--loss", "0.1", "--seed", "1",
-            "--blackout", "UAV2,3000,10", "--tolerance", "2", "--quiet",
+    argv = ["rehearse", str(_compact(tmp_path)), "--wind", "5,270", "--loss", "0.1", "--seed", "1",
+            "--blackout", "UAV2,750,10", "--tolerance", "2", "--quiet",
             "--json", str(out), "--truth", str(truth), "--db", db]  # fmt: skip
     code = main(argv)
     printed = capsys.readouterr()
@@ -255,18 +281,18 @@ def test_blackout_rehearsal_from_the_cli_recovers_and_arrives(
     record = json.loads(out.read_text())
     assert_flight_kept(db, record)
     # By the truth: UAV2 (dark for 10 s) within 2 s of its slot, the others within 1 s.
-    verdict = _paper_verdict(record, truth, tolerance_s=2.0)
+    verdict = _paper_verdict(record, truth, tolerance_s=2.0, **COMPACT_BOUNDS)
     errors = verdict.errors_s()
     late = {v: errors[v] for v in ("UAV1", "UAV3") if not abs(errors[v] or 0.0) <= TOLERANCE_S}
     assert not late and None not in errors.values(), errors
     # Link events may also come from a busy moment (planning on two cores at 200x); the
-    # blackout's must be there: UAV2 silent from 3000 s, back about 10 s later.
+    # blackout's must be there: UAV2 silent from 750 s, back about 10 s later.
     link = [e for e in record["events"] if e["kind"] == "link" and e["vehicle"] == "UAV2"]
-    lost = next(e for e in link if e["reason"].startswith("no position for") and e["t_s"] >= 3000)
+    lost = next(e for e in link if e["reason"].startswith("no position for") and e["t_s"] >= 750)
     back = next(
         e for e in link if e["reason"].startswith("telemetry back") and e["t_s"] > lost["t_s"]
     )
-    assert lost["t_s"] <= 3010.0, lost
+    assert lost["t_s"] <= 760.0, lost
     gap = re.search(r"telemetry back after ([\d.]+) s", back["reason"])
     assert gap is not None and 9.5 <= float(gap.group(1)) <= 13.0, back
 
@@ -277,15 +303,16 @@ async def test_connect_rehearsal_flies_separately_started_vehicles_one_behind_ma
     base = free_port_base(3)
     udp = free_udp_port()
     truth, pace = tmp_path / "truth.jsonl", tmp_path / "pace"
-    proc = await start_stub(PAPER, base, truth, "--lockstep", str(pace))
+    compact = _compact(tmp_path)
+    proc = await start_stub(compact, base, truth, "--lockstep", str(pace))
     try:
         async with mavproxy_router(
             f"tcp:127.0.0.1:{base}", f"udpout:127.0.0.1:{udp}", tmp_path, "--streamrate=-1"
         ):
             record = await rehearse(
                 RehearsalOptions(
-                    scenario_path=PAPER,
-                    scenario=load_scenario(PAPER),
+                    scenario_path=compact,
+                    scenario=load_scenario(compact),
                     connect=[
                         f"udpin:127.0.0.1:{udp}",  # UAV1, through MAVProxy
                         f"tcp:127.0.0.1:{base + 10}",
@@ -304,7 +331,7 @@ async def test_connect_rehearsal_flies_separately_started_vehicles_one_behind_ma
             _, err = await proc.communicate()
     assert proc.returncode == 0, err
     assert record["speedup"] is None  # not ours to know: the vehicles were only reached
-    verdict = _paper_verdict(record, truth)
+    verdict = _paper_verdict(record, truth, **COMPACT_BOUNDS)
     start = verdict.start_utc_s
     for v in record["vehicles"]:
         # The coordinator's own arrival, from telemetry alone, agrees with the truth: on the
@@ -589,30 +616,19 @@ async def test_a_re_plan_that_lands_after_the_aircraft_reach_the_pop_up_holds_th
     assert verdict.shift_s >= 0.0, verdict
 
 
-def _paper_with(tmp_path: Path, arrival: dict[str, Any]) -> Path:
-    data = yaml.safe_load(PAPER.read_text())
-    data["arrival"] = arrival
-    path = tmp_path / "scenario.yaml"
-    path.write_text(yaml.safe_dump(data))
-    return path
-
-
 async def test_waves_arrive_together_within_a_wave_and_the_gap_apart(tmp_path: Path) -> None:
-    """Two waves 120 s apart on the paper flight (wind, loss, the pop-up): UAV1 and UAV3
-    together, then UAV2; checked on the truth log."""
-    path = _paper_with(
+    """Two waves 120 s apart on the compact paper flight (:func:`_compact`: wind, loss, the
+    pop-up): UAV1 and UAV3 together, then UAV2; checked on the truth log."""
+    path = _compact(
         tmp_path, {"kind": "waves", "gap_s": 120, "groups": [["UAV1", "UAV3"], ["UAV2"]]}
     )
     truth = tmp_path / "truth.jsonl"
-    opts = _demo_run(seed=1, truth=truth)
-    record = await rehearse(
-        RehearsalOptions(
-            **{**opts.__dict__, "scenario_path": path, "scenario": load_scenario(path)}
-        )
-    )
+    record = await rehearse(_demo_run(path, seed=1, truth=truth))
     # The planned slots are the groups' (checked against the rule), and the true passages
     # keep them.
-    verdict = _paper_verdict(record, truth, scenario=yaml.safe_load(path.read_text()))
+    verdict = _paper_verdict(
+        record, truth, scenario=yaml.safe_load(path.read_text()), **COMPACT_BOUNDS
+    )
     slots = {v: lo for v, (lo, _) in verdict.slots_s.items()}
     assert slots["UAV1"] == slots["UAV3"] == pytest.approx(slots["UAV2"] - 120.0)
     at = verdict.passages_s
@@ -621,8 +637,10 @@ async def test_waves_arrive_together_within_a_wave_and_the_gap_apart(tmp_path: P
 
 
 async def test_windows_each_vehicle_arrives_in_its_own_window(tmp_path: Path) -> None:
-    own = {"UAV1": (5_500.0, 5_800.0), "UAV2": (5_600.0, 5_900.0), "UAV3": (5_550.0, 6_000.0)}
-    path = _paper_with(
+    """A window per vehicle on the compact paper flight (:func:`_compact`), each opening after
+    the earliest common arrival (some 1,280 s with the pop-up)."""
+    own = {"UAV1": (1_320.0, 1_395.0), "UAV2": (1_345.0, 1_420.0), "UAV3": (1_330.0, 1_450.0)}
+    path = _compact(
         tmp_path,
         {
             "kind": "windows",
@@ -632,12 +650,7 @@ async def test_windows_each_vehicle_arrives_in_its_own_window(tmp_path: Path) ->
         },
     )
     truth, out, report = tmp_path / "truth.jsonl", tmp_path / "flight.json", tmp_path / "report"
-    opts = _demo_run(seed=1, truth=truth, json_out=out)
-    record = await rehearse(
-        RehearsalOptions(
-            **{**opts.__dict__, "scenario_path": path, "scenario": load_scenario(path)}
-        )
-    )
+    record = await rehearse(_demo_run(path, seed=1, truth=truth, json_out=out))
     assert record["required_arrival_s"] is None  # no team time: a slot per vehicle
     # The record as written (no team time) is read back, and reported, like any other (as
     # `rehearse --json --report` does).
@@ -647,7 +660,9 @@ async def test_windows_each_vehicle_arrives_in_its_own_window(tmp_path: Path) ->
     said = (report / "arrivals.md").read_text(encoding="utf-8")
     assert "arrival windows (a slot per vehicle)" in said, said
     # Each true passage inside its own window (within 1 s), planned inside it before launch.
-    verdict = _paper_verdict(record, truth, scenario=yaml.safe_load(path.read_text()))
+    verdict = _paper_verdict(
+        record, truth, scenario=yaml.safe_load(path.read_text()), **COMPACT_BOUNDS
+    )
     assert verdict.slots_s == own
     # (A slot may move within its window in flight, for a vehicle POPUP1 makes late: the
     # window is the verdict's slot. Where the schedule put each, and where it passed:)
