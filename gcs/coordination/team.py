@@ -898,11 +898,14 @@ class TeamController(ZoneGuard, TeamTime):
             loiter_flown_m=min(m.loiter_flown_m, lo.length_m),
             tas_per_eas=m.tas_per_eas(lo.s_m),
         )
-        if d.verdict != "late":
+        top_m_s = m.limits.airspeed_max_m_s - self.config.speed_reserve_m_s
+        if d.verdict != "late" and d.required_m_s <= top_m_s:
             self._apply_decision(m, d, t, out)
             return
-        # Out of the turns now, it flies on from where it is: the route from its position
-        # located on it (a circle off the route is left towards the waypoint after).
+        # Late, or the rest of the turns would need it within the speed reserve of its top
+        # speed (no room left for what the way out of them costs). Out of the turns now, it
+        # flies on from where it is: the route from its position located on it (a circle off
+        # the route is left towards the waypoint after).
         s = lo.s_m if m.s_m is None else m.s_m
         left = m.controller.decide(
             m.track,
@@ -917,7 +920,8 @@ class TeamController(ZoneGuard, TeamTime):
         if left.eta_min_s >= d.eta_min_s:
             # Nothing to gain by leaving (its turns are as good as flown): late as anywhere.
             self._apply_decision(m, d, t, out)
-            self._late(m, d, t, out)
+            if d.verdict == "late":
+                self._late(m, d, t, out)
             return
         self._apply_decision(m, left, t, out)
         if left.verdict != "early":
@@ -941,9 +945,15 @@ class TeamController(ZoneGuard, TeamTime):
             if left.verdict == "late"
             else f"on time from there, {left.required_m_s:.2f} m/s required"
         )
+        stay = (
+            f"would make it {d.eta_min_s - m.target_s:.1f} s late even at {hi:g} m/s"
+            if d.verdict == "late"
+            else f"would need {d.required_m_s:.2f} m/s, within "
+            f"{self.config.speed_reserve_m_s:g} m/s of its top speed"
+        )
         why = (
-            f"the rest of its loiter would make it {d.eta_min_s - m.target_s:.1f} s late even "
-            f"at {hi:g} m/s: out of the turns at {t:.1f} s, on to item {seq + 1} ({rest})"
+            f"the rest of its loiter {stay}: out of the turns at {t:.1f} s, on to item "
+            f"{seq + 1} ({rest})"
         )
         out.append(
             act.Report(

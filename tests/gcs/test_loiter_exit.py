@@ -164,3 +164,36 @@ def test_a_vehicle_whose_turns_are_as_good_as_flown_is_not_taken_out_of_them(
     assert of(out, act.LeaveLoiter) == [] and m.in_loiter()
     (moved,) = reports(out, EventKind.ARRIVAL)
     assert moved.vehicle == vid and "cannot arrive before" in moved.reason
+
+
+def test_a_vehicle_its_turns_would_leave_without_a_speed_reserve_is_taken_out_of_them(
+    team: TeamController,
+) -> None:
+    """Not late, but the rest of its turns would need within ``speed_reserve_m_s`` of its top
+    airspeed (no room for what the way out of the turns costs), and leaving now is not early:
+    taken out of them, said with the speed it would need; the team time stays."""
+    vid = "UAV3"
+    m, lo, k, t1, on_circle = _in_turns(team, vid)
+    ratio = m.schedule.tas_per_eas(lo.s_m)
+    reserve = team.config.speed_reserve_m_s
+    v_near = (m.limits.airspeed_max_m_s - reserve / 2.0) * ratio  # inside the reserve
+    v_min = m.limits.airspeed_min_m_s * ratio
+    route_m = m.track.length_m - lo.s_m
+    step_m = 2.0 * m.groundspeed_m_s
+    # Round the circle, undecided, to where 1.5 km of turns are left.
+    i = SETTLED + 1
+    while lo.length_m - (i + 1) * step_m > 1_500.0:
+        m.next_decision_s = math.inf
+        _answered(team, vid, team.handle(on_circle(i), t1 + 2.0 * i), t1 + 2.0 * i)
+        i += 1
+    t = t1 + 2.0 * i
+    ref = t + (lo.length_m - i * step_m + route_m) / v_near - m.offset_s
+    assert t + route_m / v_min > ref + m.offset_s  # leaving now is not early
+    _retarget(team, ref)
+    m.next_decision_s = -math.inf
+    out = team.handle(on_circle(i), t)
+    (leave,) = of(out, act.LeaveLoiter)
+    assert leave.seq == k + 1
+    (said,) = [r for r in reports(out, EventKind.LOITER) if r.payload["action"] == "leave"]
+    assert "within" in said.reason and "of its top speed" in said.reason, said.reason
+    assert reports(out, EventKind.ARRIVAL) == [] and team.team_ref_s == ref
