@@ -53,11 +53,11 @@ _JOIN_TOL_ABS_M = 1e-6
 _JOIN_TOL_REL = 1e-9
 # Consecutive polyline vertices closer than this (relative to coordinate size) repeat.
 _REPEAT_REL = 1e-12
-# Corners turning less than this are collinear and get no arc, rad.
-_COLLINEAR_RAD = 1e-9
+COLLINEAR_RAD = 1e-9
+"""Corners turning less than this (rad) are collinear and get no arc."""
 
 
-def _heading_diff_rad(a_rad: float, b_rad: float) -> float:
+def heading_diff_rad(a_rad: float, b_rad: float) -> float:
     """Absolute smallest difference between two headings, in [0, pi]."""
     return abs((a_rad - b_rad + math.pi) % (2.0 * math.pi) - math.pi)
 
@@ -70,7 +70,7 @@ def _join_tol_m(a: Pose, b: Pose) -> float:
 def _join_gap(a: Pose, b: Pose) -> tuple[float, float] | None:
     """Return (gap_m, gap_rad) if ``b`` does not continue ``a`` with G1 continuity, else None."""
     gap_m = math.hypot(b.east_m - a.east_m, b.north_m - a.north_m)
-    gap_rad = _heading_diff_rad(a.heading_rad, b.heading_rad)
+    gap_rad = heading_diff_rad(a.heading_rad, b.heading_rad)
     if gap_m > _join_tol_m(a, b) or gap_rad > JOIN_TOL_RAD:
         return gap_m, gap_rad
     return None
@@ -678,11 +678,9 @@ def _connect(start: Pose, end: Pose, radius_m: float) -> list[Segment]:
     """Segments from ``start`` to ``end``: a straight if ``end`` is dead ahead, else Dubins."""
     de_m, dn_m = end.east_m - start.east_m, end.north_m - start.north_m
     distance_m = math.hypot(de_m, dn_m)
-    if distance_m > 0.0 and _heading_diff_rad(start.heading_rad, end.heading_rad) <= (
-        _COLLINEAR_RAD
-    ):
+    if distance_m > 0.0 and heading_diff_rad(start.heading_rad, end.heading_rad) <= (COLLINEAR_RAD):
         bearing_rad = math.atan2(de_m, dn_m)
-        if _heading_diff_rad(bearing_rad, start.heading_rad) <= _COLLINEAR_RAD:
+        if heading_diff_rad(bearing_rad, start.heading_rad) <= COLLINEAR_RAD:
             return [Segment(start, distance_m, "S")]
     return list(shortest_path(start, end, radius_m).segments())
 

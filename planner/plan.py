@@ -24,7 +24,14 @@ from planner.aco import AcoOptions, solve_aco
 from planner.backend import Backend, LocalBackend
 from planner.coupling import TimingLimits, team_min_separation_m, team_timing
 from planner.errors import InfeasibleError
-from planner.flightpath import FlightPath, Violation, check_polyline, smooth_polyline
+from planner.flightpath import (
+    COLLINEAR_RAD,
+    FlightPath,
+    Violation,
+    check_polyline,
+    heading_diff_rad,
+    smooth_polyline,
+)
 from planner.geo import LocalFrame
 from planner.grid import CostMap, Grid, VehicleClass, build_cost_map
 from planner.landing import check_glide, final_m
@@ -437,9 +444,6 @@ def _box_gap_m(a: tuple[float, float, float, float], b: tuple[float, float, floa
     return math.hypot(gap_east, gap_north)
 
 
-STRAIGHT_ON_RAD = 1e-9
-""":func:`refine_corners` takes a vertex turning less than this (rad) for one on a straight
-line (round-off only: the flight path gives such a corner no arc either)."""
 MIN_PIECE_M = 1.0
 """:func:`refine_corners` leaves no piece of a leg shorter than this (m): a split nearer a
 corner belongs to a turn too slight for the smoothing to cut inside it (a turn of round-off
@@ -463,11 +467,6 @@ def _join_m(turn_rad: float, radius_m: float) -> float:
     return 1.05 * radius_m * (math.sin(turn_rad) + 2.0 * math.sin(beta_rad))
 
 
-def _turn_between_rad(a_rad: float, b_rad: float) -> float:
-    """Absolute heading change from ``a_rad`` to ``b_rad``, in [0, pi] (rad)."""
-    return abs((b_rad - a_rad + math.pi) % (2.0 * math.pi) - math.pi)
-
-
 def _turns_rad(points_m: FloatArray) -> FloatArray:
     """Absolute heading change at each interior vertex (rad)."""
     legs = np.diff(points_m, axis=0)
@@ -488,14 +487,14 @@ def refine_corners(
     start, the first leg is split at twice the distance the turn from that heading onto the
     leg takes (:func:`_join_m`). No piece is left shorter than :data:`MIN_PIECE_M`.
 
-    Vertices that go straight on (turning less than :data:`STRAIGHT_ON_RAD`: grid nodes in a
+    Vertices that go straight on (turning less than :data:`COLLINEAR_RAD`: grid nodes in a
     row) are left out, so that a corner's splits are measured along the whole straight run
     beside it, not along its leg to the next node in the row.
     """
     pts = np.asarray(points_m, dtype=np.float64)
     if len(pts) < 3:
         return pts
-    corner = np.concatenate([[True], _turns_rad(pts) >= STRAIGHT_ON_RAD, [True]])
+    corner = np.concatenate([[True], _turns_rad(pts) >= COLLINEAR_RAD, [True]])
     pts = np.asarray(pts[corner], dtype=np.float64)
     if len(pts) < 3:
         return pts
@@ -505,7 +504,7 @@ def refine_corners(
     join_m = 0.0
     if start_heading_rad is not None:
         first_rad = math.atan2(legs[0, 0], legs[0, 1])
-        join_m = _join_m(_turn_between_rad(start_heading_rad, first_rad), radius_m)
+        join_m = _join_m(heading_diff_rad(start_heading_rad, first_rad), radius_m)
     # Distance to split at, from the start and from the end of each leg.
     at_start = np.concatenate([[2.0 * join_m], 2.0 * tangent])
     at_end = np.concatenate([2.0 * tangent, [0.0]])
@@ -545,7 +544,7 @@ def onto_route(points_m: FloatArray, radius_m: float, start_heading_rad: float) 
     while len(pts) > 2:
         leg = pts[1] - pts[0]
         first_m = float(np.hypot(*leg))
-        start_turn_rad = _turn_between_rad(start_heading_rad, math.atan2(leg[0], leg[1]))
+        start_turn_rad = heading_diff_rad(start_heading_rad, math.atan2(leg[0], leg[1]))
         need_m = max(
             _join_m(start_turn_rad, radius_m), float(_fillet_m(_turns_rad(pts[:3]), radius_m)[0])
         )
