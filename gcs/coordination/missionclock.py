@@ -147,12 +147,18 @@ class MissionClock:
         self.paced = False
         """Its monotonic clock is the simulator's pace clock (:meth:`follow`)."""
         self._paced_lead_s = 0.0
+        self.pace_rate: float | None = None
+        """On a pace clock, the simulator's speed-up when it says it (flight s per pace s): the
+        rate as the simulator runs it, not as fitted on reports dated when handled (within 3%
+        of it on a loaded machine)."""
         self.held_pace_s: float | None = None
         """While set, the lock step acknowledges no pace time past it: the simulator waits
         there (:meth:`hold`, :func:`gcs.service.stubs.follow_lockstep`)."""
         self._holds = 0
 
-    def follow(self, pace_s: Callable[[], float], lead_s: float = 0.0) -> None:
+    def follow(
+        self, pace_s: Callable[[], float], lead_s: float = 0.0, rate: float | None = None
+    ) -> None:
         """Read the simulator's pace clock (flight time / speed-up, :mod:`sitl_stub.lockstep`)
         as the monotonic clock, and date each report when it is handled: a report handled
         late then reads as one sent late, not as a clock behind.
@@ -162,7 +168,8 @@ class MissionClock:
         an offset between two vehicles within :data:`PACED_OFFSET_LEADS` leads is no evidence
         of a wrong clock and is not applied. On a loaded machine at 100x one simulator's
         vehicles otherwise read as 0.5-0.8 s apart near the end of a flight, and each such
-        offset moved that vehicle's arrival by as much.
+        offset moved that vehicle's arrival by as much. ``rate``: the simulator's speed-up
+        (:attr:`pace_rate`), when known.
 
         Raises
         ------
@@ -173,9 +180,12 @@ class MissionClock:
             raise GcsError("mission clock: follow() after the first SYSTEM_TIME")
         if not (math.isfinite(lead_s) and lead_s >= 0.0):
             raise ValueError(f"lead_s must be a number of seconds >= 0, got {lead_s!r}")
+        if rate is not None and not (math.isfinite(rate) and rate > 0.0):
+            raise ValueError(f"rate must be a positive number, got {rate!r}")
         self._monotonic = pace_s
         self.paced = True
         self._paced_lead_s = lead_s
+        self.pace_rate = rate
 
     def monotonic(self) -> float:
         """The clock's monotonic time now (the pace clock when :attr:`paced`)."""

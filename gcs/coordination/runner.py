@@ -369,15 +369,22 @@ class FlightRunner:
         """How far ahead (mission s) a changed mission may start: planning and upload time.
         On a pace clock the simulator waits while a job plans (:meth:`MissionClock.hold`):
         the planning is taken at :data:`PACED_PLAN_WALL_S`, not as long as a busy machine
-        made it."""
+        made it, and at the simulator's speed-up (:attr:`MissionClock.pace_rate`), not the rate
+        fitted on reports dated when handled: a lead that moved with the load (73-76 s at 100x)
+        moved the waypoints the re-planned routes start from."""
         plan_s = PACED_PLAN_WALL_S if self.clock.paced else self.plan_wall_s
-        return max(self.config.min_lead_s, 1.5 * (plan_s + 0.3) * self.clock.rate)
+        return max(self.config.min_lead_s, 1.5 * (plan_s + 0.3) * self._lead_rate())
+
+    def _lead_rate(self) -> float:
+        """Mission seconds per clock second for the leads: the pace clock's speed-up when the
+        simulator says it, else the fitted rate."""
+        return self.clock.pace_rate or self.clock.rate
 
     def _loiter_lead_s(self) -> float:
         """The same for loiter turns: one vehicle re-timed (milliseconds) and its upload (a
         second allowed)."""
         plan_s = 0.0 if self.clock.paced else self.loiter_wall_s
-        return max(self.config.min_lead_s, 1.5 * (plan_s + 1.0) * self.clock.rate)
+        return max(self.config.min_lead_s, 1.5 * (plan_s + 1.0) * self._lead_rate())
 
     def _planning_lead(self) -> act.PlanningLead:
         return act.PlanningLead(self._lead_s(), self._loiter_lead_s())

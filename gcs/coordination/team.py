@@ -44,6 +44,7 @@ from gcs.coordination.zoneguard import Exposure, ZoneGuard
 from planner.atmosphere import eas2tas
 from planner.mission import MAV_CMD_DO_CHANGE_SPEED
 from planner.plan import World
+from planner.popup import popup_zones
 from planner.scenario import Scenario, Threat
 from planner.schedule import Schedule
 from planner.threats import ThreatZone
@@ -67,6 +68,9 @@ NEIGHBOUR_SEPARATIONS = 2.0
 separations of either of the pair too (:func:`gcs.coordination.resolution.resolve`)."""
 LANDING_MARGIN_S = 120.0
 """Flare, roll-out and the disarm delay, on top of the glide (see ``landing_bound_s``)."""
+POPUP_SEEN_LATE_S = 5.0
+"""A pop-up threat's re-plan is counted from its appearance when its tick saw it at most this
+late (mission s; :meth:`TeamController._popup_lead_s`)."""
 
 
 def is_crash_text(text: str) -> bool:
@@ -215,7 +219,8 @@ class TeamController(ZoneGuard, TeamTime):
 
     def next_due_s(self, now_s: float) -> float:
         """The next mission time after ``now_s`` at which a tick has work (a vehicle to arm or
-        to launch); inf when none. The runner ticks then rather than up to a second late."""
+        to launch, a pop-up threat appearing); inf when none. The runner ticks then rather
+        than up to a second late."""
         lead_s = self.config.arm_lead_s
         times = [
             t
@@ -224,7 +229,24 @@ class TeamController(ZoneGuard, TeamTime):
             for t in (m.takeoff_s, m.takeoff_s - lead_s)
             if t > now_s
         ]
+        times += [
+            z.appears_at_s
+            for z in popup_zones(self.zones())
+            if z.id not in self.popups_done and z.appears_at_s is not None
+            if z.appears_at_s > now_s
+        ]
         return min(times, default=math.inf)
+
+    def _popup_lead_s(self, zone: ThreatZone, now: float) -> float:
+        """The re-plan's lead counted from the zone's appearance, not from the tick that saw
+        it: in lock step that tick comes up to the lock step's lead of flight late, more on a
+        busy machine, and the waypoints the new routes start from (the first each vehicle
+        reaches after the lead) moved with the load (seen: decided 100.1-101.9 s for a zone
+        at 100 s; two vehicles then re-planned from 4 km farther on, one from its hold point,
+        and the pair lost separation). A zone seen more than :data:`POPUP_SEEN_LATE_S` late (a
+        flight resumed after it) gets the whole lead from now."""
+        late = now - (now if zone.appears_at_s is None else zone.appears_at_s)
+        return self.lead_s - late if 0.0 < late <= POPUP_SEEN_LATE_S else self.lead_s
 
     def _t(self, utc_s: float) -> float:
         assert self.start_utc_s is not None, "the mission has not started"
@@ -332,7 +354,7 @@ class TeamController(ZoneGuard, TeamTime):
             self.popups_done.add(zone.id)
             self.threats_appeared.append({"id": zone.id, "t_s": now})
             self._guard_zone(zone)
-            self._popup(zone, now, self.lead_s, out)
+            self._popup(zone, now, self._popup_lead_s(zone, now), out)
         self._guard_tick(now, out)
 
     def _launched(self, r: act.Launched, now: float, out: list[act.Action]) -> None:

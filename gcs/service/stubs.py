@@ -173,7 +173,7 @@ def follow_lockstep(
     the clock holds the flight (:meth:`MissionClock.hold`: a planning job) nothing past that
     pace time is acknowledged."""
     pace = Lockstep(path)
-    clock.follow(pace.pace_s, pace.lead_s)
+    clock.follow(pace.pace_s, pace.lead_s, pace.speedup)
     return asyncio.create_task(_acknowledge(pace, clock, on_overrun))
 
 
