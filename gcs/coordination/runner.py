@@ -114,6 +114,14 @@ PACED_PLAN_WALL_S = 0.2
 """A re-plan's planning time (wall s) on a pace clock, where the simulator waits while it
 plans: what the paper's re-plan takes on a quiet machine, so the lead (150 s of flight at
 200x) is the same however busy the machine is."""
+PACED_UPLOAD_HOLD_WALL_S = 3.0
+"""On a pace clock a mission upload in flight holds the simulator (:meth:`MissionClock.hold`)
+for at most this long (wall s): on any machine, however busy, it is on board within that and
+took no flight time. Its exchanges are timed in wall time (resends after wall timeouts, on a
+link that loses packets), and the simulator flew on meanwhile at its speed-up: a loaded
+machine made a 52-item upload after a pop-up outlast its 78 s of flight, the vehicle was held
+short of the zone 2,100 s later and re-planned, and the team time moved 375 s. A vehicle that
+does not answer (a link blackout, which ends in flight time) lets the flight go on after it."""
 REPLAN_SEARCH_SHARE = 0.25
 """A re-plan's route search (the ACO) ends with the best routes so far once this share of the
 planning lead, in wall time, is spent: the lead allows one and a half times the longest
@@ -607,7 +615,10 @@ class FlightRunner:
         if a.in_flight and self.clock.paced:
             # On a pace clock the budget is flight time: a busy machine slows the flight, and
             # half the lead in wall seconds at the clock's rate ran out with only seconds of
-            # it flown (seen: 0.233 s of wall, a route round a pop-up never installed).
+            # it flown (seen: 0.233 s of wall, a route round a pop-up never installed). The
+            # simulator waits while the mission goes up (PACED_UPLOAD_HOLD_WALL_S): the
+            # transfer's wall-time round trips and resends take no flight time.
+            release = self._hold_clock(PACED_UPLOAD_HOLD_WALL_S)
             attempts = asyncio.ensure_future(self._upload_attempts(v, a, None))
             budget = asyncio.ensure_future(self.clock.sleep(0.5 * lead))
             try:
@@ -616,6 +627,8 @@ class FlightRunner:
                 budget.cancel()
                 attempts.cancel()
                 raise
+            finally:
+                release()
             budget.cancel()
             expired = budget.done() and not budget.cancelled() and budget.exception() is None
             if not attempts.done() and expired:
@@ -627,6 +640,22 @@ class FlightRunner:
             return
         end_s = loop.time() + 0.5 * lead / self.clock.rate if a.in_flight else None
         await self._upload_attempts(v, a, end_s)
+
+    def _hold_clock(self, wall_s: float) -> Callable[[], None]:
+        """Hold the mission clock (:meth:`MissionClock.hold`) for at most ``wall_s`` of wall
+        time; returns the release (once, whichever comes first)."""
+        self.clock.hold()
+        held = True
+
+        def release() -> None:
+            nonlocal held
+            if held:
+                held = False
+                timer.cancel()
+                self.clock.release()
+
+        timer = asyncio.get_running_loop().call_later(wall_s, release)
+        return release
 
     async def _upload_attempts(self, v: Vehicle, a: act.Upload, end_s: float | None) -> None:
         """Up to three attempts, the later ones only while ``end_s`` (loop time) allows."""

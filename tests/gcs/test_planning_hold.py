@@ -1,19 +1,27 @@
-"""A planning job in lock step takes no flight time: while the mission clock holds
-(:meth:`gcs.coordination.missionclock.MissionClock.hold`, the runner's planning jobs), the
-ground station acknowledges no pace time past where the hold began, so the simulator waits
-there however long the job takes; released, it flies on. Off a pace clock a hold is nothing
-(real vehicles do not wait)."""
+"""A planning job or a mission upload in lock step takes no flight time: while the mission
+clock holds (:meth:`gcs.coordination.missionclock.MissionClock.hold`, the runner's planning
+jobs and in-flight uploads), the ground station acknowledges no pace time past where the hold
+began, so the simulator waits there however long the job takes; released, it flies on. Off a
+pace clock a hold is nothing (real vehicles do not wait)."""
 
 from __future__ import annotations
 
 import asyncio
 from pathlib import Path
+from types import SimpleNamespace
 
 import pytest
 
+from gcs.coordination import actions as act
+from gcs.coordination import runner as runner_module
 from gcs.coordination.missionclock import MissionClock
+from gcs.coordination.runner import FlightRunner
+from gcs.errors import GcsError
 from gcs.service.stubs import follow_lockstep
+from planner.scenario import load_scenario
 from sitl_stub.lockstep import Lockstep
+
+PAPER = Path(__file__).resolve().parents[2] / "scenarios" / "paper_three_uav.yaml"
 
 
 async def test_a_held_clock_acknowledges_nothing_past_the_hold_and_a_release_lets_it_on(
@@ -53,3 +61,107 @@ def test_off_a_pace_clock_a_hold_is_nothing() -> None:
     assert clock.held_pace_s is None
     clock.release()
     assert clock.held_pace_s is None
+
+
+class _SlowUpload:
+    """A vehicle whose mission upload takes as long as the test lets it (wall time)."""
+
+    def __init__(self) -> None:
+        self.started = asyncio.Event()
+        self.finish = asyncio.Event()
+
+    async def upload_mission(self, items: list[object], **_: object) -> None:
+        self.started.set()
+        await self.finish.wait()
+
+
+def _synced(clock: MissionClock) -> None:
+    """The simulator's SYSTEM_TIME for its first 100 s of flight, received as sent (pace time
+    = flight time / 200)."""
+    for t_s in range(101):
+        clock.observe(1, 1.7e9 + t_s, float(t_s), t_s / 200.0)
+
+
+def _upload(vehicle_id: str) -> act.Upload:
+    return act.Upload(
+        vehicle_id=vehicle_id,
+        mission=SimpleNamespace(items=()),  # type: ignore[arg-type]
+        schedule=None,  # type: ignore[arg-type]
+        keep_seq=None,
+        what="after POPUP1",
+        in_flight=True,
+    )
+
+
+async def test_an_upload_in_flight_in_lock_step_takes_no_flight_time(tmp_path: Path) -> None:
+    """A mission going up in flight holds the simulator: its round trips and resends are
+    timed in wall time, and on a busy machine a 52-item upload after a pop-up outlasted its
+    78 s of flight at 200x (the vehicle was held short of the zone much later, and the team
+    time moved 375 s). Once on board the flight goes on."""
+    path = tmp_path / "pace"
+    sim = Lockstep(path, create=True, speedup=200.0, lead_s=1.0)
+    clock = MissionClock()
+    pacer = follow_lockstep(path, clock)
+    runner = FlightRunner(load_scenario(PAPER), clock)
+    vehicle = _SlowUpload()
+    runner.vehicles = {"UAV1": vehicle}  # type: ignore[dict-item]
+    _synced(clock)
+    upload = None
+    try:
+        sim.publish(100.0)
+        await asyncio.sleep(0.02)
+        upload = asyncio.create_task(runner._upload(_upload("UAV1")))
+        await vehicle.started.wait()
+        assert clock.held_pace_s == 100.0 / 200.0
+        sim.publish(100.8)
+        await asyncio.sleep(0.3)  # 60 s of flight at 200x, had the simulator not waited
+        assert sim.acknowledged_s() * 200.0 == 100.0
+        vehicle.finish.set()
+        await upload
+        assert clock.held_pace_s is None
+        await asyncio.sleep(0.02)
+        assert sim.acknowledged_s() * 200.0 == pytest.approx(100.8)
+    finally:
+        if upload is not None:
+            upload.cancel()
+        pacer.cancel()
+        await asyncio.gather(*(t for t in (pacer, upload) if t is not None), return_exceptions=True)
+        sim.close()
+
+
+async def test_a_vehicle_that_does_not_answer_an_upload_holds_the_flight_only_so_long(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """A vehicle that does not answer (a blackout, which ends in flight time) must not stop
+    the flight: the hold ends after :data:`PACED_UPLOAD_HOLD_WALL_S` of wall time, and the
+    upload then fails when its share of the lead has been flown."""
+    monkeypatch.setattr(runner_module, "PACED_UPLOAD_HOLD_WALL_S", 0.1)
+    path = tmp_path / "pace"
+    sim = Lockstep(path, create=True, speedup=200.0, lead_s=1.0)
+    clock = MissionClock()
+    pacer = follow_lockstep(path, clock)
+    runner = FlightRunner(load_scenario(PAPER), clock)
+    runner.vehicles = {"UAV1": _SlowUpload()}  # type: ignore[dict-item]
+    _synced(clock)
+    budget_s = 0.5 * runner._lead_s()
+    upload = None
+    try:
+        sim.publish(100.0)
+        await asyncio.sleep(0.02)
+        upload = asyncio.create_task(runner._upload(_upload("UAV1")))
+        await asyncio.sleep(0.3)
+        assert clock.held_pace_s is None
+        t_s = 100.0
+        while not upload.done() and t_s < 100.0 + 2.0 * budget_s:
+            t_s += 1.0
+            sim.publish(t_s)
+            await asyncio.sleep(0.005)
+        with pytest.raises(GcsError, match=f"within {budget_s:.0f} s of flight"):
+            await upload
+        assert 100.0 + budget_s <= t_s <= 100.0 + budget_s + 2.0
+    finally:
+        if upload is not None:
+            upload.cancel()
+        pacer.cancel()
+        await asyncio.gather(*(t for t in (pacer, upload) if t is not None), return_exceptions=True)
+        sim.close()
