@@ -15,7 +15,9 @@ $(STAMP): pyproject.toml | $(PY)
 	$(PY) -m pip install --quiet -e '.[dev]'
 	touch $(STAMP)
 
-test: $(STAMP) browser lint typecheck pytest
+# The type check runs beside the tests: they leave a core idle part of the time.
+test: $(STAMP) browser lint
+	$(MAKE) --no-print-directory -j2 typecheck pytest
 
 # The browser tests drive Debian's Chromium (installed here when missing: CI runs as root).
 CHROMIUM ?= /usr/bin/chromium
@@ -31,10 +33,12 @@ lint: $(STAMP)
 typecheck: $(STAMP)
 	$(VENV)/bin/mypy
 
-# On every core (pytest-xdist): the long tests (marked slow, the whole flights among them)
-# are handed out first, in turn to each worker; a module whose fixture flies once
-# (xdist_group) stays on one worker. The 30 slowest tests are listed at the end.
-TEST_WORKERS ?= auto
+# On every core and one more (pytest-xdist): a flight waits on its simulator's pace part of
+# the time, so one worker per core leaves a fifth of the CPU idle. The long tests (marked
+# slow, the whole flights among them) are handed out first, in turn to each worker; a module
+# whose fixture flies once (xdist_group) stays on one worker. The 30 slowest tests are listed
+# at the end.
+TEST_WORKERS ?= $(shell echo $$(( $$(nproc) + 1 )))
 PYTEST := $(VENV)/bin/pytest -q -n $(TEST_WORKERS) --dist loadgroup
 
 pytest: $(STAMP)
