@@ -1092,7 +1092,16 @@ class FlightRunner:
             elif m.phase in ("takeoff", "route") and st.armed is False:
                 found[vid] += "; not armed (it was flying)"
 
-        await asyncio.gather(*(one(vid, m) for vid, m in team.members.items() if not m.done))
+        # On a pace clock the simulator waits while the missions are read back (and a kept one
+        # sent again), as for an upload in flight (PACED_UPLOAD_HOLD_WALL_S): the transfers'
+        # wall-timed round trips and resends take no flight time. Read on a running simulator,
+        # the vehicles flew on unwatched 100-250 s of flight past the restart, more the busier
+        # the machine.
+        release = self._hold_clock(PACED_UPLOAD_HOLD_WALL_S)
+        try:
+            await asyncio.gather(*(one(vid, m) for vid, m in team.members.items() if not m.done))
+        finally:
+            release()
         for vid, what in found.items():
             self._say(EventKind.FLIGHT, f"resumed: {what}", vid)
         return found
