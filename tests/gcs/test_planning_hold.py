@@ -7,6 +7,8 @@ pace clock a hold is nothing (real vehicles do not wait)."""
 from __future__ import annotations
 
 import asyncio
+import contextlib
+from collections.abc import AsyncIterator
 from pathlib import Path
 from types import SimpleNamespace
 
@@ -93,11 +95,13 @@ def _upload(vehicle_id: str) -> act.Upload:
     )
 
 
-async def test_an_upload_in_flight_in_lock_step_takes_no_flight_time(tmp_path: Path) -> None:
-    """A mission going up in flight holds the simulator: its round trips and resends are
-    timed in wall time, and on a busy machine a 52-item upload after a pop-up outlasted its
-    78 s of flight at 200x (the vehicle was held short of the zone much later, and the team
-    time moved 375 s). Once on board the flight goes on."""
+@contextlib.asynccontextmanager
+async def _uploading(
+    tmp_path: Path,
+) -> AsyncIterator[tuple[Lockstep, MissionClock, asyncio.Task[None], _SlowUpload, float]]:
+    """A runner on a simulator's pace clock at 200x, 100 s into the flight, uploading a
+    mission to a vehicle that answers when the test says so: the simulator, the clock, the
+    upload, the vehicle and the upload's share of the lead (flight s)."""
     path = tmp_path / "pace"
     sim = Lockstep(path, create=True, speedup=200.0, lead_s=1.0)
     clock = MissionClock()
@@ -112,6 +116,21 @@ async def test_an_upload_in_flight_in_lock_step_takes_no_flight_time(tmp_path: P
         await asyncio.sleep(0.02)
         upload = asyncio.create_task(runner._upload(_upload("UAV1")))
         await vehicle.started.wait()
+        yield sim, clock, upload, vehicle, 0.5 * runner._lead_s()
+    finally:
+        if upload is not None:
+            upload.cancel()
+        pacer.cancel()
+        await asyncio.gather(*(t for t in (pacer, upload) if t is not None), return_exceptions=True)
+        sim.close()
+
+
+async def test_an_upload_in_flight_in_lock_step_takes_no_flight_time(tmp_path: Path) -> None:
+    """A mission going up in flight holds the simulator: its round trips and resends are
+    timed in wall time, and on a busy machine a 52-item upload after a pop-up outlasted its
+    78 s of flight at 200x (the vehicle was held short of the zone much later, and the team
+    time moved 375 s). Once on board the flight goes on."""
+    async with _uploading(tmp_path) as (sim, clock, upload, vehicle, _):
         assert clock.held_pace_s == 100.0 / 200.0
         sim.publish(100.8)
         await asyncio.sleep(0.3)  # 60 s of flight at 200x, had the simulator not waited
@@ -121,12 +140,6 @@ async def test_an_upload_in_flight_in_lock_step_takes_no_flight_time(tmp_path: P
         assert clock.held_pace_s is None
         await asyncio.sleep(0.02)
         assert sim.acknowledged_s() * 200.0 == pytest.approx(100.8)
-    finally:
-        if upload is not None:
-            upload.cancel()
-        pacer.cancel()
-        await asyncio.gather(*(t for t in (pacer, upload) if t is not None), return_exceptions=True)
-        sim.close()
 
 
 async def test_a_vehicle_that_does_not_answer_an_upload_holds_the_flight_only_so_long(
@@ -136,19 +149,7 @@ async def test_a_vehicle_that_does_not_answer_an_upload_holds_the_flight_only_so
     the flight: the hold ends after :data:`PACED_UPLOAD_HOLD_WALL_S` of wall time, and the
     upload then fails when its share of the lead has been flown."""
     monkeypatch.setattr(runner_module, "PACED_UPLOAD_HOLD_WALL_S", 0.1)
-    path = tmp_path / "pace"
-    sim = Lockstep(path, create=True, speedup=200.0, lead_s=1.0)
-    clock = MissionClock()
-    pacer = follow_lockstep(path, clock)
-    runner = FlightRunner(load_scenario(PAPER), clock)
-    runner.vehicles = {"UAV1": _SlowUpload()}  # type: ignore[dict-item]
-    _synced(clock)
-    budget_s = 0.5 * runner._lead_s()
-    upload = None
-    try:
-        sim.publish(100.0)
-        await asyncio.sleep(0.02)
-        upload = asyncio.create_task(runner._upload(_upload("UAV1")))
+    async with _uploading(tmp_path) as (sim, clock, upload, _, budget_s):
         await asyncio.sleep(0.3)
         assert clock.held_pace_s is None
         t_s = 100.0
@@ -159,9 +160,3 @@ async def test_a_vehicle_that_does_not_answer_an_upload_holds_the_flight_only_so
         with pytest.raises(GcsError, match=f"within {budget_s:.0f} s of flight"):
             await upload
         assert 100.0 + budget_s <= t_s <= 100.0 + budget_s + 2.0
-    finally:
-        if upload is not None:
-            upload.cancel()
-        pacer.cancel()
-        await asyncio.gather(*(t for t in (pacer, upload) if t is not None), return_exceptions=True)
-        sim.close()
