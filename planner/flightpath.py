@@ -678,7 +678,7 @@ def _connect(start: Pose, end: Pose, radius_m: float) -> list[Segment]:
     """Segments from ``start`` to ``end``: a straight if ``end`` is dead ahead, else Dubins."""
     de_m, dn_m = end.east_m - start.east_m, end.north_m - start.north_m
     distance_m = math.hypot(de_m, dn_m)
-    if distance_m > 0.0 and heading_diff_rad(start.heading_rad, end.heading_rad) <= (COLLINEAR_RAD):
+    if distance_m > 0.0 and heading_diff_rad(start.heading_rad, end.heading_rad) <= COLLINEAR_RAD:
         bearing_rad = math.atan2(de_m, dn_m)
         if heading_diff_rad(bearing_rad, start.heading_rad) <= COLLINEAR_RAD:
             return [Segment(start, distance_m, "S")]

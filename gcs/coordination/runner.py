@@ -24,7 +24,7 @@ import logging
 import math
 import pickle
 import time
-from collections.abc import Callable, Coroutine, Iterable, Mapping, Sequence
+from collections.abc import Callable, Coroutine, Iterable, Iterator, Mapping, Sequence
 from dataclasses import replace
 from typing import Any
 
@@ -618,17 +618,15 @@ class FlightRunner:
             # it flown (seen: 0.233 s of wall, a route round a pop-up never installed). The
             # simulator waits while the mission goes up (PACED_UPLOAD_HOLD_WALL_S): the
             # transfer's wall-time round trips and resends take no flight time.
-            release = self._hold_clock(PACED_UPLOAD_HOLD_WALL_S)
             attempts = asyncio.ensure_future(self._upload_attempts(v, a, None))
             budget = asyncio.ensure_future(self.clock.sleep(0.5 * lead))
             try:
-                await asyncio.wait({attempts, budget}, return_when=asyncio.FIRST_COMPLETED)
+                with self._held_clock(PACED_UPLOAD_HOLD_WALL_S):
+                    await asyncio.wait({attempts, budget}, return_when=asyncio.FIRST_COMPLETED)
             except BaseException:
                 budget.cancel()
                 attempts.cancel()
                 raise
-            finally:
-                release()
             budget.cancel()
             expired = budget.done() and not budget.cancelled() and budget.exception() is None
             if not attempts.done() and expired:
@@ -641,9 +639,10 @@ class FlightRunner:
         end_s = loop.time() + 0.5 * lead / self.clock.rate if a.in_flight else None
         await self._upload_attempts(v, a, end_s)
 
-    def _hold_clock(self, wall_s: float) -> Callable[[], None]:
-        """Hold the mission clock (:meth:`MissionClock.hold`) for at most ``wall_s`` of wall
-        time; returns the release (once, whichever comes first)."""
+    @contextlib.contextmanager
+    def _held_clock(self, wall_s: float) -> Iterator[None]:
+        """Hold the mission clock (:meth:`MissionClock.hold`) while in the block, for at most
+        ``wall_s`` of wall time (released once, whichever comes first)."""
         self.clock.hold()
         held = True
 
@@ -651,11 +650,14 @@ class FlightRunner:
             nonlocal held
             if held:
                 held = False
-                timer.cancel()
                 self.clock.release()
 
         timer = asyncio.get_running_loop().call_later(wall_s, release)
-        return release
+        try:
+            yield
+        finally:
+            timer.cancel()
+            release()
 
     async def _upload_attempts(self, v: Vehicle, a: act.Upload, end_s: float | None) -> None:
         """Up to three attempts, the later ones only while ``end_s`` (loop time) allows."""
@@ -1097,11 +1099,8 @@ class FlightRunner:
         # wall-timed round trips and resends take no flight time. Read on a running simulator,
         # the vehicles flew on unwatched 100-250 s of flight past the restart, more the busier
         # the machine.
-        release = self._hold_clock(PACED_UPLOAD_HOLD_WALL_S)
-        try:
+        with self._held_clock(PACED_UPLOAD_HOLD_WALL_S):
             await asyncio.gather(*(one(vid, m) for vid, m in team.members.items() if not m.done))
-        finally:
-            release()
         for vid, what in found.items():
             self._say(EventKind.FLIGHT, f"resumed: {what}", vid)
         return found

@@ -245,7 +245,9 @@ class TeamController(ZoneGuard, TeamTime):
         at 100 s; two vehicles then re-planned from 4 km farther on, one from its hold point,
         and the pair lost separation). A zone seen more than :data:`POPUP_SEEN_LATE_S` late (a
         flight resumed after it) gets the whole lead from now."""
-        late = now - (now if zone.appears_at_s is None else zone.appears_at_s)
+        if zone.appears_at_s is None:
+            return self.lead_s
+        late = now - zone.appears_at_s
         return self.lead_s - late if 0.0 < late <= POPUP_SEEN_LATE_S else self.lead_s
 
     def _t(self, utc_s: float) -> float:
