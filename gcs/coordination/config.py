@@ -49,7 +49,14 @@ class FlightConfig:
     """...for this long after it is heard again (its wind and airspeed-scale estimates
     re-learn over about a minute, :class:`~gcs.coordination.speedbias.BiasConfig`): meanwhile
     a late verdict commands its top speed but moves nothing. On the first fix after a
-    restart a vehicle was seen 47 s late, and on time 40 s later; the team time had moved."""
+    restart a vehicle was seen 47 s late, and on time 40 s later; the team time had moved..."""
+    resettle_drift: float = 0.1
+    """...and from then on, until the flight ends, only when its earliest arrival holds: on
+    two decisions in a row that agree within ``tolerance_s`` or this many seconds per second
+    between them (6 s over the estimates' minute). Re-learning what it had flown unwatched
+    (a new route taken on just before a restart), a vehicle's earliest arrival drifted 4-5 s
+    later at each decision, 10 s apart, for three minutes, and back: eleven moves put the
+    team time 47 s past the one it could make."""
     link_silence_s: float = 3.0
     """A vehicle silent this long (mission s) is reported; its mission keeps it flying."""
     link_silence_wall_s: float = 0.025

@@ -140,6 +140,9 @@ class Member:
     """Mission time since which its fixes have come without a gap longer than
     ``resettle_gap_s`` (the flight's first fixes count from the start)."""
     last_decision: Decision | None = None
+    eta_min_seen: tuple[tuple[float, float], ...] = ()
+    """``(when, eta_min_s)`` of its last two decisions, mission s: a vehicle heard again after
+    a gap moves the team time only when they agree (``resettle_drift``)."""
     wind: Wind | None = None
     """The wind its last decision was timed in (its estimate, corrected): re-plans and
     re-times in flight count on it instead of the forecast."""

@@ -1031,6 +1031,7 @@ class TeamController(ZoneGuard, TeamTime):
         """Keep the decision, time the next one, and command the airspeed it asks for (one
         command at a time)."""
         m.last_decision = d
+        m.eta_min_seen = (*m.eta_min_seen[-1:], (t, d.eta_min_s))
         m.next_decision_s = t + ArrivalController.period_s(m.target_s - t)
         if d.command_m_s is not None and not m.busy_command:
             m.busy_command = True

@@ -183,9 +183,24 @@ class TeamTime:
         m.late_said = True
         out.append(act.Report(EventKind.ALARM, reason, m.vehicle_id, value=round(late_s, 3), t_s=t))
 
+    def _settled(self, m: Member, t: float) -> bool:
+        """Its lateness may move the team time: never heard again after a gap, or heard
+        again for ``resettle_s`` with its earliest arrival as on the decision before
+        (``resettle_drift``). Meanwhile it flies at its top speed, its estimates re-learning."""
+        if m.heard_since_s == -math.inf:
+            return True
+        cfg = self.config
+        if t - m.heard_since_s < cfg.resettle_s or len(m.eta_min_seen) < 2:
+            return False
+        (before_s, eta_before_s), (now_s, eta_now_s) = m.eta_min_seen
+        if before_s < m.heard_since_s or now_s != t:
+            return False
+        drift_s = abs(eta_now_s - eta_before_s)
+        return drift_s <= max(cfg.tolerance_s, cfg.resettle_drift * (now_s - before_s))
+
     def _late(self, m: Member, d: Decision, t: float, out: list[act.Action]) -> None:
-        if t - m.heard_since_s < self.config.resettle_s:
-            return  # heard again after a gap: at top speed, its estimates re-learning first
+        if not self._settled(m, t):
+            return
         ref = self.team_ref_s
         if ref is None:
             if isinstance(self.scenario.arrival, Windows):

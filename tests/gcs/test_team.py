@@ -6,6 +6,7 @@ controller's figures)."""
 from __future__ import annotations
 
 import dataclasses
+import itertools
 import math
 import pickle
 import re
@@ -1119,6 +1120,7 @@ def test_a_vehicle_in_its_loiter_turns_is_timed_and_a_late_one_leaves_them_and_m
     for c in of(team.handle(base, t1), act.CommandSpeed):
         team.handle(act.SpeedCommanded(vid, c.airspeed_m_s, c.reason, c.decided_s), t1)
     assert m.in_loiter() and m.loiter_entered_s == t1
+    m.heard_since_s = -math.inf  # the test's leap to t1 stands for fixes all along, no gap
 
     def on_circle(i: int) -> act.Fix:
         return on_loiter_circle(team, base, lo, i)
@@ -1324,6 +1326,16 @@ def test_a_late_vehicle_the_others_cannot_wait_for_is_released_from_its_slot_wit
     assert first.target_s == pytest.approx(ref + first.offset_s)
 
 
+def _last_heard_200_s_ago(team: TeamController, vid: str) -> tuple[Member, float]:
+    """``vid`` airborne and last heard 200 s before ``t0`` (600 s after its takeoff): its
+    member and ``t0``."""
+    m = team.members[vid]
+    airborne(team, vid, m.takeoff_s)
+    t0 = m.takeoff_s + 600.0
+    m.last_fix_s = t0 - 200.0
+    return m, t0
+
+
 def test_a_vehicle_heard_again_after_a_gap_moves_the_team_time_only_once_settled(
     team: TeamController,
 ) -> None:
@@ -1332,10 +1344,7 @@ def test_a_vehicle_heard_again_after_a_gap_moves_the_team_time_only_once_settled
     waits until its fixes have run ``resettle_s`` (its wind and airspeed estimates re-learn
     meanwhile); late still then, it moves the team time."""
     vid = "UAV2"
-    m = team.members[vid]
-    airborne(team, vid, m.takeoff_s)
-    t0 = m.takeoff_s + 600.0
-    m.last_fix_s = t0 - 200.0
+    m, t0 = _last_heard_200_s_ago(team, vid)
     ref = team.team_ref_s
     cfg = FlightConfig()
     v_max = m.limits.airspeed_max_m_s
@@ -1352,6 +1361,61 @@ def test_a_vehicle_heard_again_after_a_gap_moves_the_team_time_only_once_settled
             break
     assert moved_at is not None and moved_at - t0 >= cfg.resettle_s, moved_at
     assert team.team_ref_s is not None and ref is not None and team.team_ref_s > ref
+
+
+def test_a_vehicle_heard_again_moves_the_team_time_only_once_its_earliest_arrival_holds(
+    team: TeamController,
+) -> None:
+    """Heard again after a gap, UAV2 is late at its top speed, but the headwind it reports
+    grows at every fix (its estimate re-learning): its earliest arrival drifts later, and
+    the team time stays however long that lasts (past ``resettle_s``). Once the wind holds,
+    two decisions agree (``resettle_drift``) and the team time moves, to the earliest it
+    can make then."""
+    vid = "UAV2"
+    m, t0 = _last_heard_200_s_ago(team, vid)
+    ref = team.team_ref_s
+    cfg = FlightConfig()
+    v_max = m.limits.airspeed_max_m_s
+
+    flown_m = 2_000.0
+
+    def headwind_fix(k: int, wind_m_s: float) -> act.Fix:
+        """Fix ``k`` (5 s apart), into a headwind of ``wind_m_s`` (as it reports, and as it
+        flies over the ground since the fix before)."""
+        nonlocal flown_m
+        at_max = fix(team, vid, flown_m, t0 + 5.0 * k, v_max)
+        assert at_max.groundspeed_m_s is not None and at_max.heading_deg is not None
+        gs = at_max.groundspeed_m_s - wind_m_s
+        h = math.radians(at_max.heading_deg)
+        out = dataclasses.replace(
+            at_max,
+            groundspeed_m_s=gs,
+            ve_m_s=gs * math.sin(h),
+            vn_m_s=gs * math.cos(h),
+            wind_speed_m_s=wind_m_s,
+            wind_from_deg=at_max.heading_deg % 360.0,
+        )
+        flown_m += 5.0 * gs
+        return out
+
+    etas = []
+    for k in range(40):  # 200 s, more than three times resettle_s
+        out = team.handle(headwind_fix(k, 0.1 * k), t0 + 5.0 * k)
+        assert not reports(out, EventKind.ARRIVAL) and team.team_ref_s == ref, k
+        if m.last_decision is not None and m.eta_min_seen[-1][0] == t0 + 5.0 * k:
+            etas.append(m.last_decision.eta_min_s)
+    assert m.last_decision is not None and m.last_decision.verdict == "late"
+    assert 3 * cfg.resettle_s < 5.0 * 40 and len(etas) > 10
+    assert min(b - a for a, b in itertools.pairwise(etas)) > cfg.tolerance_s
+    moved = None
+    for k in range(40, 60):
+        out = team.handle(headwind_fix(k, 4.0), t0 + 5.0 * k)
+        if reports(out, EventKind.ARRIVAL):
+            moved = k
+            break
+    assert moved is not None and moved <= 40 + 2 * 2, moved  # two decisions, 10 s apart at most
+    assert team.team_ref_s is not None and ref is not None and team.team_ref_s > ref
+    assert m.last_decision.eta_min_s < team.team_ref_s + m.offset_s
 
 
 def test_the_operator_cannot_move_the_team_time_later_than_a_vehicle_can_wait(
