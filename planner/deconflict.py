@@ -131,9 +131,12 @@ def _closest(
     return float(d[k]), float(t[k]), pa[k], pb[k]
 
 
-def pair_separation(a: VehicleSchedule, b: VehicleSchedule, *, step_s: float) -> PairSeparation:
-    """Closest approach of two scheduled vehicles while both fly (inf if never together)."""
-    t0 = max(a.takeoff_s, b.takeoff_s)
+def pair_separation(
+    a: VehicleSchedule, b: VehicleSchedule, *, step_s: float, from_s: float = -math.inf
+) -> PairSeparation:
+    """Closest approach of two scheduled vehicles while both fly (inf if never together),
+    from ``from_s`` on (a re-plan's start: what was flown before is not its to change)."""
+    t0 = max(a.takeoff_s, b.takeoff_s, from_s)
     t1 = min(a.arrival_s, b.arrival_s)
     if not t1 > t0:
         return PairSeparation(a.vehicle_id, b.vehicle_id, math.inf, math.nan, math.nan, math.nan)
@@ -153,13 +156,16 @@ def _pair_step_s(a: VehicleSchedule, b: VehicleSchedule, required_m: float) -> f
     return max(required_m / (10.0 * (a.speed_max_m_s + b.speed_max_m_s)), 0.05)
 
 
-def _grid_s(vehicles: Sequence[VehicleSchedule], step_s: float) -> FloatArray:
-    """A time grid over the team's flights, ``step_s`` apart, with every takeoff and arrival
-    on it (a pair's closest approach may be at either end of the time they fly together)."""
-    t0 = min(v.takeoff_s for v in vehicles)
-    t1 = max(v.arrival_s for v in vehicles)
+def _grid_s(
+    vehicles: Sequence[VehicleSchedule], step_s: float, from_s: float = -math.inf
+) -> FloatArray:
+    """A time grid over the team's flights from ``from_s`` on, ``step_s`` apart, with every
+    takeoff and arrival after it on it (a pair's closest approach may be at either end of
+    the time they fly together)."""
+    t0 = max(min(v.takeoff_s for v in vehicles), from_s)
+    t1 = max(max(v.arrival_s for v in vehicles), t0)
     n = max(2, int(math.ceil((t1 - t0) / step_s)) + 1)
-    ends = [x for v in vehicles for x in (v.takeoff_s, v.arrival_s)]
+    ends = [x for v in vehicles for x in (v.takeoff_s, v.arrival_s) if x >= t0]
     return np.unique(np.concatenate([np.linspace(t0, t1, n), ends]))
 
 
@@ -179,11 +185,19 @@ class TeamSamples:
     """The team's schedules sampled once on a common time grid, for trying one vehicle's
     other timings against the rest (:meth:`nearest`) without sampling them again."""
 
-    def __init__(self, vehicles: Sequence[VehicleSchedule], required_m: float) -> None:
+    def __init__(
+        self,
+        vehicles: Sequence[VehicleSchedule],
+        required_m: float,
+        *,
+        from_s: float = -math.inf,
+    ) -> None:
         self.required_m = required_m
+        self.from_s = from_s
+        """The grid starts here (a re-plan's start), or at the team's first takeoff."""
         self.ids = [v.vehicle_id for v in vehicles]
         # A timing that takes off before the team's first takeoff is alone in the air there.
-        self.t_s = _grid_s(vehicles, _team_step_s(vehicles, required_m))
+        self.t_s = _grid_s(vehicles, _team_step_s(vehicles, required_m), from_s)
         self.planes = np.ascontiguousarray(
             np.stack([_positions(v, self.t_s) for v in vehicles]).transpose(2, 0, 1)
         )
@@ -359,6 +373,8 @@ def separation(
     vehicles: Sequence[VehicleSchedule],
     required_m: float,
     samples: TeamSamples | None = None,
+    *,
+    from_s: float = -math.inf,
 ) -> Separation:
     """Minimum separation of every pair of scheduled vehicles.
 
@@ -375,11 +391,14 @@ def separation(
         The separation minimum ``d_s``, m; pairs below it are conflicts.
     samples
         These schedules sampled already (for ``required_m``), when the caller has them.
+    from_s
+        Only from this time on (a re-plan's start); the samples', when they are given.
     """
     if len(vehicles) < 2:
         return Separation(required_m, ())
     if samples is None:
-        samples = TeamSamples(vehicles, required_m)
+        samples = TeamSamples(vehicles, required_m, from_s=from_s)
+    from_s = samples.from_s
     assert samples.ids == [v.vehicle_id for v in vehicles], "samples of another team"
     coarse = _coarse_pairs(samples)
     closest = min(d for _, _, d, _, _ in coarse)
@@ -388,7 +407,8 @@ def separation(
     for i, j, d, t, mid in coarse:
         a, b = vehicles[i], vehicles[j]
         if d < search_below:
-            pairs.append(pair_separation(a, b, step_s=_pair_step_s(a, b, required_m)))
+            step_s = _pair_step_s(a, b, required_m)
+            pairs.append(pair_separation(a, b, step_s=step_s, from_s=from_s))
         else:
             pairs.append(
                 PairSeparation(a.vehicle_id, b.vehicle_id, d, t, float(mid[0]), float(mid[1]))

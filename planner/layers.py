@@ -176,6 +176,9 @@ def lift_team(
     heights_m: Sequence[float],
     required_m: float,
     retime: Callable[[VehicleSchedule], tuple[VehicleSchedule, T] | None],
+    *,
+    from_s: float = -math.inf,
+    lift_from_m: Mapping[str, float] | None = None,
 ) -> tuple[dict[str, Lifted[T]], Separation]:
     """Lift vehicles onto the altitude layers ``heights_m`` over the stretches where they
     come too close to another, until the team keeps ``required_m`` or no lift helps.
@@ -201,12 +204,18 @@ def lift_team(
         The separation minimum ``d_s``, m.
     retime
         Times a lifted planned schedule as its vehicle is timed now; None if it cannot.
+    from_s
+        Separation counts from this time on (a re-plan's start), and only there.
+    lift_from_m
+        When given, only these vehicles may be lifted, each only from this far along its
+        path on (its climb to the layer included): a vehicle in flight keeps what it will
+        have flown before its new mission starts.
 
     Returns
     -------
     The vehicles lifted (by id) and the team's separation as lifted.
     """
-    samples = TeamSamples(team, required_m)
+    samples = TeamSamples(team, required_m, from_s=from_s)
     if not heights_m or len(team) < 2:
         return {}, separation(team, required_m, samples)
     enough = SEPARATION_CHECK_MARGIN * required_m
@@ -215,12 +224,17 @@ def lift_team(
     lifted: dict[str, Lifted[T]] = {}
 
     def try_lift(vid: str, other: str, distance_m: float, time_s: float) -> bool:
+        if lift_from_m is not None and vid not in lift_from_m:
+            return False
+        floor_m = -math.inf if lift_from_m is None else lift_from_m[vid]
         v, before = vehicles[vid], samples.too_close(current[vid], enough)
         s_m = current[vid].state_at(time_s)[1]
         for height in heights_m:
             ramp_m = height / v.climb_gradient
             for half_m in (*LIFT_HALF_SPANS_M, math.inf):
-                span = (s_m - ramp_m - half_m, s_m + ramp_m + half_m)
+                span = (max(s_m - ramp_m - half_m, floor_m), s_m + ramp_m + half_m)
+                if span[1] - span[0] <= 2.0 * ramp_m:
+                    continue  # no room to climb to it and back before they meet
                 up = lift(profile[vid], planned[vid], v, height, span)
                 if up is None:
                     continue

@@ -19,6 +19,7 @@ from planner.deconflict import TeamTracks
 from planner.errors import InfeasibleError
 from planner.flightpath import FlightPath, Segment
 from planner.plan import Method, World, build_problem, build_world, solve_and_finish
+from planner.replanseparation import separate_replan
 from planner.retime import (
     Retimed,
     anchored_state,
@@ -199,6 +200,7 @@ def apply_popup(
     scenario = current.scenario
     anchors = anchors or {}
     adjustments: list[Adjustment] = []
+    adjusted: dict[str, tuple[Adjustment, ...]] = {}
     events = [Event(at_s, "popup", f"threat {zone.id} appears")]
     stages = list(current.stages)
     affected: list[str] = []
@@ -273,27 +275,33 @@ def apply_popup(
     # their turns included), as the loiters decided in flight are.
     final = {vs.vehicle_id: vs for vs in staged.vehicles}
     required = scenario.separation_m
+
+    def retime(vs: VehicleSchedule, keep_clear: Callable[..., bool] | None) -> Retimed:
+        """``vs`` timed for its vehicle's slot from where it is at the re-plan's start."""
+        vid = vs.vehicle_id
+        anchor = anchors.get(vid)
+        at = (anchor.s_m, anchor.speed_m_s) if where[vid][0] == "leg" and anchor else None
+        return retime_on_path(
+            scenario, scenario.vehicle(vid), vs, now_s=t_at[vid], target_s=targets[vid],
+            step_m_s=current.step_m_s, threats=threats, at=at,
+            loiter_margin_m_s=loiter_margin_m_s, terrain=world.terrain, keep_clear=keep_clear,
+        )  # fmt: skip
+
     for vid in [*affected, *(v.id for v in scenario.vehicles if v.id not in affected)]:
         v = scenario.vehicle(vid)
         vs = final[vid]
         same_time = abs(targets.get(v.id, vs.arrival_s) - vs.arrival_s) < 0.05
         if v.id not in targets or (v.id not in affected and same_time):
             continue
-        anchor = anchors.get(v.id)
         tracks = TeamTracks.of([x for k, x in final.items() if k != vid], t_at[vid])
 
         def keep_clear(e: float, n: float, radius_m: float, tracks: TeamTracks = tracks) -> bool:
             return tracks.clearance(e, n, radius_m)[0] >= required
 
-        at = (anchor.s_m, anchor.speed_m_s) if where[vid][0] == "leg" and anchor else None
         r: Retimed | None = None
         for check in (keep_clear, None):  # where they fit when nowhere keeps clear
             try:
-                r = retime_on_path(
-                    scenario, v, vs, now_s=t_at[vid], target_s=targets[vid],
-                    step_m_s=current.step_m_s, threats=threats, at=at,
-                    loiter_margin_m_s=loiter_margin_m_s, terrain=world.terrain, keep_clear=check,
-                )  # fmt: skip
+                r = retime(vs, check)
                 break
             except InfeasibleError:
                 if check is None:
@@ -303,13 +311,36 @@ def apply_popup(
             events.append(
                 Event(
                     at_s,
-                    "separation",
+                    "conflict",
                     f"{vid}: no place for its loiter turns keeps {required:g} m from the "
                     "team's tracks; they are flown where they fit",
                 )
             )
         final[vid] = r.schedule
-        adjustments.extend(r.adjustments)
+        adjusted[vid] = tuple(r.adjustments)
+    # Then the team, from the re-plan's start on: a pair under d_s separated by the plan's
+    # means, or said before anything is installed.
+    lift_from_m = {
+        v.id: 0.0 if where[v.id][0] == "ground" else where[v.id][1]
+        for v in scenario.vehicles
+        if v.id in targets
+        and where[v.id][0] != "arrived"
+        and (where[v.id][0] == "ground" or not anchors or v.id in anchors)
+    }
+
+    def lifted(up: VehicleSchedule) -> VehicleSchedule | None:
+        try:
+            r = retime(up, None)
+        except InfeasibleError:
+            return None
+        adjusted[up.vehicle_id] = tuple(r.adjustments)
+        return r.schedule
+
+    kept = separate_replan(scenario, final, from_s=at_s, lift_from_m=lift_from_m, retime=lifted)
+    final = kept.vehicles
+    events.extend(kept.events)
+    for done in adjusted.values():
+        adjustments.extend(done)
     retimed = [final[v.id] for v in scenario.vehicles]
     stages.append(speed_stage(f"after {zone.id}: final", at_s, retimed))
     out = replace(

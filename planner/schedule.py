@@ -27,7 +27,7 @@ import math
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from functools import cached_property
-from typing import Literal, NamedTuple
+from typing import Any, Literal, NamedTuple
 
 import numpy as np
 from numpy.typing import NDArray
@@ -282,6 +282,8 @@ class Event:
     time_s: float
     kind: str
     text: str
+    payload: Mapping[str, Any] = field(default_factory=dict)
+    """What a program reads of it (a conflict's pair, distance and time)."""
 
 
 @dataclass(frozen=True)

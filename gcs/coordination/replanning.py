@@ -564,7 +564,14 @@ class MissionChanges:
                 continue  # said below: the team time does not move
             # The re-timed team arrival is said with its time (the store keeps it).
             value = new_ref if ev.kind == EventKind.ARRIVAL else None
-            out.append(act.Report(EventKind(ev.kind), ev.text, value=value, t_s=t))
+            payload = dict(ev.payload)
+            pair = payload.get("pair")
+            vehicle = pair[0] if isinstance(pair, list) and pair else None
+            out.append(
+                act.Report(
+                    EventKind(ev.kind), ev.text, vehicle, value=value, t_s=t, payload=payload
+                )
+            )
         if stuck:
             # The re-planned vehicles' routes are longer than the others can wait for (no
             # slower speed or loiter turns left to them): the team time stays, and the

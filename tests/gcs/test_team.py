@@ -37,7 +37,7 @@ from planner.plan import World, build_world, plan
 from planner.popup import popup_zones
 from planner.retime import build_schedule
 from planner.scenario import Scenario, Threat, parse_scenario
-from planner.schedule import Schedule
+from planner.schedule import Event, Schedule
 from planner.schedulefile import PathMission
 from planner.threats import build_threats
 from tests.gcs.conftest import START_UTC
@@ -540,6 +540,40 @@ def test_a_popup_re_plans_the_vehicles_whose_routes_it_touches_and_no_other(
             assert uploads[vid].schedule.path.length_m == pytest.approx(before.length_m)
     assert all(u.keep_seq == job.keeps[u.vehicle_id] for u in uploads.values())
     assert team.team_ref_s == outcome.schedule.required_arrival_s
+
+
+def test_a_re_plan_pair_left_under_the_separation_is_alarmed_before_any_upload(
+    team: TeamController,
+) -> None:
+    """The re-plan says a pair it could not separate (:mod:`planner.replanseparation`): the
+    coordinator reports its conflict and its alarm, with the pair, the distance and the time,
+    before it sends the first of the new missions."""
+    zones = build_threats(team.scenario, {vid: m.takeoff_s for vid, m in team.members.items()})
+    (zone,) = popup_zones(zones)
+    t_p = float(zone.appears_at_s or 0.0)
+    _on_schedule(team, t_p - 1.0)
+    (job,) = [a.job for a in of(team.handle(act.Tick(), t_p), act.Compute)]
+    assert isinstance(job, act.PopupJob)
+    outcome = job.run()
+    pair = {"pair": ["UAV1", "UAV2"], "distance_m": 212.0, "at_s": t_p + 900.0}
+    said = "UAV1 and UAV2 would come within 212 m of each other"
+    left = dataclasses.replace(
+        outcome,
+        events=(
+            *outcome.events,
+            Event(t_p, "conflict", said, {**pair, "resolution": None}),
+            Event(t_p, "alarm", said, pair),
+        ),
+    )
+    out = team.handle(act.Computed(job, left), t_p + 1.0)
+    kinds = [(a.kind, a.vehicle) if isinstance(a, act.Report) else type(a) for a in out]
+    first_upload = kinds.index(act.Upload)
+    alarm = kinds.index((EventKind.ALARM, "UAV1"))
+    conflict = kinds.index((EventKind.CONFLICT, "UAV1"))
+    assert max(alarm, conflict) < first_upload, kinds
+    report = out[alarm]
+    assert isinstance(report, act.Report)
+    assert report.payload == pair and report.reason == said
 
 
 def test_a_popup_times_the_splice_waypoint_with_the_loiter_turns_flown_before_it(
