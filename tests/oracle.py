@@ -60,7 +60,11 @@ class Track:
         return int(self.utc_s.size)
 
     def since(self, utc_s: float) -> Track:
-        keep = self.utc_s >= utc_s
+        return self.between(utc_s, math.inf)
+
+    def between(self, from_utc_s: float, to_utc_s: float) -> Track:
+        """The samples from ``from_utc_s`` to ``to_utc_s``."""
+        keep = (self.utc_s >= from_utc_s) & (self.utc_s <= to_utc_s)
         return Track(*(getattr(self, f)[keep] for f in _FIELDS))
 
 

@@ -1,5 +1,5 @@
 """Prometheus ``/metrics``: read from the engine when scraped (links, messages, malformed
-frames, commands, uploads, arrival errors, event-bus drops, flights)."""
+frames, commands, uploads, arrival errors, event-bus drops, flights, separation events)."""
 
 from __future__ import annotations
 
@@ -11,6 +11,7 @@ from prometheus_client.core import CounterMetricFamily, GaugeMetricFamily, Metri
 from prometheus_client.registry import Collector
 
 from gcs.coordination.events import EventKind
+from gcs.coordination.separationlog import separation_kind
 from gcs.service.engine import Engine
 
 __all__ = ["metrics_text"]
@@ -56,10 +57,28 @@ class _EngineCollector(Collector):
         drops = CounterMetricFamily(
             "tcgcs_event_drops", "events a subscriber could not take", labels=["flight"]
         )
+        separations = CounterMetricFamily(
+            "tcgcs_separation_events",
+            "conflicts a flight met, by kind: predicted, resolved, released, unresolved (a "
+            "re-plan's, alarmed), loss (under the separation)",
+            labels=["flight", "kind"],
+        )
+        least = GaugeMetricFamily(
+            "tcgcs_separation_loss_min_meters",
+            "the least distance a separation alarm of the flight reported (telemetry)",
+            labels=["flight"],
+        )
         tally: Counter[tuple[str, str]] = Counter()
         up: Counter[str] = Counter()
         for fid, h in e.flights.items():
+            kinds: Counter[str] = Counter()
+            lost_m: list[float] = []
             for ev in h.runner.events:
+                sep = separation_kind(ev)
+                if sep is not None:
+                    kinds[sep.kind] += 1
+                    if sep.kind == "loss" and sep.said_m is not None:
+                        lost_m.append(sep.said_m)
                 if ev.kind is EventKind.SPEED:
                     tally["speed", "failed" if "failed" in ev.reason else "ok"] += 1
                 elif ev.kind is EventKind.LAUNCH:
@@ -71,11 +90,15 @@ class _EngineCollector(Collector):
                     late_s = member.arrival_s - member.target_s
                     error.add_metric([fid, member.vehicle_id], late_s)
             drops.add_metric([fid], float(h.runner.bus.dropped))
+            for kind, n in kinds.items():
+                separations.add_metric([fid, kind], float(n))
+            if lost_m:
+                least.add_metric([fid], min(lost_m))
         for (kind, result), n in tally.items():
             commands.add_metric([kind, result], float(n))
         for result, n in up.items():
             uploads.add_metric([result], float(n))
-        yield from (commands, uploads, error, drops)
+        yield from (commands, uploads, error, drops, separations, least)
 
 
 def metrics_text(engine: Engine) -> bytes:

@@ -38,6 +38,7 @@ from gcs.coordination.events import EventKind, FlightEvent
 from gcs.coordination.member import Member
 from gcs.coordination.missionclock import MissionClock
 from gcs.coordination.runner import FlightRunner
+from gcs.coordination.separationlog import separation_events
 from gcs.errors import GcsError
 from gcs.mavlink.link import Link
 from gcs.mavlink.vehicle import Vehicle
@@ -661,7 +662,8 @@ def flight_record(
         )
     sep = min_separation(tracks, until_utc_s=until)
     ids = {v.system_id: vid for vid, v in coord.vehicles.items()}
-    zones = zone_clearances(coord, {ids[k]: v for k, v in tracks.items() if k in ids})
+    by_vehicle = {ids[k]: v for k, v in tracks.items() if k in ids}
+    zones = zone_clearances(coord, by_vehicle)
     ref = coord.team_ref_s
     planned_ref = None if coord.team is None else coord.team.planned_ref_s
     return {
@@ -677,6 +679,7 @@ def flight_record(
         "min_separation_m": None if sep is None else round(sep[0], 1),
         "min_separation_pair": None if sep is None else [ids.get(sep[1]), ids.get(sep[2])],
         "min_separation_utc_s": None if sep is None else round(sep[3], 3),
+        "separation_events": separation_events(coord.events, by_vehicle, start),
         "zone_clearances": zones,
         "zone_entries": [z for z in zones if z["inside_samples"] > 0],
         "alarms": [

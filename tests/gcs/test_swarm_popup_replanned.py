@@ -45,6 +45,7 @@ import numpy as np
 import pytest
 
 from tests.flightstory import story
+from tests.oracle import separation, tracks_by_vehicle
 from tests.rehearsing import rehearse_data
 from tests.teams import ring_team
 from tests.verdict import Verdict, judge, routes_into_disc
@@ -201,3 +202,35 @@ def test_the_team_keeps_its_separation_throughout(flight: Flight) -> None:
     assert verdict.separation.least_m >= verdict.separation_m, (
         f"{verdict.separation} < {verdict.separation_m:g} m\n{flight.told()}"
     )
+
+
+def test_the_record_says_each_conflict_what_was_done_and_how_close_the_pair_truly_came(
+    flight: Flight,
+) -> None:
+    """``separation_events``: the re-plan's pairs it could not separate are there (alarmed
+    before the missions were sent, the speed resolution left to keep them apart), and every
+    entry's closest distance over its encounter is the one the test finds in the truth log
+    (:func:`tests.oracle.separation` over the same stretch of time)."""
+    record = flight.record
+    entries = record["separation_events"]
+    unresolved = [e for e in entries if e["kind"] == "unresolved"]
+    assert unresolved, flight.told()
+    alarms = {
+        tuple(sorted(a["reason"].split(" would come")[0].split(" and ")))
+        for a in record["alarms"]
+        if "after the re-plan" in a["reason"]
+    }
+    assert {tuple(sorted(e["pair"])) for e in unresolved} == alarms
+    tracks = tracks_by_vehicle(flight.truth, record)
+    measured = 0
+    for e in entries:
+        a, b = e["pair"]
+        window = {vid: tracks[vid].between(e["utc_s"], e["until_utc_s"]) for vid in (a, b)}
+        if min(len(t) for t in window.values()) == 0 or e["closest_m"] is None:
+            continue
+        truth = separation(window)
+        assert e["closest_m"] == pytest.approx(truth.least_m, abs=3.0), (e, str(truth))
+        measured += 1
+    assert measured >= len(unresolved)
+    for e in unresolved:
+        assert e["closest_m"] is not None and e["closest_m"] >= record["separation_m"], e
