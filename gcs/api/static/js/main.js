@@ -4,6 +4,7 @@
 
 import { Api, ApiError, describeError, savedToken, saveToken } from "./api.js";
 import { MissionClock } from "./clock.js";
+import { Conflicts } from "./conflicts.js";
 import { num, vehicleColour } from "./format.js";
 import { MapView } from "./map.js";
 import { Countdown, Timeline, VehicleTable } from "./panel.js";
@@ -64,6 +65,7 @@ mapView.setColourFunction(vehicleColour);
 const table = new VehicleTable($("vehicles").querySelector("tbody"), (id) => abortVehicle(id));
 const countdown = new Countdown($("countdown"), $("team-time-line"));
 const timeline = new Timeline($("events"), $("event-count"), $("timeline-filter"));
+const conflicts = new Conflicts($("conflicts"));
 
 // -- small helpers ----------------------------------------------------------------------------
 
@@ -199,6 +201,8 @@ function closeFlight() {
   clock.reset();
   table.clear();
   timeline.clear();
+  conflicts.clear();
+  mapView.setConflicts([]);
   mapView.clearTrails();
   mapView.vehicles = [];
   mapView.colours.clear();
@@ -354,6 +358,7 @@ function onMessage(type, data, received) {
   } else if (type === "event") {
     state.events.push(data);
     timeline.add(data);
+    conflicts.add(data);
     if (MAP_KINDS.has(data.kind)) refreshMap();
     if (SNAPSHOT_KINDS.has(data.kind)) refreshSnapshot();
     if (data.kind === "flight") refreshFlights();
@@ -378,6 +383,8 @@ function renderPanel() {
   const now = clock.now(performance.now());
   const tS = now ? now.t_s : null;
   table.update(vehicleList(), mapView.colours, tS, RUNNING.has(state.flightState));
+  conflicts.render(tS);
+  mapView.setConflicts(conflicts.active(tS));
   say("flight-state", state.flightState || "");
   const input = $("team-time");
   if (!teamTimeEdited && document.activeElement !== input && state.teamTimeS !== null) {
@@ -653,6 +660,7 @@ window.tcgcs = {
   clock,
   map: mapView,
   table,
+  conflicts,
   get stream() {
     return stream;
   },

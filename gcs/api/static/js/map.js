@@ -22,6 +22,7 @@ export class MapView {
     this.tiles = null; // a TileLayer when the service has a tile source
     this.base = "hillshade"; // or "tiles"
     this.vehicles = [];
+    this.conflicts = []; // the encounters in progress: [{a, b, kind, said_m}]
     this.trails = new Map();
     this.colours = new Map();
     this.tool = "pan";
@@ -75,6 +76,12 @@ export class MapView {
   }
 
   /** Telemetry vehicles (positions, headings); extends each flown trail. */
+  /** The pairs in conflict now (conflicts.js): a line between each pair as drawn. */
+  setConflicts(conflicts) {
+    this.conflicts = conflicts;
+    this.dirty = true;
+  }
+
   setVehicles(vehicles) {
     this.vehicles = vehicles;
     for (const v of vehicles) {
@@ -278,6 +285,7 @@ export class MapView {
     for (const t of this.doc.threats) this._threat(t);
     for (const v of this.doc.vehicles) this._plan(v);
     for (const [id, trail] of this.trails) this._trail(id, trail);
+    for (const line of this._conflictLines()) this._conflict(line);
     for (const v of this.vehicles) this._vehicle(v);
     this._drawing();
     this._furniture();
@@ -450,6 +458,35 @@ export class MapView {
     this._label(tag, v.east_m, v.north_m, colour, 10, -8);
   }
 
+  /** Each conflict whose two vehicles are on the map: {a, b, kind, said_m, from, to}. */
+  _conflictLines() {
+    const at = new Map();
+    for (const v of this.vehicles) {
+      if (v.east_m !== null && v.east_m !== undefined) at.set(v.id, [v.east_m, v.north_m]);
+    }
+    return this.conflicts
+      .filter((c) => at.has(c.a) && at.has(c.b))
+      .map((c) => ({ a: c.a, b: c.b, kind: c.kind, said_m: c.said_m, from: at.get(c.a), to: at.get(c.b) }));
+  }
+
+  _conflict(line) {
+    const ctx = this.ctx;
+    const red = line.kind === "loss" || line.kind === "unresolved";
+    const colour = red ? "#c0392b" : line.kind === "predicted" ? "#d68910" : "#1f6fb2";
+    this._path([line.from, line.to]);
+    ctx.lineWidth = 2.5;
+    ctx.strokeStyle = colour;
+    ctx.setLineDash(red ? [] : [6, 4]);
+    ctx.stroke();
+    ctx.setLineDash([]);
+    const e = (line.from[0] + line.to[0]) / 2;
+    const n = (line.from[1] + line.to[1]) / 2;
+    const d = Math.hypot(line.to[0] - line.from[0], line.to[1] - line.from[1]);
+    // What the event said (the closest it expects, or the distance it measured), and now.
+    const said = line.said_m === null || line.said_m === undefined ? "" : ` ${Math.round(line.said_m)} m,`;
+    this._label(`${line.kind}${said} now ${Math.round(d)} m`, e, n, colour, 6, -6);
+  }
+
   _drawing() {
     const ctx = this.ctx;
     const shapes = [];
@@ -526,7 +563,7 @@ export class MapView {
   }
 
   /** What is drawn, for the tests: the routes (world metres), the trails, the transform, the
-   *  base layer. */
+   *  base layer, the lines between pairs in conflict. */
   geometry() {
     const routes = {};
     if (this.doc) for (const v of this.doc.vehicles) routes[v.id] = v.route_en_m;
@@ -538,6 +575,7 @@ export class MapView {
       view: { ...this.view, width: this.width, height: this.height },
       pending: this.pending,
       base: this.base,
+      conflicts: this._conflictLines(),
     };
   }
 }

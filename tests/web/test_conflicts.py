@@ -1,0 +1,97 @@
+"""Conflicts in the console: thirty aircraft of :func:`tests.teams.ring_team` flown through the
+service at 100x, with the pop-up zone of :mod:`tests.gcs.test_swarm_popup_replanned`: the
+re-plan round it leaves pairs it cannot separate (an alarm each, before the missions are
+sent) and the flight resolves them by speed. The page draws a line between each pair in
+conflict, joining the two aircraft where it draws them, and lists them in its Separation
+panel; once the flight is over, what the page read of the stream is what the flight record's
+``separation_events`` says (kind, pair and event), read by the service on its own."""
+
+from __future__ import annotations
+
+import asyncio
+import math
+from typing import Any
+
+import pytest
+import yaml
+
+from tests.service.test_flights_http import _ok
+from tests.teams import ring_team
+from tests.web.conftest import Console
+
+pytestmark = pytest.mark.slow  # one flight of thirty aircraft: about 30 s of wall time
+
+ZONE = {
+    "kind": "radar", "id": "POP30", "forbidden": True,
+    "center": {"east_m": 30_000.0, "north_m": 39_000.0}, "radius_m": 2_500.0,
+    "appears": {"at_s": 95.0},
+}  # fmt: skip
+
+
+async def _ring_flight(c: Console) -> str:
+    """The ring's flight on simulator vehicles at 100x, its missions on board."""
+    data = ring_team(30)
+    data["threats"].append(ZONE)
+    async with c.service.client() as client:
+        body = yaml.safe_dump(data, sort_keys=False)
+        sc = _ok(
+            await client.post(
+                "/v1/scenarios", content=body, headers={"Content-Type": "application/yaml"}
+            ),
+            201,
+        )
+        job = _ok(await client.post("/v1/schedules", json={"scenario_id": sc["id"]}), 202)
+        while job["state"] in ("queued", "running"):
+            await asyncio.sleep(0.1)
+            job = _ok(await client.get(f"/v1/jobs/{job['id']}"))
+        assert job["state"] == "succeeded", job
+        rehearsal = {"speedup": 100.0, "seed": 1}
+        body2 = {"schedule_id": job["result"]["id"], "rehearsal": rehearsal}
+        fid = str(_ok(await client.post("/v1/flights", json=body2), 201)["flight_id"])
+        _ok(await client.post(f"/v1/flights/{fid}/upload"), 202)
+        snap: dict[str, Any] = {"state": "planned"}
+        while snap["state"] in ("planned", "uploading"):
+            await asyncio.sleep(0.1)
+            snap = _ok(await client.get(f"/v1/flights/{fid}"))
+        assert snap["state"] == "ready", snap
+    return fid
+
+
+async def test_the_console_draws_each_conflict_between_the_pair_and_lists_it(
+    console: Console,
+) -> None:
+    c, page = console, console.page
+    fid = await _ring_flight(c)
+    await c.open(f"/ui/?flight={fid}")
+    await c.login()
+    await c.until("() => !document.getElementById('launch').disabled", timeout_s=60.0)
+    await page.click("#launch")
+    await c.confirm()
+
+    # The re-plan's pairs it cannot separate: drawn between the two aircraft as drawn.
+    drawn = await c.until(
+        """() => {
+             const lines = tcgcs.geometry().conflicts;
+             if (!lines.some(l => l.kind === "unresolved")) return null;
+             const at = Object.fromEntries(
+               tcgcs.map.vehicles.map(v => [v.id, [v.east_m, v.north_m]]));
+             const listed = [...document.querySelectorAll("#conflicts li.now")]
+               .map(li => li.dataset.pair);
+             return {lines, at, listed};
+           }""",
+        timeout_s=90.0,
+    )
+    await c.screenshot("console-conflicts.png")
+    for line in drawn["lines"]:
+        assert math.dist(line["from"], drawn["at"][line["a"]]) < 1e-6, line
+        assert math.dist(line["to"], drawn["at"][line["b"]]) < 1e-6, line
+        assert "|".join(sorted((line["a"], line["b"]))) in drawn["listed"], (line, drawn["listed"])
+
+    await c.until("() => tcgcs.stream.state === 'ended'", timeout_s=120.0)
+    async with c.service.client() as client:
+        record = _ok(await client.get(f"/v1/flights/{fid}/record"))
+    said = [[e["seq"], e["kind"], *e["pair"]] for e in record["separation_events"]]
+    seen = await c.js("tcgcs.conflicts.seen.map(s => [s.seq, s.kind, s.a, s.b])")
+    assert said and seen == said
+    assert {e["kind"] for e in record["separation_events"]} >= {"unresolved", "resolved"}
+    assert not c.external(), c.external()
