@@ -8,11 +8,12 @@ paper's 200 km map and static threats, launch sites on the west and south edges,
 nearest the team's middle will be at 3,000 s (across the routes that funnel together there).
 The team is planned and scheduled, then the re-plan the coordinator runs when the threat
 appears (:func:`planner.popup.apply_popup`: the routes it touches planned
-again from where the vehicles will be, and the team re-timed) is timed, several times, each
-from its own seed. The re-plan is what stands between the threat and the uploads: the
-coordinator starts them as soon as it returns.
+again from where the vehicles will be, the team re-timed, and checked in 4-D from then on:
+pairs under d_s lifted onto altitude layers, or said) is timed, several times, each from its
+own seed. The re-plan is what stands between the threat and the uploads: the coordinator
+starts them as soon as it returns.
 
-    .venv/bin/python bench/bench_replan.py --vehicles 30 [--team ring|paper]
+    .venv/bin/python bench/bench_replan.py --vehicles 30 [--team ring|paper] [--radius-m M]
 """
 
 from __future__ import annotations
@@ -53,6 +54,9 @@ def main() -> None:
     parser.add_argument("--vehicles", type=int, default=30)
     parser.add_argument("--runs", type=int, default=5)
     parser.add_argument("--team", choices=["ring", "paper"], default="paper")
+    parser.add_argument(
+        "--radius-m", type=float, default=None, help="the zone's radius (default 2.5 / 4 km)"
+    )
     args = parser.parse_args()
     if args.team == "ring":
         data = ring_team(args.vehicles)
@@ -60,6 +64,7 @@ def main() -> None:
     else:
         data = team_scenario(args.vehicles)
         centre, radius_m, at_s = _crowded_point(data, 3_000.0), 4_000.0, 1_500.0
+    radius_m = args.radius_m or radius_m
     data["threats"].append(
         {
             "kind": "radar", "id": "POP", "forbidden": True,
@@ -83,7 +88,13 @@ def main() -> None:
         )  # fmt: skip
         walls.append(time.perf_counter() - t0)
         replanned = [e.text for e in outcome.events if e.kind == "replan"]
-        print(f"seed {seed}: {walls[-1]:.2f} s; {'; '.join(replanned)}")
+        pairs = [e.payload for e in outcome.events if e.kind == "conflict" and "pair" in e.payload]
+        lifted = sum(1 for p in pairs if p.get("resolution") == "altitude")
+        print(
+            f"seed {seed}: {walls[-1]:.2f} s; {len(outcome.affected)} re-planned; "
+            f"{lifted} lifted onto a layer, {len(pairs) - lifted} pairs left under d_s; "
+            f"{'; '.join(replanned)}"
+        )
     print(
         f"{args.vehicles} vehicles, re-plan wall s: median {statistics.median(walls):.2f}, "
         f"max {max(walls):.2f} over {len(walls)} runs"
