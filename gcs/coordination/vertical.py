@@ -1,0 +1,169 @@
+"""Vertical resolution: a predicted loss of separation that no speed resolves is resolved by
+one of the pair leaving its height by a layer and coming back once past (pure: no clock, no
+I/O).
+
+Two aircraft funnelled onto one track, or meeting head-on on one line, cannot be kept apart
+by speed (:func:`gcs.coordination.resolution.resolve` returns nothing, or a choice short of
+the separation). As TCAS II and ACAS Xu do first, one of them then moves vertically: it climbs
+or descends by ``layer_m`` (or by as many layers, up to ``max_layers``, as the separation
+needs: it is a 3-D distance, and on one line the height alone keeps it) at ``rate_m_s``
+from ``response_s`` after the decision, holds that
+height until ``release_after_s`` past the last moment their tracks come under the separation
+horizontally, and returns to its profile at the same rate.
+
+Who moves, and which way (the priority rule), among the choices that keep the whole
+separation in 3-D over the encounter, judged on the pair's predicted tracks (each along its
+own route at its present speed, :class:`~gcs.coordination.resolution.Ahead`) and within the
+mover's room (its ceiling, and its floor: the terrain under the stretch it flies meanwhile
+plus its clearance, :class:`Room`):
+
+1. the fewest layers;
+2. the one with more time to its slot (its arrival controller makes up what the height
+   changes in true airspeed; the other flies on untouched);
+3. the sense that widens the height between them as it is (the higher climbs, the lower
+   descends), so that a late or partial manoeuvre still helps;
+4. a climb before a descent (away from the terrain);
+5. the smaller vehicle id.
+
+None when no choice keeps the separation (an alarm, as when nothing at all resolves it).
+"""
+
+from __future__ import annotations
+
+import itertools
+import math
+from collections.abc import Mapping
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+
+from gcs.coordination.resolution import Ahead
+
+FloatArray = NDArray[np.float64]
+
+__all__ = ["Room", "VerticalResolution", "height_profile", "resolve_vertical"]
+
+
+@dataclass(frozen=True)
+class Room:
+    """How far a vehicle may leave its height over the next minutes: AMSL, m."""
+
+    ceiling_m: float
+    """Its ``alt_max_m``."""
+    floor_m: float
+    """The highest ground under the stretch it may fly meanwhile, plus its clearance."""
+
+
+@dataclass(frozen=True)
+class VerticalResolution:
+    """``vehicle`` goes to ``alt_m`` (its height ``offset_m`` away) from ``start_s`` until
+    ``until_s``, then back, to keep the separation from ``other``."""
+
+    vehicle: str
+    other: str
+    offset_m: float
+    """Up (+) or down (-), m."""
+    alt_m: float
+    """The height it is asked, AMSL, m."""
+    start_s: float
+    until_s: float
+    """When it is asked back to its profile."""
+    predicted_m: float
+    """The pair's closest approach so resolved (3-D), m."""
+    unresolved_m: float
+    """Their closest approach as they fly, m."""
+    at_s: float
+    """When that would be."""
+
+
+def height_profile(
+    alt_m: float,
+    offset_m: float,
+    t_s: FloatArray,
+    *,
+    start_s: float,
+    until_s: float,
+    rate_m_s: float,
+) -> FloatArray:
+    """The height (m) at the times ``t_s`` of a vehicle at ``alt_m`` that leaves it by
+    ``offset_m`` at ``rate_m_s`` from ``start_s`` and comes back at the same rate from
+    ``until_s``."""
+    away = np.clip((t_s - start_s) * rate_m_s, 0.0, abs(offset_m))
+    back = np.clip((t_s - until_s) * rate_m_s, 0.0, abs(offset_m))
+    return alt_m + math.copysign(1.0, offset_m) * np.maximum(away - back, 0.0)
+
+
+def resolve_vertical(
+    a: Ahead,
+    b: Ahead,
+    *,
+    now_s: float,
+    separation_m: float,
+    layer_m: float,
+    rate_m_s: float,
+    room: Mapping[str, Room],
+    look_ahead_s: float = 90.0,
+    step_s: float = 1.0,
+    response_s: float = 5.0,
+    release_after_s: float = 10.0,
+    max_layers: int = 3,
+) -> VerticalResolution | None:
+    """The vertical manoeuvre that keeps ``a`` and ``b`` ``separation_m`` apart in 3-D if
+    their tracks as they fly bring them closer within ``look_ahead_s`` (None if they do not,
+    or if no choice keeps them apart: see the module for the rule)."""
+    bound = min(a.t_s + a.horizon_s, b.t_s + b.horizon_s)
+    end_s = min(bound, now_s + look_ahead_s)
+    if end_s <= now_s:
+        return None
+    t = np.arange(now_s, end_s + step_s, step_s)
+    pa = a.positions(t, a.airspeed_m_s, response_s)
+    pb = b.positions(t, b.airspeed_m_s, response_s)
+    flat = np.sqrt(((pa - pb) ** 2).sum(axis=1))
+    as_flown = np.sqrt(flat**2 + (a.alt_m - b.alt_m) ** 2)
+    if np.isnan(as_flown).all() or not np.nanmin(as_flown) < separation_m:
+        return None
+    k = int(np.nanargmin(as_flown))
+    unresolved_m, at_s = float(as_flown[k]), float(t[k])
+    inside = np.flatnonzero(np.nan_to_num(flat, nan=np.inf) < separation_m)
+    until = float(t[inside[-1]]) + release_after_s
+    start = now_s + response_s
+    choices = []
+    for mover, other in ((a, b), (b, a)):
+        if not mover.movable:
+            continue
+        r = room.get(mover.vehicle)
+        if r is None:
+            continue
+        for layers, sense in itertools.product(range(1, max_layers + 1), (1.0, -1.0)):
+            offset = sense * layers * layer_m
+            target = mover.alt_m + offset
+            if target > r.ceiling_m or target < r.floor_m:
+                continue
+            z = height_profile(
+                mover.alt_m, offset, t, start_s=start, until_s=until, rate_m_s=rate_m_s
+            )
+            d = np.sqrt(flat**2 + (z - other.alt_m) ** 2)
+            least = float(np.nanmin(d))
+            if least < separation_m:
+                continue
+            widens = (mover.alt_m - other.alt_m) * sense > 0.0 or (
+                mover.alt_m == other.alt_m and sense > 0.0
+            )
+            slot_left_s = mover.t_s + mover.horizon_s - now_s
+            rank = (layers, -slot_left_s, not widens, sense < 0.0, mover.vehicle)
+            choices.append((rank, mover, other, offset, target, least))
+    if not choices:
+        return None
+    _, mover, other, offset, target, least = min(choices, key=lambda c: c[0])
+    return VerticalResolution(
+        mover.vehicle,
+        other.vehicle,
+        offset,
+        target,
+        start,
+        until,
+        least,
+        unresolved_m,
+        at_s,
+    )
