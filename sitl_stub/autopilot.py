@@ -540,6 +540,21 @@ class Autopilot:
             return False
         return self._do_change_speed(speed_type, speed_m_s, throttle_pct, self._pending)
 
+    def change_altitude(self, alt_amsl_m: float) -> bool:
+        """MAV_CMD_DO_CHANGE_ALTITUDE as ArduPlane takes it, in any mode: the waypoint flown
+        to now (``next_WP_loc``) gets ``alt_amsl_m``, gone to at once rather than along the
+        leg's slope (``reset_offset_altitude``); the next waypoint brings the mission's
+        altitude back (ArduPlane/GCS_Mavlink.cpp, handle_command_int_DO_CHANGE_ALTITUDE and
+        handle_change_alt_request). Holding (LOITER, RTL's circle) it is the held altitude."""
+        if not math.isfinite(alt_amsl_m):
+            return False
+        nw = self._next_wp
+        self._next_wp = (nw[0], nw[1], alt_amsl_m)
+        self._alt_slew = False
+        if self._nav >= _NAV_LEVEL or self._nav == _NAV_IDLE:
+            self._hold_alt_m = alt_amsl_m
+        return True
+
     # ------------------------------------------------------------------ stepping
     def step(self, dt_s: float) -> list[Event]:
         """Advance by dt_s simulated seconds; returns the events in the order they happened."""

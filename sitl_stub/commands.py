@@ -19,6 +19,13 @@ from sitl_stub.mission_server import LinkId
 from sitl_stub.telemetry import DEFAULT_INTERVALS_S
 
 FORCE_MAGIC = 21196.0
+_AMSL_FRAMES = (mavlink2.MAV_FRAME_GLOBAL, mavlink2.MAV_FRAME_GLOBAL_INT)
+_ABOVE_HOME_FRAMES = (
+    mavlink2.MAV_FRAME_GLOBAL_RELATIVE_ALT,
+    mavlink2.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT,
+    mavlink2.MAV_FRAME_GLOBAL_TERRAIN_ALT,
+    mavlink2.MAV_FRAME_GLOBAL_TERRAIN_ALT_INT,
+)
 
 CommandHandler = Callable[[Any, list[float], LinkId], int]
 
@@ -61,6 +68,7 @@ class CommandHandlers:
             mavlink2.MAV_CMD_NAV_RETURN_TO_LAUNCH: self._cmd_rtl,
             mavlink2.MAV_CMD_NAV_LOITER_UNLIM: self._cmd_loiter,
             mavlink2.MAV_CMD_DO_REPOSITION: self._cmd_reposition,
+            mavlink2.MAV_CMD_DO_CHANGE_ALTITUDE: self._cmd_change_altitude,
         }
 
     def _ack(self, msg: Any, command: int, result: int | bool, link: LinkId) -> None:
@@ -115,6 +123,20 @@ class CommandHandlers:
 
     def _cmd_change_speed(self, msg: Any, p: list[float], link: LinkId) -> int:
         return self._result(self.autopilot.change_speed(int(p[0]), p[1], p[2]))
+
+    def _cmd_change_altitude(self, msg: Any, p: list[float], link: LinkId) -> int:
+        """param1 the altitude (m), param2 its MAV_FRAME: AMSL for GLOBAL(_INT), above home
+        for RELATIVE_ALT and TERRAIN_ALT (the stub's frames), DENIED for any other, as
+        ArduPlane's mavlink_coordinate_frame_to_location_alt_frame refuses it
+        (ArduPlane/GCS_Mavlink.cpp handle_command_int_DO_CHANGE_ALTITUDE)."""
+        frame = int(p[1])
+        if frame in _AMSL_FRAMES:
+            alt_m = p[0]
+        elif frame in _ABOVE_HOME_FRAMES:
+            alt_m = self.autopilot.home[2] + p[0]
+        else:
+            return int(mavlink2.MAV_RESULT_DENIED)
+        return self._result(self.autopilot.change_altitude(alt_m))
 
     def _cmd_set_mission_current(self, msg: Any, p: list[float], link: LinkId) -> int:
         ok = self.autopilot.set_current(int(p[0]))

@@ -435,6 +435,25 @@ def test_change_speed_in_auto() -> None:
     assert not ap.change_speed(2, 3.0)  # climb speed: not supported
 
 
+def test_change_altitude_holds_until_the_next_waypoint_brings_the_missions_back() -> None:
+    """ArduPlane/GCS_Mavlink.cpp: handle_command_int_DO_CHANGE_ALTITUDE ->
+    handle_change_alt_request sets next_WP_loc's altitude (and reset_offset_altitude: it is
+    gone to at once, not along the leg's slope); the next NAV command starts from its own
+    item, so the mission's altitude comes back at the next waypoint."""
+    ap = make()
+    airborne_in_auto(ap, FULL_MISSION, 3)  # on the 1.5 km leg to the corner, at 100 m
+    assert ap.change_altitude(HOME[2] + 250.0)
+    trace = run(ap, 400, until=lambda a: a.current_seq != 3)
+    on_leg = [st.alt_m for st, seq in zip(trace.states, trace.seqs, strict=True) if seq == 3]
+    assert max(on_leg) > HOME[2] + 200.0  # climbing to 250 m, not on the leg's 100 m
+    assert ap.current_seq == 4
+    # The next leg's item (120 m) takes over: down from the climb to it.
+    back = HOME[2] + 120.0
+    run(ap, 120, until=lambda a: a.current_seq != 4 or abs(a.state.alt_m - back) < 3.0)
+    assert ap.current_seq == 4 and ap.state.alt_m == pytest.approx(back, abs=3.0)
+    assert not ap.change_altitude(math.nan)
+
+
 @pytest.mark.parametrize(("lo_m_s", "hi_m_s", "ask_m_s"), [(12, 29.2, 29.2), (15.7, 30, 15.7)])
 def test_change_speed_to_a_limit_that_is_no_float32_is_accepted(
     lo_m_s: float, hi_m_s: float, ask_m_s: float

@@ -105,6 +105,31 @@ async def test_command_int_is_answered(client: Client) -> None:
     assert ack.result == mavlink2.MAV_RESULT_ACCEPTED
 
 
+@pytest.mark.parametrize(
+    ("frame", "result"),
+    [
+        (mavlink2.MAV_FRAME_GLOBAL, mavlink2.MAV_RESULT_ACCEPTED),
+        (mavlink2.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT, mavlink2.MAV_RESULT_ACCEPTED),
+        (mavlink2.MAV_FRAME_LOCAL_NED, mavlink2.MAV_RESULT_DENIED),
+        (mavlink2.MAV_FRAME_MISSION, mavlink2.MAV_RESULT_DENIED),
+    ],
+)
+async def test_change_altitude_is_taken_in_a_global_frame_as_arduplane_takes_it(
+    client: Client, frame: int, result: int
+) -> None:
+    """ArduPlane/GCS_Mavlink.cpp handle_command_int_DO_CHANGE_ALTITUDE: param1 the altitude,
+    param2 its MAV_FRAME; a frame mavlink_coordinate_frame_to_location_alt_frame does not
+    map (anything but GLOBAL, RELATIVE_ALT and TERRAIN_ALT, INT or not) is DENIED."""
+    client.send(
+        mavlink2.MAVLink_command_int_message(
+            1, 1, 0, mavlink2.MAV_CMD_DO_CHANGE_ALTITUDE, 0, 0, 700.0, float(frame), 0, 0,
+            0, 0, 0,
+        )
+    )  # fmt: skip
+    ack = await client.recv("COMMAND_ACK")
+    assert ack.command == mavlink2.MAV_CMD_DO_CHANGE_ALTITUDE and ack.result == result
+
+
 async def test_command_for_other_system_is_ignored(client: Client) -> None:
     client.send(mavlink2.MAVLink_command_long_message(9, 1, 31999, 0, 0, 0, 0, 0, 0, 0, 0))
     assert await client.try_recv("COMMAND_ACK", 0.5) is None
