@@ -1,9 +1,10 @@
 """Conflicts in the console: thirty aircraft of :func:`tests.teams.ring_team` flown through the
 service at 100x, with the pop-up zone of :mod:`tests.gcs.test_swarm_popup_replanned`: the
 re-plan round it leaves pairs it cannot separate (an alarm each, before the missions are
-sent) and the flight resolves them by speed. The page draws a line between each pair in
-conflict, joining the two aircraft where it draws them, and lists them in its Separation
-panel; once the flight is over, what the page read of the stream is what the flight record's
+sent; in flight the speed resolution keeps them apart, judged by that module). The page
+draws a line between each pair in conflict, joining the two aircraft where it draws them,
+and lists them in its Separation panel. The operator then sends them all home; once the
+flight is over, what the page read of the stream is what the flight record's
 ``separation_events`` says (kind, pair and event), read by the service on its own."""
 
 from __future__ import annotations
@@ -19,7 +20,7 @@ from tests.service.test_flights_http import _ok
 from tests.teams import ring_team
 from tests.web.conftest import Console
 
-pytestmark = pytest.mark.slow  # one flight of thirty aircraft: about 30 s of wall time
+pytestmark = pytest.mark.slow  # thirty aircraft up to the re-plan: about 15 s of wall time
 
 ZONE = {
     "kind": "radar", "id": "POP30", "forbidden": True,
@@ -87,11 +88,14 @@ async def test_the_console_draws_each_conflict_between_the_pair_and_lists_it(
         assert math.dist(line["to"], drawn["at"][line["b"]]) < 1e-6, line
         assert "|".join(sorted((line["a"], line["b"]))) in drawn["listed"], (line, drawn["listed"])
 
+    # Sent home (the flight ends with its record), as the operator would once seen.
+    await page.click("#abort-all")
+    await c.confirm()
     await c.until("() => tcgcs.stream.state === 'ended'", timeout_s=120.0)
     async with c.service.client() as client:
         record = _ok(await client.get(f"/v1/flights/{fid}/record"))
     said = [[e["seq"], e["kind"], *e["pair"]] for e in record["separation_events"]]
     seen = await c.js("tcgcs.conflicts.seen.map(s => [s.seq, s.kind, s.a, s.b])")
     assert said and seen == said
-    assert {e["kind"] for e in record["separation_events"]} >= {"unresolved", "resolved"}
+    assert "unresolved" in {e["kind"] for e in record["separation_events"]}
     assert not c.external(), c.external()
