@@ -158,6 +158,8 @@ class SpeedBiasEstimator:
         )
         lo, hi = cfg.scale_bounds
         self._scale = float(min(max(k, lo), hi))
+        # The wind error fitted for the scale the predictions use (at its bound, if there).
+        k = self._scale
         de, dn = (v2 - self._a * k) / d, (v3 - self._b * k) / d
         norm = math.hypot(de, dn)
         if norm > cfg.max_wind_error_m_s:

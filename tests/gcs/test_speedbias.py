@@ -121,6 +121,42 @@ def test_the_scale_is_bounded() -> None:
     assert est.scale == pytest.approx(est.config.scale_bounds[1])
 
 
+def test_with_the_scale_at_its_bound_the_wind_error_is_fitted_for_that_scale() -> None:
+    """A 25 % fast airframe: the scale stops at its bound (1.15), and the wind error is the
+    decayed least-squares fit, with its prior, for that scale (solved here by numpy): what
+    the predictions are made with. Fitted for the scale beyond the bound instead, the wind
+    error carried the part of the airspeed the bound cut off, the wrong way round."""
+    est = SpeedBiasEstimator()
+    cfg = est.config
+    reported = Wind.from_speed_from(3.0, 120.0)
+    rows_e, rows_n, times, tas = [], [], [], 22.0
+    for k in range(200):
+        t, h = 0.5 * k, math.radians(3.0 * k)
+        ve = 1.25 * tas * math.sin(h) + reported.to_east_m_s + 1.0
+        vn = 1.25 * tas * math.cos(h) + reported.to_north_m_s - 0.5
+        assert est.update(
+            t, ve_m_s=ve, vn_m_s=vn, heading_rad=h, predicted_tas_m_s=tas, wind=reported
+        )
+        rows_e.append((tas * math.sin(h), ve - reported.to_east_m_s))
+        rows_n.append((tas * math.cos(h), vn - reported.to_north_m_s))
+        times.append(t)
+    k_bound = cfg.scale_bounds[1]
+    assert est.scale == pytest.approx(k_bound)
+    w = np.exp(-(times[-1] - np.array(times)) / cfg.time_constant_s)
+    # For a fixed scale each component's fit is the weighted mean of what the scale leaves,
+    # pulled towards 0 by the prior's weight.
+    fit = [
+        float(
+            (w * (np.array([r for _, r in rows]) - k_bound * np.array([x for x, _ in rows]))).sum()
+        )
+        / float(w.sum() + cfg.prior_fixes)
+        for rows in (rows_e, rows_n)
+    ]
+    assert (est.wind_error.to_east_m_s, est.wind_error.to_north_m_s) == pytest.approx(
+        tuple(fit), abs=1e-9
+    )
+
+
 def test_the_estimate_is_the_decayed_least_squares_fit_with_its_prior() -> None:
     """The estimator's closed form against the same problem solved here by numpy: each fix's
     two rows weighted by exp(-age / time constant), the prior as that many fixes' worth of
