@@ -199,7 +199,7 @@ def apply_popup(
     """
     scenario = current.scenario
     anchors = anchors or {}
-    adjustments: list[Adjustment] = []
+    # Each re-timed vehicle's adjustments: its last timing's (a lift times it again).
     adjusted: dict[str, tuple[Adjustment, ...]] = {}
     events = [Event(at_s, "popup", f"threat {zone.id} appears")]
     stages = list(current.stages)
@@ -339,8 +339,7 @@ def apply_popup(
     kept = separate_replan(scenario, final, from_s=at_s, lift_from_m=lift_from_m, retime=lifted)
     final = kept.vehicles
     events.extend(kept.events)
-    for done in adjusted.values():
-        adjustments.extend(done)
+    adjustments = [a for done in adjusted.values() for a in done]
     retimed = [final[v.id] for v in scenario.vehicles]
     stages.append(speed_stage(f"after {zone.id}: final", at_s, retimed))
     out = replace(

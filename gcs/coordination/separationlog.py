@@ -88,8 +88,10 @@ def separation_kind(ev: FlightEvent) -> SeparationEvent | None:
     return SeparationEvent("predicted", ev.vehicle, other, "none", said_m, at_s + ENCOUNTER_AFTER_S)
 
 
-def _window(samples: Sequence[TruthSample], from_utc: float, to_utc: float) -> list[TruthSample]:
-    times = [s.utc_s for s in samples]
+def _window(
+    samples: Sequence[TruthSample], times: Sequence[float], from_utc: float, to_utc: float
+) -> list[TruthSample]:
+    """The samples (their ``times``) from ``from_utc`` to ``to_utc``."""
     return list(samples[bisect.bisect_left(times, from_utc) : bisect.bisect_right(times, to_utc)])
 
 
@@ -104,15 +106,18 @@ def separation_events(
     ``closest_m`` and ``closest_utc_s``, None when the tracks do not hold the pair flying
     together then."""
     out: list[dict[str, Any]] = []
+    times: dict[str, list[float]] = {}  # each track's sample times, listed once
     for ev in events:
         sep = separation_kind(ev)
         if sep is None:
             continue
         from_utc, to_utc = start_utc_s + ev.t_s, start_utc_s + sep.until_s
-        pair = {
-            k: _window(tracks.get(vid, ()), from_utc, to_utc)
-            for k, vid in enumerate((sep.vehicle, sep.other))
-        }
+        pair = {}
+        for k, vid in enumerate((sep.vehicle, sep.other)):
+            track = tracks.get(vid, ())
+            if vid not in times:
+                times[vid] = [s.utc_s for s in track]
+            pair[k] = _window(track, times[vid], from_utc, to_utc)
         closest = min_separation(pair)
         out.append(
             {

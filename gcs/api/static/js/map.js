@@ -75,13 +75,13 @@ export class MapView {
     this.dirty = true;
   }
 
-  /** Telemetry vehicles (positions, headings); extends each flown trail. */
   /** The pairs in conflict now (conflicts.js): a line between each pair as drawn. */
   setConflicts(conflicts) {
     this.conflicts = conflicts;
     this.dirty = true;
   }
 
+  /** Telemetry vehicles (positions, headings); extends each flown trail. */
   setVehicles(vehicles) {
     this.vehicles = vehicles;
     for (const v of vehicles) {
