@@ -68,6 +68,14 @@ async def test_the_console_draws_each_conflict_between_the_pair_and_lists_it(
     await c.until("() => !document.getElementById('launch').disabled", timeout_s=60.0)
     await page.click("#launch")
     await c.confirm()
+    # Launched (the page says so), or the service's refusal, in words.
+    said = await c.until(
+        "() => document.getElementById('flight-error').textContent"
+        " || (document.getElementById('flight-note').textContent.startsWith('launched')"
+        " && 'launched')",
+        timeout_s=60.0,
+    )
+    assert said == "launched", said
 
     # The re-plan's pairs it cannot separate: drawn between the two aircraft as drawn.
     drawn = await c.until(
