@@ -100,6 +100,13 @@ async function act(errorEl, button, fn) {
   }
 }
 
+/** The open flight's route `rest`; with no flight open (signed out while confirming) an
+ * error in words, so that nothing is sent for a flight the operator did not see. */
+function flightPath(rest) {
+  if (!state.flightId) throw new Error("no flight is open");
+  return `/v1/flights/${encodeURIComponent(state.flightId)}/${rest}`;
+}
+
 function debounce(fn, ms) {
   let timer = null;
   return () => {
@@ -502,7 +509,7 @@ $("upload").addEventListener("click", async () => {
   const n = state.order.length;
   if (!(await confirmAction(`Upload the missions to the ${n} vehicles of this flight?`, "Upload"))) return;
   await act("flight-error", $("upload"), async () => {
-    await api.post(`/v1/flights/${state.flightId}/upload`, undefined, { what: "upload" });
+    await api.post(flightPath("upload"), undefined, { what: "upload" });
     say("flight-note", "uploading: each vehicle's result follows");
     refreshSnapshot();
   });
@@ -514,7 +521,7 @@ $("launch").addEventListener("click", async () => {
     "simulator vehicles); each vehicle takes off at its takeoff time.";
   if (!(await confirmAction(text, "Launch"))) return;
   await act("flight-error", $("launch"), async () => {
-    const out = await api.post(`/v1/flights/${state.flightId}/launch`, {}, { what: "launch" });
+    const out = await api.post(flightPath("launch"), {}, { what: "launch" });
     say("flight-note", `launched: the mission starts at UTC ${new Date(out.start_utc_s * 1000).toISOString()}`);
     refreshSnapshot();
   });
@@ -529,7 +536,7 @@ function abortWords(results) {
 async function abortVehicle(id) {
   if (!(await confirmAction(`Abort ${id}? It leaves the team and flies home (RTL).`, `Abort ${id}`))) return;
   await act("abort-error", null, async () => {
-    const out = await api.post(`/v1/flights/${state.flightId}/abort`, { vehicle: id, mode: "rtl" }, { what: `abort ${id}` });
+    const out = await api.post(flightPath("abort"), { vehicle: id, mode: "rtl" }, { what: `abort ${id}` });
     const why = out.vehicles[id];
     if (why) say("abort-error", `${id} was not aborted: ${why}`);
     else say("abort-note", `${id} aborted: flying home (RTL)`);
@@ -540,7 +547,7 @@ async function abortVehicle(id) {
 $("abort-all").addEventListener("click", async () => {
   if (!(await confirmAction("Abort EVERY vehicle? All fly home (RTL); the flight ends.", "Abort all"))) return;
   await act("flight-error", $("abort-all"), async () => {
-    const out = await api.post(`/v1/flights/${state.flightId}/abort`, { mode: "rtl" }, { what: "abort all" });
+    const out = await api.post(flightPath("abort"), { mode: "rtl" }, { what: "abort all" });
     say("flight-note", abortWords(out.vehicles));
     refreshSnapshot();
   });
@@ -562,7 +569,7 @@ $("team-time-form").addEventListener("submit", async (ev) => {
   const text = `Move the team arrival from ${num(from, 1)} s to ${value.toFixed(1)} s${delta}? Every vehicle's slot moves with it.`;
   if (!(await confirmAction(text, "Move"))) return;
   await act("team-time-error", $("team-time-move"), async () => {
-    const r = await api.request("PUT", `/v1/flights/${state.flightId}/team-time`, {
+    const r = await api.request("PUT", flightPath("team-time"), {
       json: { arrival_s: value },
       headers: { "If-Match": `"${version}"` },
       what: "team time",
@@ -644,7 +651,7 @@ $("draw-confirm").addEventListener("submit", async (ev) => {
   const at = readNumber("draw-at");
   if (at !== null) body.at_s = at;
   await act("draw-error", $("draw-send"), async () => {
-    await api.post(`/v1/flights/${state.flightId}/threats`, body, { what: `threat ${id}` });
+    await api.post(flightPath("threats"), body, { what: `threat ${id}` });
     discardShape();
     mapView.setTool("pan");
     say("flight-note", `threat ${id} sent: the routes it touches are planned again when it appears`);
@@ -682,5 +689,6 @@ window.tcgcs = {
 
 // -- start ------------------------------------------------------------------------------------
 
+updateButtons();
 if (savedToken()) signIn(savedToken());
 else showLogin("");
