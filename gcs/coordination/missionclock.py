@@ -81,6 +81,12 @@ OFFSET_CONFIRM_WALL_S = 2.0
 """...and for at least this long (monotonic s): at 200x thirty reports come within 0.15 s of
 wall time, as long as one stall of the event loop, which then moved offsets by up to a second
 though one simulator gave the vehicles one clock (and every arrival with them)."""
+HEARD_WALL_S = 0.5
+"""On a pace clock, a vehicle not heard for this long (monotonic wall s: a blackout, a lost
+link) no longer holds the lock step back (:meth:`MissionClock.heard_pace_s`)."""
+HEARD_BEHIND_MAX_PACE_S = 10.0
+"""A vehicle whose newest report is stamped this far (pace s) behind the pace clock is on
+another time base (not the simulator's: rebooted, or another vehicle): it holds nothing."""
 OFFSET_WINDOW = 64
 """Each offset sample compares the least delayed of a vehicle's last this many reports: a
 stretch of delayed reports from one vehicle (its link queued, 70 ms of wall time is 14 s of
@@ -155,6 +161,9 @@ class MissionClock:
         """While set, the lock step acknowledges no pace time past it: the simulator waits
         there (:meth:`hold`, :func:`gcs.service.stubs.follow_lockstep`)."""
         self._holds = 0
+        self._heard: dict[int, tuple[float, float]] = {}
+        """On a pace clock: each vehicle's newest report's boot time (s) and the monotonic
+        wall time it was handled at (:meth:`heard`)."""
 
     def follow(
         self, pace_s: Callable[[], float], lead_s: float = 0.0, rate: float | None = None
@@ -200,6 +209,33 @@ class MissionClock:
         if self._holds == 0:
             self.held_pace_s = self._monotonic()
         self._holds += 1
+
+    def heard(self, system_id: int, time_boot_s: float, wall_s: float) -> None:
+        """On a pace clock: a report of vehicle ``system_id`` stamped ``time_boot_s`` (the
+        simulator's flight time) was handled at monotonic wall time ``wall_s``."""
+        if not self.paced or not math.isfinite(time_boot_s):
+            return
+        newest = self._heard.get(system_id)
+        if newest is None or time_boot_s >= newest[0]:
+            self._heard[system_id] = (time_boot_s, wall_s)
+        else:
+            self._heard[system_id] = (newest[0], wall_s)  # a late packet: still talking
+
+    def heard_pace_s(self, wall_s: float, rate: float) -> float:
+        """On a pace clock running at ``rate`` flight s per pace s, the pace time that every
+        vehicle still talking has been heard to: the least of their newest reports' stamps.
+        What the lock step acknowledges stays within it, so a vehicle whose reports reach
+        this process late (a router between them that falls behind on a busy machine) is
+        not flown on past what it was last seen doing. Infinite when none holds: none heard
+        within :data:`HEARD_WALL_S` of wall time, or its stamps on another time base."""
+        least = math.inf
+        now_s = self._monotonic()
+        for boot_s, at_wall_s in self._heard.values():
+            pace_s = boot_s / rate
+            if wall_s - at_wall_s > HEARD_WALL_S or pace_s < now_s - HEARD_BEHIND_MAX_PACE_S:
+                continue
+            least = min(least, pace_s)
+        return least
 
     def release(self) -> None:
         """One :meth:`hold` ended; the last lets the simulator fly on."""

@@ -415,7 +415,9 @@ class FlightRunner:
     def attach_clock(self) -> None:
         """Feed every vehicle's SYSTEM_TIME into the mission clock, each dated back by half the
         least round trip seen on its link (TIMESYNC): a vehicle behind a router is heard later
-        than one reached directly, and at 200x 5 ms of it would read as a clock 1 s behind."""
+        than one reached directly, and at 200x 5 ms of it would read as a clock 1 s behind.
+        On a pace clock, every report's boot-time stamp also tells the clock how far that
+        vehicle has been heard (:meth:`MissionClock.heard`)."""
         for vehicle in self.vehicles.values():
             sysid = vehicle.system_id
             link = vehicle.link
@@ -428,7 +430,13 @@ class FlightRunner:
                 link: Any = link,
                 least: Any = least_rtt_s,
             ) -> None:
-                if msg.get_type() != "SYSTEM_TIME" or msg.get_srcSystem() != sysid:
+                if msg.get_srcSystem() != sysid:
+                    return
+                if self.clock.paced:
+                    boot_ms = getattr(msg, "time_boot_ms", None)
+                    if boot_ms is not None:
+                        self.clock.heard(sysid, boot_ms * 1e-3, rx_s)
+                if msg.get_type() != "SYSTEM_TIME":
                     return
                 rtt = link.counters.rtt_s
                 if rtt is not None and rtt < least[0]:

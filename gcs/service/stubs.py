@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import math
 import os
 import secrets
 import signal
@@ -171,7 +172,9 @@ def follow_lockstep(
     STALE_WALL_S`) lets the simulator fly on without this process: ``on_overrun`` is then
     called, once the loop turns again, with the flight seconds it ran beyond the lead. While
     the clock holds the flight (:meth:`MissionClock.hold`: a planning job) nothing past that
-    pace time is acknowledged."""
+    pace time is acknowledged, nor ever past the newest report of a vehicle still talking
+    (:meth:`MissionClock.heard_pace_s`: one behind a router that falls behind is waited
+    for)."""
     pace = Lockstep(path)
     clock.follow(pace.pace_s, pace.lead_s, pace.speedup)
     return asyncio.create_task(_acknowledge(pace, clock, on_overrun))
@@ -184,19 +187,23 @@ OVERRUN_SAID_S = 1.0
 async def _acknowledge(
     pace: Lockstep, clock: MissionClock, on_overrun: Callable[[float], None] | None
 ) -> None:
-    acked_s: float | None = None
+    # The furthest pace time acknowledged: the simulator may have flown to its lead (an
+    # acknowledgement taken back, when a backlog of reports comes in, holds it from there).
+    furthest_s = -math.inf
     try:
         while True:
             seen_s = pace.pace_s()
-            if acked_s is not None and on_overrun is not None:
-                beyond_s = (seen_s - acked_s) * pace.speedup - pace.lead_s
+            if math.isfinite(furthest_s) and on_overrun is not None:
+                beyond_s = (seen_s - furthest_s) * pace.speedup - pace.lead_s
                 if beyond_s > OVERRUN_SAID_S:
                     on_overrun(beyond_s)
+                    furthest_s = seen_s - pace.lead_s / pace.speedup  # said: counted once
             held_s = clock.held_pace_s
             if held_s is not None:
                 seen_s = min(seen_s, held_s)
+            seen_s = min(seen_s, clock.heard_pace_s(time.monotonic(), pace.speedup))
             pace.acknowledge(seen_s)
-            acked_s = seen_s
+            furthest_s = max(furthest_s, seen_s)
             await asyncio.sleep(0.001)
     finally:
         pace.release()

@@ -313,7 +313,10 @@ async def test_connect_rehearsal_flies_separately_started_vehicles_one_behind_ma
         # default module handles each one: on a busy machine MAVProxy then falls behind the
         # stream, and as its main loop forwards ONE datagram from us per pass (each pass
         # parsing up to 16 KiB of telemetry) our messages queued for seconds and the
-        # upload's resends outgrew that queue (round trips over the 20 s stall limit).
+        # upload's resends outgrew that queue (round trips over the 20 s stall limit). The
+        # lock step waits for UAV1's reports to come through (at MAVProxy's pace, not 200x:
+        # on a busy machine UAV1 was otherwise flown on past what we had heard of it, and
+        # missed its slot by 5-28 s).
         async with mavproxy_router(
             f"tcp:127.0.0.1:{base}", f"udpout:127.0.0.1:{udp}", tmp_path,
             "--streamrate=-1", "--default-modules=link",
@@ -328,7 +331,7 @@ async def test_connect_rehearsal_flies_separately_started_vehicles_one_behind_ma
                         f"tcp:127.0.0.1:{base + 20}",
                     ],
                     truth=truth,
-                    lockstep_file=pace,  # the stub waits for the coordinator, not for MAVProxy
+                    lockstep_file=pace,  # the stub waits until we have heard each vehicle
                     seed=1,
                     quiet=True,
                 )

@@ -12,8 +12,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from gcs.coordination.missionclock import MissionClock
+from gcs.coordination.missionclock import HEARD_BEHIND_MAX_PACE_S, HEARD_WALL_S, MissionClock
 from gcs.errors import GcsError
+from gcs.service.stubs import follow_lockstep
 from sitl_stub.api import SimTeam
 from sitl_stub.lockstep import STALE_WALL_S, Lockstep
 
@@ -81,6 +82,57 @@ def test_a_mission_clock_on_the_pace_clock_counts_flight_time_not_wall_time() ->
     assert clock.now_utc_s() == pytest.approx(1_031.0, abs=1e-6)
     with pytest.raises(GcsError, match="follow"):
         clock.follow(lambda: 0.0)
+
+
+def test_the_pace_heard_is_the_least_newest_report_of_the_vehicles_still_talking() -> None:
+    """At 200x: vehicle 2's reports come 20 s of flight behind vehicle 1's (a router between
+    them falls behind); a late packet does not take its newest stamp back; one silent for
+    HEARD_WALL_S of wall time (a blackout) holds nothing, nor does one whose stamps are on
+    another time base; off a pace clock nothing is heard."""
+    pace = [0.5]
+    clock = MissionClock()
+    clock.follow(lambda: pace[0], 1.0, 200.0)
+    assert clock.heard_pace_s(10.0, 200.0) == math.inf  # none heard yet
+    clock.heard(1, 100.0, 10.0)
+    clock.heard(2, 80.0, 10.0)
+    assert clock.heard_pace_s(10.0, 200.0) == pytest.approx(80.0 / 200.0)
+    clock.heard(2, 70.0, 10.1)  # a late packet: talking, and heard to 80 s still
+    assert clock.heard_pace_s(10.1 + 0.9 * HEARD_WALL_S, 200.0) == pytest.approx(0.4)
+    clock.heard(1, 100.5, 10.4)
+    assert clock.heard_pace_s(10.1 + 1.1 * HEARD_WALL_S, 200.0) == pytest.approx(100.5 / 200)
+    assert clock.heard_pace_s(10.4 + 1.1 * HEARD_WALL_S, 200.0) == math.inf
+    clock.heard(3, 5.0, 11.0)  # 5 s stamps while the pace clock says 100 s of flight
+    pace[0] = 5.0 / 200.0 + HEARD_BEHIND_MAX_PACE_S + 0.1
+    assert clock.heard_pace_s(11.0, 200.0) == math.inf
+    unpaced = MissionClock()
+    unpaced.heard(1, 100.0, 10.0)
+    assert unpaced.heard_pace_s(10.0, 200.0) == math.inf
+
+
+async def test_the_ground_station_acknowledges_no_further_than_its_vehicles_were_heard(
+    tmp_path: Path,
+) -> None:
+    """The simulator steps no further than the lead past the newest report of the vehicle
+    heard least far; once that one's reports catch up, it flies on."""
+    path = tmp_path / "pace"
+    sim = Lockstep(path, create=True, speedup=200.0, lead_s=1.0)
+    clock = MissionClock()
+    pacer = follow_lockstep(path, clock)
+    try:
+        sim.publish(100.0)
+        clock.heard(1, 100.0, time.monotonic())
+        clock.heard(2, 80.0, time.monotonic())
+        await asyncio.sleep(0.02)
+        assert sim.acknowledged_s() * 200.0 == pytest.approx(80.0)
+        assert sim.limit_s() == pytest.approx(81.0)
+        clock.heard(2, 100.0, time.monotonic())
+        await asyncio.sleep(0.02)
+        assert sim.acknowledged_s() * 200.0 == pytest.approx(100.0)
+        assert sim.limit_s() == pytest.approx(101.0)
+    finally:
+        pacer.cancel()
+        await asyncio.gather(pacer, return_exceptions=True)
+        sim.close()
 
 
 def _paced_team(lead_s: float, true_offsets_s: dict[int, float]) -> MissionClock:
