@@ -41,7 +41,7 @@ async def running_service(
     tokens: Mapping[str, Sequence[str]],
     *,
     database_url: str | None = None,
-    ready_within_s: float = 30.0,
+    ready_within_s: float = 120.0,
     stop_within_s: float = 30.0,
 ) -> AsyncIterator[ServiceProcess]:
     """The service on ``data_dir`` (its SQLite file there unless ``database_url``) with these
