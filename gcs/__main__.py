@@ -448,6 +448,12 @@ def parser() -> argparse.ArgumentParser:
         help="test hook: add S wall seconds to every pop-up re-plan (a re-plan that comes back "
         "too late: the vehicles whose routes enter the zone hold short of it)",
     )
+    rh.add_argument(
+        "--allow-conflicts",
+        action="store_true",
+        help="launch even where the plan leaves two vehicles under the separation (each pair "
+        "said, an alarm): a rehearsal of the resolution in flight",
+    )
     rh.add_argument("--tolerance", type=float, default=1.0, help="pass mark for arrivals (s)")
     rh.add_argument("--quiet", action="store_true", help="no progress lines")
     rh.set_defaults(fn=rehearse_cmd)
@@ -582,6 +588,7 @@ def _rehearsal_options(args: argparse.Namespace) -> object:
             stall_bound_s=args.stall_bound,
             hard_deadline_s=args.hard_deadline,
             replan_delay_wall_s=args.replan_delay,
+            allow_conflicts=args.allow_conflicts,
         ),
         db_url=args.db,
         resume=args.resume,

@@ -107,6 +107,17 @@ class SpeedCommanded:
 
 
 @dataclass(frozen=True)
+class AltitudeCommanded:
+    """The outcome of :class:`CommandAltitude`."""
+
+    vehicle_id: str
+    alt_m: float
+    above_home: bool
+    decided_s: float
+    error: str | None = None
+
+
+@dataclass(frozen=True)
 class Installed:
     """The outcome of :class:`Upload` (``skipped``: the vehicle had passed the splice
     waypoint, so it was not sent)."""
@@ -200,6 +211,18 @@ class Launch:
 class CommandSpeed:
     vehicle_id: str
     airspeed_m_s: float
+    reason: str
+    decided_s: float
+
+
+@dataclass(frozen=True)
+class CommandAltitude:
+    """The altitude of the waypoint the vehicle flies to now (MAV_CMD_DO_CHANGE_ALTITUDE):
+    AMSL, or above home with ``above_home`` (the mission's own frame)."""
+
+    vehicle_id: str
+    alt_m: float
+    above_home: bool
     reason: str
     decided_s: float
 
@@ -356,6 +379,7 @@ Input = (
     | LinkBack
     | Launched
     | SpeedCommanded
+    | AltitudeCommanded
     | Installed
     | Computed
     | HoldTaken
@@ -368,6 +392,7 @@ Action = (
     | Arm
     | Launch
     | CommandSpeed
+    | CommandAltitude
     | Upload
     | SetMode
     | Hold

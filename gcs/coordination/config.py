@@ -77,6 +77,19 @@ class FlightConfig:
     """Each vehicle's pairs are predicted for resolution at most this often (mission s)."""
     resolve_response_s: float = 5.0
     """The time a vehicle is assumed to take to reach a new airspeed, for the prediction."""
+    allow_conflicts: bool = False
+    """Launch a schedule whose plan leaves pairs under the separation (a rehearsal of the
+    in-flight resolution): each pair is said before launch, a conflict and an alarm.
+    Refused before launch otherwise."""
+    vertical_horizon_s: float = 240.0
+    """Pairs are screened this far ahead (mission s; climbing a layer takes minutes): one that
+    no speed would keep apart over it is resolved by height at once (:mod:`gcs.coordination.
+    vertical`), the others by speed once within ``resolve_horizon_s``; 0 resolves nothing by
+    height."""
+    vertical_layer_m: float = 0.0
+    """A conflict no speed resolves is resolved by one of the pair leaving its height by this
+    much, or by two or three times it (:mod:`gcs.coordination.vertical`); 0: the scenario's
+    first altitude layer, or half the separation without one."""
     runout_m: float = 300.0
     """A last waypoint this far past the goal, so the aircraft flies through the goal."""
     waypoint_spacing_m: float = 5000.0

@@ -41,6 +41,7 @@ from gcs.errors import GcsError
 from gcs.mavlink import commands, mission_client
 from gcs.mavlink.dialect import mavlink2
 from gcs.mavlink.vehicle import Vehicle
+from planner.deconflict import PairSeparation
 from planner.errors import InfeasibleError
 from planner.plan import World, build_world, plan
 from planner.retime import build_schedule, check_feasible
@@ -181,6 +182,8 @@ class FlightRunner:
         self.state_reason = ""
         """Why the flight is in its state, when it was said (a failure's reason)."""
         self.plan_wall_s = 1.0
+        self._planned_conflicts: tuple[PairSeparation, ...] = ()
+        """The pairs the plan left under the separation (launched with ``allow_conflicts``)."""
         self.loiter_wall_s = 0.2
         """The longest loiter job so far (wall s): it sets the loiter lead."""
         self.on_checkpoint: Callable[[bytes], None] | None = None
@@ -356,6 +359,16 @@ class FlightRunner:
             self._publish(
                 act.Report(EventKind.PLAN, a.reason, a.vehicle, a.strategy, a.value, a.time_s)
             )
+        for c in self._planned_conflicts:
+            said = (
+                f"{c.a} and {c.b} are planned {c.distance_m:.0f} m apart at {c.time_s:.1f} s, "
+                f"under the separation {self.scenario.separation_m:g} m: launched so "
+                "(allow_conflicts), left to the resolution in flight"
+            )
+            payload = {"pair": [c.a, c.b], "distance_m": round(c.distance_m, 1),
+                       "at_s": round(c.time_s, 1)}  # fmt: skip
+            self._publish(act.Report(EventKind.CONFLICT, said, c.a, payload=payload))
+            self._publish(act.Report(EventKind.ALARM, said, c.a, payload=payload))
 
     def _plan(self) -> tuple[Schedule, World]:
         scenario = self.scenario
@@ -368,9 +381,10 @@ class FlightRunner:
         try:
             p = plan(scenario, method=self.config.method, rng=self.rng, world=world)
             schedule = build_schedule(scenario, p, world=world)
-            check_feasible(schedule)
+            sep = check_feasible(schedule, allow_conflicts=self.config.allow_conflicts)
         except InfeasibleError as err:
             raise InfeasibleRequest(f"refused before launch: {err}") from None
+        self._planned_conflicts = sep.conflicts
         return schedule, world
 
     def _lead_s(self) -> float:
@@ -495,6 +509,8 @@ class FlightRunner:
                     self._spawn(self._launch(a))
                 case act.CommandSpeed():
                     self._spawn(self._command_speed(a))
+                case act.CommandAltitude():
+                    self._spawn(self._command_altitude(a))
                 case act.Upload():
                     self._spawn(self._install(a))
                 case act.Compute():
@@ -558,6 +574,13 @@ class FlightRunner:
         v = self.vehicles[a.vehicle_id]
         err = await self._outcome(v.change_speed(a.airspeed_m_s, **self._command(v)))
         self._feed(act.SpeedCommanded(a.vehicle_id, a.airspeed_m_s, a.reason, a.decided_s, err))
+
+    async def _command_altitude(self, a: act.CommandAltitude) -> None:
+        v = self.vehicles[a.vehicle_id]
+        err = await self._outcome(
+            v.change_altitude(a.alt_m, above_home=a.above_home, **self._command(v))
+        )
+        self._feed(act.AltitudeCommanded(a.vehicle_id, a.alt_m, a.above_home, a.decided_s, err))
 
     async def _set_mode(self, a: act.SetMode) -> str | None:
         v = self.vehicles[a.vehicle_id]

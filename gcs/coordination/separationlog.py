@@ -12,9 +12,10 @@ Kinds:
 
 - ``predicted``: their present velocities bring the pair under the separation within the
   look-ahead (an alarm follows if it comes true);
-- ``resolved``: one of the pair flies another speed until past the other (``speed``), or a
-  re-plan lifts it onto an altitude layer (``altitude``);
-- ``released``: a speed resolution is over;
+- ``resolved``: one of the pair flies another speed until past the other (``speed``), leaves
+  its height by a layer or more until past it (``altitude``, signed), or a re-plan lifts it
+  onto an altitude layer (``altitude``);
+- ``released``: a speed or height resolution is over;
 - ``unresolved``: a re-plan left the pair under the separation (said before its missions
   were sent, with an alarm);
 - ``loss``: the pair came under the separation (the alarm).
@@ -81,6 +82,10 @@ def separation_kind(ev: FlightEvent) -> SeparationEvent | None:
     if resolution == "speed":
         until = max(at_s, float(p.get("until_s", at_s))) + ENCOUNTER_AFTER_S
         action = f"speed {float(p['airspeed_m_s']):g} m/s"
+        return SeparationEvent("resolved", ev.vehicle, other, action, said_m, until)
+    if resolution == "altitude":
+        until = max(at_s, float(p.get("until_s", at_s))) + ENCOUNTER_AFTER_S
+        action = f"altitude {float(p.get('offset_m', 0.0)):+g} m"
         return SeparationEvent("resolved", ev.vehicle, other, action, said_m, until)
     if resolution == "released":
         end = ev.t_s + ENCOUNTER_AFTER_S

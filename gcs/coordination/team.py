@@ -27,6 +27,7 @@ re-time without it or abort, as ``on_vehicle_lost`` says. The flight ends at its
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping, Sequence
 from typing import Any
 
 import numpy as np
@@ -40,6 +41,8 @@ from gcs.coordination.resolution import Ahead, Forecasts, Resolution, resolve
 from gcs.coordination.separation import Position, SeparationWatch
 from gcs.coordination.teamtime import TeamTime, TeamTimeRefused
 from gcs.coordination.tracks import TruthSample, closest_approach
+from gcs.coordination.vertical import Room, VerticalResolution, resolve_vertical
+from gcs.coordination.verticalflight import VerticalFlight, room_ahead
 from gcs.coordination.zoneguard import Exposure, ZoneGuard
 from planner.atmosphere import eas2tas
 from planner.mission import MAV_CMD_DO_CHANGE_SPEED
@@ -161,10 +164,12 @@ class TeamController(ZoneGuard, TeamTime):
         """Every fix against the other flying vehicles' (an alarm below the separation)."""
         self.forecasts = Forecasts(
             [vs.vehicle_id for vs in schedule.vehicles],
-            self.config.resolve_horizon_s,
+            self._screen_horizon_s(),
             self.config.resolve_response_s,
         )
         """Each vehicle's flight ahead along its route, for resolving conflicts."""
+        self.vertical = VerticalFlight()
+        """The vertical resolutions being flown."""
         for vs in schedule.vehicles:
             v = scenario.vehicle(vs.vehicle_id)
             limits = SpeedLimits(v.speed_min_m_s, v.speed_max_m_s, schedule.step_m_s)
@@ -278,6 +283,8 @@ class TeamController(ZoneGuard, TeamTime):
                 self._launched(event, now_s, out)
             case act.SpeedCommanded():
                 self._speed_commanded(event, out)
+            case act.AltitudeCommanded():
+                self.vertical.commanded(event, out)
             case act.Installed():
                 self._installed(event, now_s, out)
             case act.Computed():
@@ -568,7 +575,8 @@ class TeamController(ZoneGuard, TeamTime):
             horizon_s=max(m.target_s - m.last_fix_s, 0.0),
             movable=not turning
             and track.length_m - m.s_m >= self.config.final_m
-            and m.resolving is None,
+            and m.resolving is None
+            and m.vehicle_id not in self.vertical,
         )
 
     def _resolve_conflicts(self, m: Member, t: float, out: list[act.Action]) -> None:
@@ -593,16 +601,17 @@ class TeamController(ZoneGuard, TeamTime):
             else:
                 self._fly_resolution(m, t, out)
             return
+        if m.vehicle_id in self.vertical:
+            self.vertical.fly(m, t, out)
+            return
         if cfg.resolve_horizon_s <= 0.0 or t < m.next_resolve_s:
             return
         m.next_resolve_s = t + cfg.resolve_period_s
         forecasts = self.forecasts
-        if (forecasts.look_ahead_s, forecasts.response_s) != (
-            cfg.resolve_horizon_s,
-            cfg.resolve_response_s,
-        ):
+        horizon_s = self._screen_horizon_s()
+        if (forecasts.look_ahead_s, forecasts.response_s) != (horizon_s, cfg.resolve_response_s):
             forecasts = self.forecasts = Forecasts(
-                list(self.members), cfg.resolve_horizon_s, cfg.resolve_response_s
+                list(self.members), horizon_s, cfg.resolve_response_s
             )
         mine = self._ahead(m)
         if mine is None:
@@ -612,7 +621,7 @@ class TeamController(ZoneGuard, TeamTime):
         d_s = self.scenario.separation_m
         for other in forecasts.near(m.vehicle_id, d_s, t):
             x = self.members[other]
-            if x.resolving is not None or x.over:
+            if x.resolving is not None or x.over or other in self.vertical:
                 continue
             theirs = forecasts.ahead[other]
             # The vehicles a speed change could bring either of the pair near.
@@ -628,6 +637,20 @@ class TeamController(ZoneGuard, TeamTime):
                 mine, theirs, now_s=t, separation_m=d_s, look_ahead_s=cfg.resolve_horizon_s,
                 response_s=cfg.resolve_response_s, neighbours=neighbours,
             )  # fmt: skip
+            if (res is None or not res.keeps_separation) and cfg.vertical_horizon_s > 0.0:
+                # Would a speed keep them apart over the longer horizon? Then it is flown once
+                # they are within the speed's; else one of them changes height now.
+                later = resolve(
+                    mine, theirs, now_s=t, separation_m=d_s,
+                    look_ahead_s=cfg.vertical_horizon_s, response_s=cfg.resolve_response_s,
+                    neighbours=neighbours,
+                ) if res is None else res  # fmt: skip
+                up = None
+                if later is None or not later.keeps_separation:
+                    up = self._resolve_vertically(mine, theirs, t, neighbours)
+                if up is not None:
+                    self.vertical.start(self.members[up.vehicle], up, t, out)
+                    return
             if res is None:
                 continue
             mover = self.members[res.vehicle]
@@ -653,6 +676,42 @@ class TeamController(ZoneGuard, TeamTime):
             )
             self._fly_resolution(mover, t, out)
             return
+
+    def _resolve_vertically(
+        self, a: Ahead, b: Ahead, t: float, neighbours: Mapping[str, Sequence[Ahead]]
+    ) -> VerticalResolution | None:
+        """What no speed resolves, by height (:func:`gcs.coordination.vertical.
+        resolve_vertical`): each of the pair within its room over the look-ahead, climbing or
+        descending no steeper than the slower of the two may, and not into its neighbours."""
+        cfg = self.config
+        if self.world is None:
+            return None
+        d_s = self.scenario.separation_m
+        layers = self.scenario.altitude_layers_m
+        layer_m = cfg.vertical_layer_m or (layers[0] if layers else 0.5 * d_s)
+        rooms: dict[str, Room] = {}
+        rates: list[float] = []
+        for ahead in (a, b):
+            v = self.scenario.vehicle(ahead.vehicle)
+            room = room_ahead(
+                self.members[ahead.vehicle], v, self.world.terrain, t, t + cfg.vertical_horizon_s
+            )
+            if room is not None:
+                rooms[ahead.vehicle] = room
+            rates.append(v.climb_gradient * ahead.airspeed_m_s)
+        return resolve_vertical(
+            a, b, now_s=t, separation_m=d_s, layer_m=layer_m, rate_m_s=min(rates), room=rooms,
+            look_ahead_s=cfg.vertical_horizon_s, response_s=cfg.resolve_response_s,
+            neighbours=neighbours,
+        )  # fmt: skip
+
+    def _screen_horizon_s(self) -> float:
+        """How far ahead pairs are forecast for resolution: the speed's horizon, or the
+        height's when longer (none when nothing is resolved)."""
+        cfg = self.config
+        if cfg.resolve_horizon_s <= 0.0:
+            return cfg.resolve_horizon_s
+        return max(cfg.resolve_horizon_s, cfg.vertical_horizon_s)
 
     @staticmethod
     def _fly_resolution(m: Member, t: float, out: list[act.Action]) -> None:
@@ -1322,6 +1381,7 @@ class TeamController(ZoneGuard, TeamTime):
         self.__dict__.update(state)
         self.__dict__.setdefault("separation", SeparationWatch(self.scenario.separation_m))
         self.__dict__.setdefault("loiter_lead_s", self.lead_s)
+        self.__dict__.setdefault("vertical", VerticalFlight())
 
     def rebind_world(self, world: World) -> None:
         self.world = world

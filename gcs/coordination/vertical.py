@@ -32,7 +32,7 @@ from __future__ import annotations
 
 import itertools
 import math
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -108,10 +108,13 @@ def resolve_vertical(
     response_s: float = 5.0,
     release_after_s: float = 10.0,
     max_layers: int = 3,
+    neighbours: Mapping[str, Sequence[Ahead]] | None = None,
 ) -> VerticalResolution | None:
     """The vertical manoeuvre that keeps ``a`` and ``b`` ``separation_m`` apart in 3-D if
     their tracks as they fly bring them closer within ``look_ahead_s`` (None if they do not,
-    or if no choice keeps them apart: see the module for the rule)."""
+    or if no choice keeps them apart: see the module for the rule). ``neighbours``: by
+    vehicle, the others near it; a choice that brings its mover under the separation of one
+    of them, or closer than it comes as it flies, is not taken."""
     bound = min(a.t_s + a.horizon_s, b.t_s + b.horizon_s)
     end_s = min(bound, now_s + look_ahead_s)
     if end_s <= now_s:
@@ -135,6 +138,7 @@ def resolve_vertical(
         r = room.get(mover.vehicle)
         if r is None:
             continue
+        around = _around(mover, t, (neighbours or {}).get(mover.vehicle, ()), response_s)
         for layers, sense in itertools.product(range(1, max_layers + 1), (1.0, -1.0)):
             offset = sense * layers * layer_m
             target = mover.alt_m + offset
@@ -145,7 +149,7 @@ def resolve_vertical(
             )
             d = np.sqrt(flat**2 + (z - other.alt_m) ** 2)
             least = float(np.nanmin(d))
-            if least < separation_m:
+            if least < separation_m or not _clear_of(around, z, separation_m):
                 continue
             widens = (mover.alt_m - other.alt_m) * sense > 0.0 or (
                 mover.alt_m == other.alt_m and sense > 0.0
@@ -167,3 +171,29 @@ def resolve_vertical(
         unresolved_m,
         at_s,
     )
+
+
+def _around(
+    mover: Ahead, t: FloatArray, others: Sequence[Ahead], response_s: float
+) -> list[tuple[FloatArray, float, float]]:
+    """For each other vehicle near the mover: their horizontal distance at the times ``t``,
+    its height, and the least 3-D distance of the two as they fly."""
+    mine = mover.positions(t, mover.airspeed_m_s, response_s)
+    out = []
+    for o in others:
+        flat = np.sqrt(((mine - o.positions(t, o.airspeed_m_s, response_s)) ** 2).sum(axis=1))
+        if np.isnan(flat).all():
+            continue
+        as_flown = float(np.nanmin(np.sqrt(flat**2 + (mover.alt_m - o.alt_m) ** 2)))
+        out.append((flat, o.alt_m, as_flown))
+    return out
+
+
+def _clear_of(around: Sequence[tuple[FloatArray, float, float]], z: FloatArray, d_m: float) -> bool:
+    """Whether the mover flown at the heights ``z`` stays ``d_m`` from each other vehicle, or
+    no closer than it comes to it as it flies."""
+    for flat, alt_m, as_flown in around:
+        least = float(np.nanmin(np.sqrt(flat**2 + (z - alt_m) ** 2)))
+        if least < min(d_m, as_flown):
+            return False
+    return True

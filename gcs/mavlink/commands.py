@@ -745,6 +745,35 @@ async def change_speed(
     )
 
 
+async def change_altitude(
+    link: Link,
+    sysid: int,
+    alt_m: float,
+    *,
+    above_home: bool = False,
+    target_component: int = 1,
+    timeout_s: float | None = None,
+    retries: int | None = None,
+) -> CommandAck:
+    """MAV_CMD_DO_CHANGE_ALTITUDE as COMMAND_INT: param1 the altitude (m), param2 its frame,
+    AMSL (MAV_FRAME_GLOBAL) or above home with ``above_home`` (MAV_FRAME_GLOBAL_RELATIVE_ALT).
+    ArduPlane takes it in AUTO for the waypoint flown to now (the next one brings the
+    mission's altitude back): ArduPlane/GCS_Mavlink.cpp handle_command_int_DO_CHANGE_ALTITUDE
+    reads the frame from param2, not from the message's frame field."""
+    if not math.isfinite(alt_m):
+        raise ValueError(f"altitude must be a finite number of metres, got {alt_m!r}")
+    frame = mavlink2.MAV_FRAME_GLOBAL_RELATIVE_ALT if above_home else mavlink2.MAV_FRAME_GLOBAL
+    return await command_int(
+        link,
+        sysid,
+        int(mavlink2.MAV_CMD_DO_CHANGE_ALTITUDE),
+        (float(alt_m), float(frame), 0.0, 0.0),
+        target_component=target_component,
+        timeout_s=timeout_s,
+        retries=retries,
+    )
+
+
 def message_id_of(message: str | int) -> int:
     """A MAVLink message id from a name (``"GLOBAL_POSITION_INT"``) or an id."""
     if isinstance(message, str):

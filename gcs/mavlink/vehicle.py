@@ -110,6 +110,20 @@ class Vehicle:
                 self.link, self.system_id, first, last, target_component=self.component_id
             )
 
+    async def change_altitude(
+        self, alt_m: float, *, above_home: bool = False, **options: Any
+    ) -> None:
+        """The altitude of the waypoint flown to now (AMSL, or above home)."""
+        async with self._lock(mavlink2.MAV_CMD_DO_CHANGE_ALTITUDE):
+            await commands.change_altitude(
+                self.link,
+                self.system_id,
+                alt_m,
+                above_home=above_home,
+                target_component=self.component_id,
+                **options,
+            )
+
     async def change_speed(
         self, speed_m_s: float, *, airspeed: bool = True, **options: Any
     ) -> None:

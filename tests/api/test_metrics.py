@@ -1,6 +1,6 @@
 """``/metrics`` counts a flight's separation events by kind and gives the least distance its
 separation alarms reported (read from the flight's events when scraped: those of
-:func:`tests.gcs.test_separationlog.an_encounter`, one of each kind and two resolutions)."""
+:func:`tests.gcs.test_separationlog.an_encounter`, one of each kind and three resolutions)."""
 
 from __future__ import annotations
 
@@ -41,6 +41,6 @@ def test_metrics_count_separation_events_by_kind_and_the_least_loss() -> None:
         kind: samples[(count, (("flight", "f1"), ("kind", kind)))]
         for kind in ("predicted", "resolved", "released", "unresolved", "loss")
     }
-    assert said == {"predicted": 1, "resolved": 2, "released": 1, "unresolved": 1, "loss": 1}
+    assert said == {"predicted": 1, "resolved": 3, "released": 1, "unresolved": 1, "loss": 1}
     assert len([k for k in samples if k[0] == count]) == 5
     assert samples[("tcgcs_separation_loss_min_meters", (("flight", "f1"),))] == 224.0

@@ -57,13 +57,13 @@ def team(paper: tuple[Scenario, World, Schedule]) -> TeamController:
 
 
 async def start_stub(
-    scenario: Path, base: int, truth: Path, *extra: str, speedup: float = 200.0
+    scenario: Path, base: int, truth: Path, *extra: str, speedup: float = 200.0, vehicles: int = 3
 ) -> asyncio.subprocess.Process:
     """``python -m sitl_stub --scenario`` as an operator would start it: on its own, homes
     from the scenario (nose toward the goal), the scenario's airspeeds, default timeouts, one
     TCP client per port as ArduPilot's SITL serves; ``extra`` options after those."""
     proc = await asyncio.create_subprocess_exec(
-        sys.executable, "-m", "sitl_stub", "--scenario", str(scenario), "--vehicles", "3",
+        sys.executable, "-m", "sitl_stub", "--scenario", str(scenario), "--vehicles", str(vehicles),
         "--tcp-base", str(base), "--speedup", repr(speedup), "--truth", str(truth),
         "--one-client-per-port", *extra,
         stdout=asyncio.subprocess.PIPE, stderr=asyncio.subprocess.PIPE,

@@ -28,6 +28,7 @@ from gcs.mavlink.commands import (
     Result,
     Step,
     arm,
+    change_altitude,
     change_speed,
     command_int,
     command_long,
@@ -590,6 +591,23 @@ async def test_change_speed_params_and_validation() -> None:
     assert len(link.sent) == 2
 
 
+async def test_change_altitude_is_command_int_with_its_frame_in_param2() -> None:
+    """ArduPlane/GCS_Mavlink.cpp handle_command_int_DO_CHANGE_ALTITUDE reads the altitude from
+    param1 and its MAV_FRAME from param2 (not the message's frame field)."""
+    link = FakeLink(replying(ACCEPTED))
+    await change_altitude(link, 1, 812.5)
+    sent = link.sent[-1]
+    assert sent.get_type() == "COMMAND_INT"
+    assert sent.command == int(mavlink2.MAV_CMD_DO_CHANGE_ALTITUDE)
+    assert (sent.param1, sent.param2) == (812.5, float(mavlink2.MAV_FRAME_GLOBAL))
+    await change_altitude(link, 1, 400.0, above_home=True)
+    sent = link.sent[-1]
+    assert (sent.param1, sent.param2) == (400.0, float(mavlink2.MAV_FRAME_GLOBAL_RELATIVE_ALT))
+    with pytest.raises(ValueError, match="altitude"):
+        await change_altitude(link, 1, math.nan)
+    assert len(link.sent) == 2
+
+
 async def test_set_message_interval_by_name_and_id() -> None:
     link = FakeLink(replying(ACCEPTED))
     await set_message_interval(link, 1, "GLOBAL_POSITION_INT", 0.1)
@@ -693,6 +711,18 @@ async def test_loopback_change_speed_acknowledged_and_visible_in_stub() -> None:
         await change_speed(link, 1, target)
         await team.wait_sim_time(team.sim_time_s + 0.5)
         assert ap.target_airspeed_m_s == pytest.approx(target)
+
+
+async def test_loopback_change_altitude_sets_the_waypoint_flown_to() -> None:
+    """The stub takes it as ArduPlane does (ArduPlane/GCS_Mavlink.cpp
+    handle_command_int_DO_CHANGE_ALTITUDE): AMSL, or above home; holding, it is the held
+    altitude."""
+    async with stub_link() as (team, link):
+        ap = team.vehicles[0].autopilot
+        await change_altitude(link, 1, 950.0)
+        assert ap._next_wp[2] == pytest.approx(950.0)
+        await change_altitude(link, 1, 300.0, above_home=True)
+        assert ap._next_wp[2] == pytest.approx(ap.home[2] + 300.0)
 
 
 async def test_loopback_message_interval_request_message_and_start_mission() -> None:

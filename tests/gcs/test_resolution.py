@@ -220,11 +220,18 @@ def test_a_vehicle_in_its_loiter_turns_is_predicted_round_them_and_the_other_one
 
 
 def _crossing_team() -> TeamController:
-    """Two aircraft whose schedule crosses the middle of the map at the same moment: the
-    schedule's separation by timing undone (each re-timed at its own cruise speed for the
-    same arrival), so that the controller must resolve in flight what a late vehicle or a
-    re-plan could cause."""
-    data = crossing_scenario(arrival={"kind": "simultaneous", "required_s": 1500})
+    """Two aircraft whose schedule crosses the middle of the map at the same moment."""
+    team = timed_alike(crossing_scenario(arrival={"kind": "simultaneous", "required_s": 1500}))
+    a_, b_ = team.schedule.vehicles
+    assert pair_separation(a_, b_, step_s=0.1).distance_m < 1.0  # they meet, as timed
+    return team
+
+
+def timed_alike(data: dict[str, Any]) -> TeamController:
+    """The team of ``data`` (one arrival at 1500 s) started, its schedule's separation by
+    timing undone (each vehicle re-timed at its own cruise speed for the same arrival), so
+    that the controller must resolve in flight what a late vehicle or a re-plan could
+    cause."""
     scenario = parse_scenario(data)
     world = build_world(scenario)
     schedule = build_schedule(scenario, plan(scenario, "astar", world=world), world=world)
@@ -235,8 +242,6 @@ def _crossing_team() -> TeamController:
         ).schedule
         for vs in schedule.vehicles
     )  # fmt: skip
-    a_, b_ = natural
-    assert pair_separation(a_, b_, step_s=0.1).distance_m < 1.0  # they meet, as timed
     schedule = dataclasses.replace(schedule, vehicles=natural)
     team = TeamController(scenario, schedule, world, FlightConfig(), rng=np.random.default_rng(0))
     team.start(START_UTC)

@@ -51,13 +51,18 @@ def _closest_m(
 
 def an_encounter() -> list[FlightEvent]:
     """Every kind of separation event of one pair (A, B) whose closest pass, 224 m, is at
-    300 s, and two events that are none."""
+    300 s (resolved by speed, by height and by a re-plan's layer), and two events that are
+    none."""
     replan = {"pair": ["A", "B"], "distance_m": 224.0, "at_s": 300.0}
     return [
         _event(EventKind.CONFLICT, "A", 250.0, other="B", distance_m=224.0, at_s=300.0),
         _event(
             EventKind.CONFLICT, "A", 260.0, other="B", resolution="speed", airspeed_m_s=16.0,
             until_s=320.0, distance_m=224.0, resolved_m=310.0, at_s=300.0,
+        ),
+        _event(
+            EventKind.CONFLICT, "A", 262.0, other="B", resolution="altitude", offset_m=-300.0,
+            alt_m=600.0, until_s=320.0, distance_m=224.0, resolved_m=380.0, at_s=300.0,
         ),
         _event(EventKind.ALARM, "A", 298.0, other="B", distance_m=224.0),
         _event(EventKind.CONFLICT, "A", 330.0, other="B", resolution="released"),
@@ -78,13 +83,15 @@ def test_each_conflict_event_is_read_as_its_kind_with_what_was_done_and_the_true
     assert kinds == [
         ("predicted", "none"),
         ("resolved", "speed 16 m/s"),
+        ("resolved", "altitude -300 m"),
         ("loss", "alarm"),
         ("released", "released"),
         ("resolved", "altitude +150 m"),
         ("unresolved", "alarm"),
     ]
-    ends = [300.0, 320.0, 298.0, 330.0, 300.0, 300.0]
-    for e, t0, end in zip(out, (250.0, 260.0, 298.0, 330.0, 100.0, 100.0), ends, strict=True):
+    ends = [300.0, 320.0, 320.0, 298.0, 330.0, 300.0, 300.0]
+    starts = (250.0, 260.0, 262.0, 298.0, 330.0, 100.0, 100.0)
+    for e, t0, end in zip(out, starts, ends, strict=True):
         assert e["pair"] == ["A", "B"] and e["t_s"] == t0
         assert e["until_utc_s"] == pytest.approx(START_UTC + end + ENCOUNTER_AFTER_S)
         expected = _closest_m(0.0, 15_000.0, 20.0, -30.0, 200.0, 100.0, t0, end + 60.0)
@@ -92,8 +99,8 @@ def test_each_conflict_event_is_read_as_its_kind_with_what_was_done_and_the_true
     # The encounters that hold the pass: about 224 m (200 m across, 100 m up); the release
     # after it measures the pair opening again.
     assert out[0]["closest_m"] == pytest.approx(math.hypot(200.0, 100.0), abs=1.0)
-    assert out[3]["closest_m"] > 1_000.0
-    assert out[0]["said_m"] == 224.0 and out[3]["said_m"] is None
+    assert out[4]["closest_m"] > 1_000.0
+    assert out[0]["said_m"] == 224.0 and out[4]["said_m"] is None
 
 
 def test_a_pair_not_flying_then_has_no_closest() -> None:

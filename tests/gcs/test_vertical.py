@@ -6,13 +6,21 @@ tracks are straight lines, the climb and the return at the commanded rate) and t
 
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import numpy as np
 import pytest
 
+from gcs.coordination import actions as act
+from gcs.coordination.config import FlightConfig
+from gcs.coordination.events import EventKind
 from gcs.coordination.resolution import Ahead, resolve
+from gcs.coordination.team import TeamController
 from gcs.coordination.vertical import Room, resolve_vertical
+from tests.gcs.test_resolution import timed_alike
+from tests.gcs.test_team import airborne, fix, of, reports, seq_ahead
+from tests.planner.conftest import head_on_scenario
 
 D_S = 500.0
 LAYER_M = 300.0
@@ -114,3 +122,138 @@ def test_a_pair_that_keeps_its_separation_is_left_alone() -> None:
     room = {"A": Room(3_000.0, 400.0), "B": Room(3_000.0, 400.0)}
     kw = {"now_s": NOW_S, "separation_m": D_S, "layer_m": LAYER_M, "rate_m_s": RATE_M_S}
     assert resolve_vertical(a, b, room=room, look_ahead_s=180.0, **kw) is None
+
+
+def test_a_mover_is_not_sent_into_a_third_vehicle() -> None:
+    """C flies with B, 600 m above it: B's climb of two layers would end where C is (the
+    test's own distance, every 0.1 s, shows it), so B descends instead."""
+    a = _ahead("A", 0.0, 1.0, 1_000.0, slot_in_s=900.0)
+    b = _ahead("B", 6_000.0, -1.0, 1_000.0, slot_in_s=2_400.0)
+    c = _ahead("C", 6_000.0, -1.0, 1_600.0, slot_in_s=2_400.0)
+    room = {"A": Room(3_000.0, 400.0), "B": Room(3_000.0, 400.0)}
+    kw = {"now_s": NOW_S, "separation_m": D_S, "layer_m": LAYER_M, "rate_m_s": RATE_M_S}
+    alone = resolve_vertical(a, b, room=room, look_ahead_s=180.0, **kw)
+    assert alone is not None and (alone.vehicle, alone.offset_m) == ("B", 2 * LAYER_M)
+    t = np.arange(NOW_S, NOW_S + 400.0, 0.1)
+    zb = np.array([_height(1_000.0, alone.offset_m, alone.start_s, alone.until_s, x) for x in t])
+    assert float(np.abs(zb - 1_600.0).min()) < D_S  # with C at once, the same line
+    v = resolve_vertical(a, b, room=room, look_ahead_s=180.0, neighbours={"B": [c]}, **kw)
+    assert v is not None and (v.vehicle, v.offset_m, v.alt_m) == ("B", -2 * LAYER_M, 400.0)
+    zb = np.array([_height(1_000.0, v.offset_m, v.start_s, v.until_s, x) for x in t])
+    assert float(np.abs(zb - 1_600.0).min()) >= D_S
+
+
+# -- flown by the team controller ----------------------------------------------------------------
+
+CLIMB_M_S = 2.5
+"""The test's aircraft climb and descend at this rate towards the altitude they are asked (the
+scenario's climb gradient, 0.1, at 25 m/s)."""
+
+
+def _head_on_team() -> TeamController:
+    """Two aircraft on one line, A east and B west, each timed at its own cruise for the same
+    arrival: they meet head-on half way, at one height, which no speed can keep apart."""
+    return timed_alike(head_on_scenario(arrival={"kind": "simultaneous", "required_s": 1500}))
+
+
+@dataclasses.dataclass
+class _Flown:
+    closest_m: float = math.inf
+    closest_flat_m: float = math.inf
+    heights: dict[str, list[float]] = dataclasses.field(default_factory=dict)
+    asked: list[act.CommandAltitude] = dataclasses.field(default_factory=list)
+    said: list[act.Report] = dataclasses.field(default_factory=list)
+    arrived: dict[str, float] = dataclasses.field(default_factory=dict)
+
+
+def _fly_heights(team: TeamController) -> _Flown:
+    """Fly the team to the goals, fixes every 0.5 s from this test's kinematics: still air,
+    a commanded airspeed flown 3 s after its command, and heights as ArduPlane takes
+    DO_CHANGE_ALTITUDE (ArduPlane/GCS_Mavlink.cpp handle_command_int_DO_CHANGE_ALTITUDE):
+    the asked altitude is the target of the waypoint flown to now, and the next waypoint
+    brings the mission's altitude back; the aircraft goes towards its target at CLIMB_M_S.
+    The distances are the test's own, in 3-D, from the positions and heights it flew."""
+    ids = list(team.members)
+    t0 = max(m.schedule.climb_end_s for m in team.members.values()) + 1.0
+    s, level, z, target, seq = {}, {}, {}, {}, {}
+    for vid in ids:
+        m = team.members[vid]
+        airborne(team, vid, m.takeoff_s)
+        _, s[vid], level[vid] = m.schedule.state_at(t0)
+        z[vid] = m.schedule.alt_at(s[vid])
+        target[vid] = None
+        seq[vid] = seq_ahead(team, vid, s[vid])
+    home_m = {vid: team.members[vid].mission.items[0].z for vid in ids}
+    flown = _Flown(heights={vid: [] for vid in ids})
+    pending: list[tuple[float, str, float]] = []
+    dt, t = 0.5, t0
+    while len(flown.arrived) < len(ids) and t < t0 + 3000.0:
+        t += dt
+        for p in [p for p in pending if p[0] <= t]:
+            level[p[1]] = p[2]
+            pending.remove(p)
+        for vid in ids:
+            if vid in flown.arrived:
+                continue
+            m = team.members[vid]
+            s[vid] += level[vid] * m.schedule.tas_per_eas(s[vid]) * dt
+            if s[vid] >= m.track.length_m:
+                flown.arrived[vid] = t
+                continue
+            if seq_ahead(team, vid, s[vid]) != seq[vid]:
+                seq[vid], target[vid] = seq_ahead(team, vid, s[vid]), None  # the next waypoint
+            want = m.schedule.alt_at(s[vid]) if target[vid] is None else target[vid]
+            z[vid] += float(np.clip(want - z[vid], -CLIMB_M_S * dt, CLIMB_M_S * dt))
+            flown.heights[vid].append(z[vid])
+            f = dataclasses.replace(fix(team, vid, s[vid], t, level[vid]), alt_amsl_m=z[vid])
+            out = team.handle(f, t)
+            flown.said += reports(out, EventKind.CONFLICT) + reports(out, EventKind.ALARM)
+            for c in of(out, act.CommandSpeed):
+                team.handle(act.SpeedCommanded(c.vehicle_id, c.airspeed_m_s, c.reason, t), t)
+                pending.append((t + 3.0, c.vehicle_id, c.airspeed_m_s))
+            for c in of(out, act.CommandAltitude):
+                flown.asked.append(c)
+                who = c.vehicle_id
+                target[who] = c.alt_m + (home_m[who] if c.above_home else 0.0)
+                team.handle(act.AltitudeCommanded(who, c.alt_m, c.above_home, t), t)
+        if not flown.arrived:
+            pa, pb = (team.members[v].schedule.path.pose_at(s[v]) for v in ids)
+            flat = math.hypot(pa.east_m - pb.east_m, pa.north_m - pb.north_m)
+            flown.closest_flat_m = min(flown.closest_flat_m, flat)
+            flown.closest_m = min(flown.closest_m, math.hypot(flat, z[ids[0]] - z[ids[1]]))
+    return flown
+
+
+def test_a_head_on_pair_in_flight_is_kept_apart_by_height_and_both_make_their_slots() -> None:
+    team = _head_on_team()
+    d_s = team.scenario.separation_m
+    flown = _fly_heights(team)
+    # They pass within the separation over the ground: height kept them apart, in 3-D.
+    assert flown.closest_flat_m < 0.5 * d_s, flown.closest_flat_m
+    assert flown.closest_m >= d_s, f"{flown.closest_m:.0f} m"
+    moved = [r for r in flown.said if (r.payload or {}).get("resolution") == "altitude"]
+    back = [r for r in flown.said if (r.payload or {}).get("resolution") == "released"]
+    assert len(moved) == 1 and len(back) == 1, [r.reason for r in flown.said]
+    mover = moved[0].vehicle
+    assert mover is not None
+    assert not [r for r in flown.said if r.kind is EventKind.ALARM], flown.said
+    # Within its room: the ceiling, and the flat ground (100 m) plus its clearance.
+    v = team.scenario.vehicle(mover)
+    assert min(flown.heights[mover]) >= 100.0 + v.clearance_m
+    assert max(flown.heights[mover]) <= v.alt_max_m
+    # Its height asked at each waypoint it started meanwhile, then its profile's.
+    asked = [c for c in flown.asked if c.vehicle_id == mover]
+    assert len(asked) >= 2 and not asked[0].above_home and asked[-1].above_home
+    assert flown.heights[mover][-1] == pytest.approx(
+        team.members[mover].schedule.alt_at(team.members[mover].track.length_m), abs=1.0
+    )
+    for vid, m in team.members.items():
+        assert flown.arrived[vid] == pytest.approx(m.target_s, abs=1.0), vid
+
+    # With no resolution by height (``vertical_horizon_s=0``) the same flight loses the
+    # separation, alarmed: what the height prevents is there.
+    off = _head_on_team()
+    off.config = FlightConfig(vertical_horizon_s=0.0)
+    flown = _fly_heights(off)
+    assert not flown.asked and flown.closest_m < d_s
+    assert [r for r in flown.said if r.kind is EventKind.ALARM]

@@ -60,20 +60,30 @@ def small_scenario(**overrides: Any) -> dict[str, Any]:
     return out
 
 
-def crossing_scenario(**overrides: Any) -> dict[str, Any]:
-    """:func:`small_scenario` without threats, A flying east and B north across the middle of
-    the map, 36 km each: timed alike they cross the middle at the same moment."""
+def _two_lines(
+    overrides: dict[str, Any],
+    a: tuple[float, float, float, float],
+    b: tuple[float, float, float, float],
+) -> dict[str, Any]:
+    """:func:`small_scenario` without threats, A and B each flying from ``(east, north)`` to
+    ``(east, north)`` (the four numbers, m) at 500 m."""
     data = small_scenario(**({"threats": []} | overrides))
-    a, b = data["vehicles"]
-    a["start"], a["goal"] = (
-        {"east_m": 2000, "north_m": 20000, "alt_m": 500},
-        {"east_m": 38000, "north_m": 20000, "alt_m": 500},
-    )
-    b["start"], b["goal"] = (
-        {"east_m": 20000, "north_m": 2000, "alt_m": 500},
-        {"east_m": 20000, "north_m": 38000, "alt_m": 500},
-    )
+    for v, (e0, n0, e1, n1) in zip(data["vehicles"], (a, b), strict=True):
+        v["start"] = {"east_m": e0, "north_m": n0, "alt_m": 500}
+        v["goal"] = {"east_m": e1, "north_m": n1, "alt_m": 500}
     return data
+
+
+def crossing_scenario(**overrides: Any) -> dict[str, Any]:
+    """A flying east and B north across the middle of the map, 36 km each: timed alike they
+    cross the middle at the same moment."""
+    return _two_lines(overrides, (2000, 20000, 38000, 20000), (20000, 2000, 20000, 38000))
+
+
+def head_on_scenario(**overrides: Any) -> dict[str, Any]:
+    """A flying east and B west on lines 100 m apart, at one height: timed alike for one
+    arrival they meet head-on half way, and no timing keeps them apart."""
+    return _two_lines(overrides, (2000, 20000, 38000, 20000), (38000, 20100, 2000, 20100))
 
 
 @pytest.fixture

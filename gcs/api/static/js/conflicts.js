@@ -1,6 +1,6 @@
 // Conflicts between aircraft, read from the flight's events as the flight record's
 // `separation_events` reads them (gcs.coordination.separationlog): predicted, resolved (by
-// speed, or by an altitude layer in a re-plan), released, unresolved (a re-plan's, alarmed)
+// speed, by height, or by an altitude layer in a re-plan), released, unresolved (a re-plan's, alarmed)
 // and loss (under the separation). Each encounter is shown from its event to a minute past
 // when the event expects the pair closest; the map draws a line between the pair, the panel
 // lists them.
@@ -32,6 +32,12 @@ export function separationOf(ev) {
   if (p.resolution === "speed") {
     const until = Math.max(atS, Number(p.until_s ?? atS)) + ENCOUNTER_AFTER_S;
     return { ...base, kind: "resolved", a: ev.vehicle, b: p.other, action: `speed ${p.airspeed_m_s} m/s`, until_s: until };
+  }
+  if (p.resolution === "altitude") {
+    const until = Math.max(atS, Number(p.until_s ?? atS)) + ENCOUNTER_AFTER_S;
+    const offset = Number(p.offset_m ?? 0);
+    const action = `altitude ${offset >= 0 ? "+" : ""}${offset} m`;
+    return { ...base, kind: "resolved", a: ev.vehicle, b: p.other, action, until_s: until };
   }
   if (p.resolution === "released") {
     return { ...base, kind: "released", a: ev.vehicle, b: p.other, action: "released", until_s: ev.t_s };
