@@ -66,6 +66,9 @@ GOAL_ALONG_SLACK_M = 500.0
 the arrival radius and this much more (a fix or two of travel)."""
 
 
+RESOLVED_MARGIN = 1.1
+"""A resolution is counted on only if it keeps the pair this many separations apart as
+predicted; a speed resolution short of it gives way to one by height."""
 NEIGHBOUR_SEPARATIONS = 2.0
 """A conflict's resolution is judged against the vehicles forecast within this many
 separations of either of the pair too (:func:`gcs.coordination.resolution.resolve`)."""
@@ -559,16 +562,18 @@ class TeamController(ZoneGuard, TeamTime):
         if turning:
             lo = track.loiters[done]
             at_m = lo.s_m + min(m.loiter_flown_m, lo.length_m)
+        climbing = self.vertical.flying.get(m.vehicle_id)
         return Ahead(
             m.vehicle_id,
             m.last_fix_s,
             at_m,
             m.groundspeed_m_s,
-            m.level_m_s,
+            m.level_m_s if m.resolving is None else m.resolving.airspeed_m_s,
             m.tas_per_eas(m.s_m),
             m.limits.airspeed_min_m_s,
             m.limits.airspeed_max_m_s,
-            m.alt_amsl_m,
+            # Flying a height resolution: where it is going (what the others must keep clear).
+            m.alt_amsl_m if climbing is None else climbing.resolution.alt_m,
             along_m,
             east_m,
             north_m,
@@ -580,9 +585,11 @@ class TeamController(ZoneGuard, TeamTime):
         )
 
     def _resolve_conflicts(self, m: Member, t: float, out: list[act.Action]) -> None:
-        """Keep a resolution flown until it is over; else, every ``resolve_period_s``,
-        predict the vehicle's pairs along their routes and resolve the first that comes
-        under the separation (:func:`gcs.coordination.resolution.resolve`)."""
+        """Keep a resolution flown until it is over; every ``resolve_period_s``, forecast
+        the vehicle along its route for the others (flying a resolution too: it is one of
+        their pairs, not to be moved), and if it flies none, predict its pairs and resolve
+        the first that comes under the separation (:func:`gcs.coordination.resolution.
+        resolve`, or by height)."""
         cfg = self.config
         r = m.resolving
         if r is not None:
@@ -600,10 +607,9 @@ class TeamController(ZoneGuard, TeamTime):
                 )
             else:
                 self._fly_resolution(m, t, out)
-            return
         if m.vehicle_id in self.vertical:
             self.vertical.fly(m, t, out)
-            return
+        busy = m.resolving is not None or m.vehicle_id in self.vertical
         if cfg.resolve_horizon_s <= 0.0 or t < m.next_resolve_s:
             return
         m.next_resolve_s = t + cfg.resolve_period_s
@@ -618,11 +624,13 @@ class TeamController(ZoneGuard, TeamTime):
             forecasts.drop(m.vehicle_id)
             return
         forecasts.update(mine, t)
+        if busy:
+            return
         d_s = self.scenario.separation_m
         for other in forecasts.near(m.vehicle_id, d_s, t):
             x = self.members[other]
-            if x.resolving is not None or x.over or other in self.vertical:
-                continue
+            if x.over or self._resolving_from(x) == m.vehicle_id:
+                continue  # over, or resolving this very pair already
             theirs = forecasts.ahead[other]
             # The vehicles a speed change could bring either of the pair near.
             neighbours = {
@@ -637,7 +645,7 @@ class TeamController(ZoneGuard, TeamTime):
                 mine, theirs, now_s=t, separation_m=d_s, look_ahead_s=cfg.resolve_horizon_s,
                 response_s=cfg.resolve_response_s, neighbours=neighbours,
             )  # fmt: skip
-            if (res is None or not res.keeps_separation) and cfg.vertical_horizon_s > 0.0:
+            if not self._keeps(res) and cfg.vertical_horizon_s > 0.0:
                 # Would a speed keep them apart over the longer horizon? Then it is flown once
                 # they are within the speed's; else one of them changes height now.
                 later = resolve(
@@ -646,10 +654,11 @@ class TeamController(ZoneGuard, TeamTime):
                     neighbours=neighbours,
                 ) if res is None else res  # fmt: skip
                 up = None
-                if later is None or not later.keeps_separation:
+                if not self._keeps(later):
                     up = self._resolve_vertically(mine, theirs, t, neighbours)
                 if up is not None:
                     self.vertical.start(self.members[up.vehicle], up, t, out)
+                    self._forecast_again(self.members[up.vehicle], t)
                     return
             if res is None:
                 continue
@@ -675,7 +684,32 @@ class TeamController(ZoneGuard, TeamTime):
                 )
             )
             self._fly_resolution(mover, t, out)
+            self._forecast_again(mover, t)
             return
+
+    def _keeps(self, res: Resolution | None) -> bool:
+        """Whether a speed resolution keeps the pair apart with :data:`RESOLVED_MARGIN` to
+        spare (one held short by its mover's slot, predicted to pass at the separation
+        itself, came 130 m under it as flown)."""
+        return (
+            res is not None
+            and res.keeps_separation
+            and res.predicted_m >= RESOLVED_MARGIN * self.scenario.separation_m
+        )
+
+    def _resolving_from(self, m: Member) -> str | None:
+        """The vehicle ``m`` flies a resolution (speed or height) to keep apart from."""
+        if m.resolving is not None:
+            return m.resolving.other
+        climbing = self.vertical.flying.get(m.vehicle_id)
+        return None if climbing is None else climbing.resolution.other
+
+    def _forecast_again(self, m: Member, t: float) -> None:
+        """``m`` has just been given a resolution: its forecast for the others is its flight
+        as resolved (not movable), from now."""
+        ahead = self._ahead(m)
+        if ahead is not None:
+            self.forecasts.update(ahead, t)
 
     def _resolve_vertically(
         self, a: Ahead, b: Ahead, t: float, neighbours: Mapping[str, Sequence[Ahead]]
@@ -700,7 +734,8 @@ class TeamController(ZoneGuard, TeamTime):
                 rooms[ahead.vehicle] = room
             rates.append(v.climb_gradient * ahead.airspeed_m_s)
         return resolve_vertical(
-            a, b, now_s=t, separation_m=d_s, layer_m=layer_m, rate_m_s=min(rates), room=rooms,
+            a, b, now_s=t, separation_m=RESOLVED_MARGIN * d_s, layer_m=layer_m,
+            rate_m_s=min(rates), room=rooms,
             look_ahead_s=cfg.vertical_horizon_s, response_s=cfg.resolve_response_s,
             neighbours=neighbours,
         )  # fmt: skip
