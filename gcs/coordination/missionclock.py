@@ -84,6 +84,11 @@ though one simulator gave the vehicles one clock (and every arrival with them)."
 HEARD_WALL_S = 0.5
 """On a pace clock, a vehicle not heard for this long (monotonic wall s: a blackout, a lost
 link) no longer holds the lock step back (:meth:`MissionClock.heard_pace_s`)."""
+HEARD_SLACK_S = 5.0
+"""Flight seconds past the least newest report the lock step may still acknowledge: reports
+that are in transit (a few milliseconds of wall time, seconds of flight at 200x) or lost on
+a lossy link do not stall the simulator; a router seconds of wall time behind still holds
+it."""
 HEARD_BEHIND_MAX_PACE_S = 10.0
 """A vehicle whose newest report is stamped this far (pace s) behind the pace clock is on
 another time base (not the simulator's: rebooted, or another vehicle): it holds nothing."""
@@ -223,7 +228,8 @@ class MissionClock:
 
     def heard_pace_s(self, wall_s: float, rate: float) -> float:
         """On a pace clock running at ``rate`` flight s per pace s, the pace time that every
-        vehicle still talking has been heard to: the least of their newest reports' stamps.
+        vehicle still talking has been heard to: the least of their newest reports' stamps,
+        and :data:`HEARD_SLACK_S` of flight.
         What the lock step acknowledges stays within it, so a vehicle whose reports reach
         this process late (a router between them that falls behind on a busy machine) is
         not flown on past what it was last seen doing. Infinite when none holds: none heard
@@ -235,7 +241,7 @@ class MissionClock:
             if wall_s - at_wall_s > HEARD_WALL_S or pace_s < now_s - HEARD_BEHIND_MAX_PACE_S:
                 continue
             least = min(least, pace_s)
-        return least
+        return least + HEARD_SLACK_S / rate
 
     def release(self) -> None:
         """One :meth:`hold` ended; the last lets the simulator fly on."""

@@ -12,7 +12,12 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from gcs.coordination.missionclock import HEARD_BEHIND_MAX_PACE_S, HEARD_WALL_S, MissionClock
+from gcs.coordination.missionclock import (
+    HEARD_BEHIND_MAX_PACE_S,
+    HEARD_SLACK_S,
+    HEARD_WALL_S,
+    MissionClock,
+)
 from gcs.errors import GcsError
 from gcs.service.stubs import follow_lockstep
 from sitl_stub.api import SimTeam
@@ -93,13 +98,16 @@ def test_the_pace_heard_is_the_least_newest_report_of_the_vehicles_still_talking
     clock = MissionClock()
     clock.follow(lambda: pace[0], 1.0, 200.0)
     assert clock.heard_pace_s(10.0, 200.0) == math.inf  # none heard yet
+    slack = HEARD_SLACK_S / 200.0  # reports in transit
     clock.heard(1, 100.0, 10.0)
     clock.heard(2, 80.0, 10.0)
-    assert clock.heard_pace_s(10.0, 200.0) == pytest.approx(80.0 / 200.0)
+    assert clock.heard_pace_s(10.0, 200.0) == pytest.approx(80.0 / 200.0 + slack)
     clock.heard(2, 70.0, 10.1)  # a late packet: talking, and heard to 80 s still
-    assert clock.heard_pace_s(10.1 + 0.9 * HEARD_WALL_S, 200.0) == pytest.approx(0.4)
+    assert clock.heard_pace_s(10.1 + 0.9 * HEARD_WALL_S, 200.0) == pytest.approx(0.4 + slack)
     clock.heard(1, 100.5, 10.4)
-    assert clock.heard_pace_s(10.1 + 1.1 * HEARD_WALL_S, 200.0) == pytest.approx(100.5 / 200)
+    assert clock.heard_pace_s(10.1 + 1.1 * HEARD_WALL_S, 200.0) == pytest.approx(
+        100.5 / 200 + slack
+    )
     assert clock.heard_pace_s(10.4 + 1.1 * HEARD_WALL_S, 200.0) == math.inf
     clock.heard(3, 5.0, 11.0)  # 5 s stamps while the pace clock says 100 s of flight
     pace[0] = 5.0 / 200.0 + HEARD_BEHIND_MAX_PACE_S + 0.1
@@ -112,8 +120,9 @@ def test_the_pace_heard_is_the_least_newest_report_of_the_vehicles_still_talking
 async def test_the_ground_station_acknowledges_no_further_than_its_vehicles_were_heard(
     tmp_path: Path,
 ) -> None:
-    """The simulator steps no further than the lead past the newest report of the vehicle
-    heard least far; once that one's reports catch up, it flies on."""
+    """The simulator steps no further than the lead (and the slack for reports in transit)
+    past the newest report of the vehicle heard least far; once that one's reports catch up,
+    it flies on."""
     path = tmp_path / "pace"
     sim = Lockstep(path, create=True, speedup=200.0, lead_s=1.0)
     clock = MissionClock()
@@ -123,8 +132,8 @@ async def test_the_ground_station_acknowledges_no_further_than_its_vehicles_were
         clock.heard(1, 100.0, time.monotonic())
         clock.heard(2, 80.0, time.monotonic())
         await asyncio.sleep(0.02)
-        assert sim.acknowledged_s() * 200.0 == pytest.approx(80.0)
-        assert sim.limit_s() == pytest.approx(81.0)
+        assert sim.acknowledged_s() * 200.0 == pytest.approx(80.0 + HEARD_SLACK_S)
+        assert sim.limit_s() == pytest.approx(81.0 + HEARD_SLACK_S)
         clock.heard(2, 100.0, time.monotonic())
         await asyncio.sleep(0.02)
         assert sim.acknowledged_s() * 200.0 == pytest.approx(100.0)
