@@ -221,10 +221,9 @@ class MissionClock:
         if not self.paced or not math.isfinite(time_boot_s):
             return
         newest = self._heard.get(system_id)
-        if newest is None or time_boot_s >= newest[0]:
-            self._heard[system_id] = (time_boot_s, wall_s)
-        else:
-            self._heard[system_id] = (newest[0], wall_s)  # a late packet: still talking
+        # A late packet keeps the newest stamp, and says the vehicle still talks.
+        stamp_s = time_boot_s if newest is None else max(time_boot_s, newest[0])
+        self._heard[system_id] = (stamp_s, wall_s)
 
     def heard_pace_s(self, wall_s: float, rate: float) -> float:
         """On a pace clock running at ``rate`` flight s per pace s, the pace time that every

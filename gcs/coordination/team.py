@@ -580,8 +580,7 @@ class TeamController(ZoneGuard, TeamTime):
             horizon_s=max(m.target_s - m.last_fix_s, 0.0),
             movable=not turning
             and track.length_m - m.s_m >= self.config.final_m
-            and m.resolving is None
-            and m.vehicle_id not in self.vertical,
+            and self._resolving_from(m) is None,
         )
 
     def _resolve_conflicts(self, m: Member, t: float, out: list[act.Action]) -> None:
@@ -609,7 +608,7 @@ class TeamController(ZoneGuard, TeamTime):
                 self._fly_resolution(m, t, out)
         if m.vehicle_id in self.vertical:
             self.vertical.fly(m, t, out)
-        busy = m.resolving is not None or m.vehicle_id in self.vertical
+        busy = self._resolving_from(m) is not None
         if cfg.resolve_horizon_s <= 0.0 or t < m.next_resolve_s:
             return
         m.next_resolve_s = t + cfg.resolve_period_s

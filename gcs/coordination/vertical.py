@@ -138,7 +138,8 @@ def resolve_vertical(
         r = room.get(mover.vehicle)
         if r is None:
             continue
-        around = _around(mover, t, (neighbours or {}).get(mover.vehicle, ()), response_s)
+        others = (neighbours or {}).get(mover.vehicle, ())
+        around = _around(pa if mover is a else pb, mover.alt_m, t, others, response_s)
         for layers, sense in itertools.product(range(1, max_layers + 1), (1.0, -1.0)):
             offset = sense * layers * layer_m
             target = mover.alt_m + offset
@@ -174,17 +175,17 @@ def resolve_vertical(
 
 
 def _around(
-    mover: Ahead, t: FloatArray, others: Sequence[Ahead], response_s: float
+    mine: FloatArray, alt_m: float, t: FloatArray, others: Sequence[Ahead], response_s: float
 ) -> list[tuple[FloatArray, float, float]]:
-    """For each other vehicle near the mover: their horizontal distance at the times ``t``,
-    its height, and the least 3-D distance of the two as they fly."""
-    mine = mover.positions(t, mover.airspeed_m_s, response_s)
+    """For each other vehicle near the mover (at ``mine``, its positions at the times ``t``,
+    and ``alt_m``): their horizontal distance at those times, its height, and the least 3-D
+    distance of the two as they fly."""
     out = []
     for o in others:
         flat = np.sqrt(((mine - o.positions(t, o.airspeed_m_s, response_s)) ** 2).sum(axis=1))
         if np.isnan(flat).all():
             continue
-        as_flown = float(np.nanmin(np.sqrt(flat**2 + (mover.alt_m - o.alt_m) ** 2)))
+        as_flown = float(np.nanmin(np.sqrt(flat**2 + (alt_m - o.alt_m) ** 2)))
         out.append((flat, o.alt_m, as_flown))
     return out
 
