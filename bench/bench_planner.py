@@ -28,9 +28,10 @@ from procstat import TreeMemory  # bench/, beside this script
 
 from planner.backend import Backend, RayBackend
 from planner.deconflict import separation
-from planner.plan import build_terrain, build_world, plan
+from planner.plan import build_world, plan
 from planner.retime import build_schedule
 from planner.scenario import load_scenario, parse_scenario
+from planner.terrain import build_terrain
 
 ROOT = Path(__file__).resolve().parents[1]
 PAPER = ROOT / "scenarios" / "paper_three_uav.yaml"

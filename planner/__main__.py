@@ -22,14 +22,16 @@ def _write_json(out: Path, doc: object, what: str) -> Path:
 
 
 def _cmd_plan(args: argparse.Namespace) -> int:
+    from planner.scenario import load_scenario
+
+    t0 = time.perf_counter()
+    scenario = load_scenario(args.scenario)  # refused before the planner is loaded
+
     import numpy as np
 
     from planner.plan import plan
     from planner.report import plan_json
-    from planner.scenario import load_scenario
 
-    t0 = time.perf_counter()
-    scenario = load_scenario(args.scenario)
     result = plan(scenario, args.method, rng=np.random.default_rng(args.seed))
     elapsed = time.perf_counter() - t0
     doc = plan_json(
@@ -55,6 +57,13 @@ def _cmd_plot(args: argparse.Namespace) -> int:
 
 
 def _cmd_schedule(args: argparse.Namespace) -> int:
+    from planner.scenario import load_scenario, parse_wind
+
+    t0 = time.perf_counter()
+    scenario = load_scenario(args.scenario)  # refused before the planner is loaded
+    if args.wind is not None:
+        scenario = scenario.with_forecast_wind(parse_wind(args.wind, "--wind"))
+
     import numpy as np
 
     from planner.deconflict import check_separation, separation
@@ -62,13 +71,8 @@ def _cmd_schedule(args: argparse.Namespace) -> int:
     from planner.plan import build_world, plan
     from planner.popup import replay_popups
     from planner.retime import build_schedule, check_feasible
-    from planner.scenario import load_scenario, parse_wind
     from planner.schedulefile import schedule_json
 
-    t0 = time.perf_counter()
-    scenario = load_scenario(args.scenario)
-    if args.wind is not None:
-        scenario = scenario.with_forecast_wind(parse_wind(args.wind, "--wind"))
     rng = np.random.default_rng(args.seed)
     world = build_world(scenario)
     planned = plan(scenario, args.method, rng=rng, world=world)

@@ -15,7 +15,6 @@ from __future__ import annotations
 from collections.abc import Sequence
 
 import numpy as np
-from scipy.optimize import linear_sum_assignment
 
 
 def assign_goals(
@@ -28,6 +27,9 @@ def assign_goals(
     s = np.asarray(starts, dtype=np.float64).reshape(-1, 2)
     g = np.asarray(goals, dtype=np.float64).reshape(-1, 2)
     cost = ((s[:, None, :] - g[None, :, :]) ** 2).sum(axis=-1)
+    # Imported here: a scenario is read (and refused) without loading scipy.optimize.
+    from scipy.optimize import linear_sum_assignment
+
     rows, cols = linear_sum_assignment(cost)
     order = [0] * len(starts)
     for r, c in zip(rows, cols, strict=True):

@@ -13,7 +13,6 @@ from __future__ import annotations
 import math
 from collections.abc import Iterator, Mapping, Sequence
 from dataclasses import dataclass
-from pathlib import Path
 from typing import Literal
 
 import numpy as np
@@ -38,18 +37,15 @@ from planner.landing import check_glide, final_m
 from planner.pool import default_workers, forked_map
 from planner.problem import Problem, SolveResult, Status, VehicleTask, task_fields
 from planner.scenario import (
-    FlatTerrain,
     Scenario,
     Simultaneous,
     Spaced,
-    SrtmTerrainSpec,
-    SyntheticTerrainSpec,
     Vehicle,
     Waves,
     Windows,
 )
 from planner.search import solve_exact
-from planner.terrain import SrtmTerrain, SyntheticTerrain, Terrain
+from planner.terrain import Terrain, build_terrain
 from planner.threats import ThreatZone, active, build_threats, forbidden_at, polyline_clearance_m
 
 FloatArray = NDArray[np.float64]
@@ -64,37 +60,6 @@ outclimb the ground ahead by a margin that grows with the distance flown)."""
 CLIMB_HEAD_FACTOR = 1.5
 """A route whose shortened climb from home is too low keeps its grid legs as they are for
 this many times the distance that climb took, and is shortened after them."""
-
-
-@dataclass(frozen=True)
-class _Flat:
-    elevation: float
-
-    def elevation_m(self, east_m: FloatArray, north_m: FloatArray) -> FloatArray:
-        return np.full(np.broadcast(east_m, north_m).shape, self.elevation, dtype=np.float64)
-
-
-def build_terrain(scenario: Scenario) -> Terrain:
-    """The scenario's terrain source; SRTM tiles are checked to cover the area up front."""
-    spec = scenario.terrain
-    area = scenario.area
-    if isinstance(spec, FlatTerrain):
-        return _Flat(spec.elevation_m)
-    if isinstance(spec, SyntheticTerrainSpec):
-        return SyntheticTerrain.generate(
-            seed=spec.seed,
-            min_east_m=area.min_east_m,
-            max_east_m=area.max_east_m,
-            min_north_m=area.min_north_m,
-            max_north_m=area.max_north_m,
-            base_m=spec.base_m,
-            peak_m=spec.peak_m,
-            hills=spec.hills,
-        )
-    assert isinstance(spec, SrtmTerrainSpec)
-    terrain = SrtmTerrain(Path(spec.directory), scenario.frame())
-    terrain.require_area(area.min_east_m, area.max_east_m, area.min_north_m, area.max_north_m)
-    return terrain
 
 
 def timing_limits(scenario: Scenario) -> list[TimingLimits]:

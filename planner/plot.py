@@ -7,12 +7,7 @@ from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
-import matplotlib
-
-matplotlib.use("Agg")
-import matplotlib.pyplot as plt
 import numpy as np
-from matplotlib.patches import Circle, Polygon
 
 from planner.errors import PlannerError
 from planner.plan import World, build_world
@@ -44,6 +39,8 @@ def draw_world(
     time a threat appeared to its label and marks it as a pop-up. Returns the map extent
     (west, east, south, north) in km.
     """
+    from matplotlib.patches import Circle, Polygon  # matplotlib when a figure is drawn
+
     appeared = appeared_s or {}
     g = world.grid
     extent = (
@@ -95,6 +92,11 @@ def plot_plan(plan_path: Path, out_path: Path) -> None:
         scenario_file = plan_path.parent / scenario_file
     scenario = load_scenario(scenario_file)
     world = build_world(scenario)
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
     fig, ax = plt.subplots(figsize=(9, 8), dpi=110)
     extent = draw_world(fig, ax, world)
     colours = plt.rcParams["axes.prop_cycle"].by_key()["color"]

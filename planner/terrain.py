@@ -10,10 +10,10 @@ from typing import Protocol
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
-from scipy import ndimage
 
 from planner.errors import TerrainError
 from planner.geo import LocalFrame
+from planner.scenario import FlatTerrain, Scenario, SrtmTerrainSpec, SyntheticTerrainSpec
 
 __all__ = [
     "SRTM_VOID",
@@ -21,6 +21,7 @@ __all__ = [
     "SrtmTerrain",
     "SyntheticTerrain",
     "Terrain",
+    "build_terrain",
     "clearance_m",
     "min_clearance_along",
     "srtm_tile_name",
@@ -302,6 +303,8 @@ def _fill_voids(samples: NDArray[np.int16]) -> NDArray[np.int16]:
         return samples
     if void.all():
         return np.zeros_like(samples)
+    from scipy import ndimage  # only for SRTM tiles with voids
+
     # For every sample, the indices of the nearest non-void sample.
     indices = ndimage.distance_transform_edt(void, return_distances=False, return_indices=True)
     filled: NDArray[np.int16] = samples[indices[0], indices[1]]
@@ -683,3 +686,34 @@ def min_clearance_along(
         raise ValueError("path east_m/north_m/alt_m has no samples")
     index = int(np.argmin(clearance))
     return float(clearance[index]), index
+
+
+@dataclass(frozen=True)
+class _Flat:
+    elevation: float
+
+    def elevation_m(self, east_m: FloatArray, north_m: FloatArray) -> FloatArray:
+        return np.full(np.broadcast(east_m, north_m).shape, self.elevation, dtype=np.float64)
+
+
+def build_terrain(scenario: Scenario) -> Terrain:
+    """The scenario's terrain source; SRTM tiles are checked to cover the area up front."""
+    spec = scenario.terrain
+    area = scenario.area
+    if isinstance(spec, FlatTerrain):
+        return _Flat(spec.elevation_m)
+    if isinstance(spec, SyntheticTerrainSpec):
+        return SyntheticTerrain.generate(
+            seed=spec.seed,
+            min_east_m=area.min_east_m,
+            max_east_m=area.max_east_m,
+            min_north_m=area.min_north_m,
+            max_north_m=area.max_north_m,
+            base_m=spec.base_m,
+            peak_m=spec.peak_m,
+            hills=spec.hills,
+        )
+    assert isinstance(spec, SrtmTerrainSpec)
+    terrain = SrtmTerrain(Path(spec.directory), scenario.frame())
+    terrain.require_area(area.min_east_m, area.max_east_m, area.min_north_m, area.max_north_m)
+    return terrain

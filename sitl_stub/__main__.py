@@ -442,7 +442,7 @@ def terrain_from_args(args: argparse.Namespace, homes: Sequence[Home]) -> GridTe
         return None
     import numpy as np
 
-    from planner.plan import build_terrain
+    from planner.terrain import build_terrain
     from sitl_stub.terrain import with_hills
 
     scenario = _scenario(args.scenario)
@@ -485,7 +485,7 @@ def homes_from_scenario(path: str, n: int) -> list[Home]:
     """
     import numpy as np
 
-    from planner.plan import build_terrain
+    from planner.terrain import build_terrain
 
     scenario = _scenario(path)
     frame = scenario.frame()

@@ -9,8 +9,8 @@ from typing import Any
 import numpy as np
 import yaml
 
-from planner.plan import build_terrain
 from planner.scenario import load_scenario, parse_scenario
+from planner.terrain import build_terrain
 
 PAPER = Path(__file__).resolve().parents[1] / "scenarios" / "paper_three_uav.yaml"
 TARGET = (200_000.0, 200_000.0)

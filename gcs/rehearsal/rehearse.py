@@ -47,9 +47,9 @@ from gcs.service.fleet import Fleet
 from gcs.service.stubs import StubProcess, follow_lockstep
 from gcs.store.repository import FlightKeeper, Store
 from planner.deconflict import separation
-from planner.plan import build_terrain
 from planner.scenario import Scenario
 from planner.schedulefile import schedule_json
+from planner.terrain import build_terrain
 
 FLIGHT_FORMAT = "tcgcs-flight/1"
 TRUTH_ARRIVAL_WINDOW_S = 30.0
@@ -393,12 +393,13 @@ async def _rehearse(
         if pacer is not None:
             pacer.cancel()
             pacer = None
+        truth = None
         if stub is not None:
             await stub.stop()
             stub = None
         elif truth_path is not None:
-            await _await_truth(truth_path, coord)
-        record = flight_record(coord, opts, truth_path, time.perf_counter() - wall0)
+            truth = await _await_truth(truth_path, coord)
+        record = flight_record(coord, opts, truth_path, time.perf_counter() - wall0, truth)
         record["flight_id"] = flight_id
     finally:
         printed.close()  # the printer drains what is queued, then ends
@@ -506,14 +507,16 @@ async def _abort_at(coord: FlightRunner, abort: Abort, start_utc_s: float) -> No
     await coord.abort(abort.vehicle_id, mode=abort.mode)
 
 
-async def _await_truth(path: Path, coord: FlightRunner, timeout_s: float = 5.0) -> None:
+async def _await_truth(
+    path: Path, coord: FlightRunner, timeout_s: float = 5.0
+) -> dict[int, list[TruthSample]] | None:
     """Wait until a running simulator's truth log has reached past every arrival (it is
-    flushed about once a wall second)."""
+    flushed about once a wall second); that log as read then, or None when it did not."""
     need = max(
         (m.arrival_s for m in coord.members.values() if m.arrival_s is not None), default=None
     )
     if need is None or coord.start_utc_s is None:
-        return
+        return None
     need += coord.start_utc_s
     loop = asyncio.get_running_loop()
     until = loop.time() + timeout_s
@@ -521,8 +524,9 @@ async def _await_truth(path: Path, coord: FlightRunner, timeout_s: float = 5.0) 
         if path.exists():
             truth = read_truth(path)
             if truth and all(s and s[-1].utc_s > need for s in truth.values()):
-                return
+                return truth
         await asyncio.sleep(0.25)
+    return None
 
 
 def _send_blackouts(
@@ -552,15 +556,21 @@ def _ev_json(ev: FlightEvent, start_utc_s: float) -> dict[str, Any]:
 
 
 def flight_record(
-    coord: FlightRunner, opts: RehearsalOptions, truth_path: Path | None, wall_s: float
+    coord: FlightRunner,
+    opts: RehearsalOptions,
+    truth_path: Path | None,
+    wall_s: float,
+    truth: dict[int, list[TruthSample]] | None = None,
 ) -> dict[str, Any]:
-    """The flight as data: arrivals (true when the simulator is ours), separations, events."""
+    """The flight as data: arrivals (true when the simulator is ours), separations, events.
+    ``truth``: the truth log already read from ``truth_path``, if it was."""
     assert coord.start_utc_s is not None
     start = coord.start_utc_s
     frame = coord.scenario.frame()
-    truth: dict[int, list[TruthSample]] = {}
-    if truth_path is not None and truth_path.exists():
-        truth = read_truth(truth_path)
+    if truth is None:
+        truth = {}
+        if truth_path is not None and truth_path.exists():
+            truth = read_truth(truth_path)
     vehicles: list[dict[str, Any]] = []
     until: dict[int, float] = {}
     tracks: dict[int, list[TruthSample]] = {}

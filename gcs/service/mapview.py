@@ -7,17 +7,12 @@ from __future__ import annotations
 import io
 from typing import Any
 
-import matplotlib
-
-matplotlib.use("Agg")
-import matplotlib.colors as mcolors
-import matplotlib.pyplot as plt
 import numpy as np
 
 from gcs.coordination.member import path_en
 from gcs.coordination.team import TeamController
-from planner.plan import build_terrain
 from planner.scenario import NoFly, Radar, Scenario
+from planner.terrain import build_terrain
 
 __all__ = ["flight_map", "terrain_png"]
 
@@ -27,6 +22,12 @@ TERRAIN_PX = 768
 
 def terrain_png(scenario: Scenario) -> bytes:
     """A hillshade coloured by height over the scenario's area (north up), as PNG."""
+    import matplotlib  # when a map is first drawn, not when the service starts
+
+    matplotlib.use("Agg")
+    import matplotlib.colors as mcolors
+    import matplotlib.pyplot as plt
+
     area = scenario.area
     terrain = build_terrain(scenario)
     scale = TERRAIN_PX / max(area.width_m, area.height_m)

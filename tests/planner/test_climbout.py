@@ -24,10 +24,11 @@ import pytest
 from planner.climbout import MIN_TAKEOFF_ALT_M, climb_out, straight_start_m
 from planner.flightpath import smooth_polyline, straight
 from planner.mission import MAV_CMD_NAV_TAKEOFF, MAV_CMD_NAV_WAYPOINT
-from planner.plan import build_terrain, plan
+from planner.plan import plan
 from planner.retime import build_schedule
 from planner.scenario import parse_scenario
 from planner.schedulefile import path_mission
+from planner.terrain import build_terrain
 from planner.wind import Wind
 from sitl_stub.autopilot import Autopilot, ItemReached, Mode
 from sitl_stub.items import MissionItem

@@ -14,11 +14,12 @@ import pytest
 
 from planner.errors import ScenarioError, SeparationError
 from planner.layers import LANE_STRETCHES_M, lanes, layer_profile, lift
-from planner.plan import build_terrain, plan
+from planner.plan import plan
 from planner.retime import build_schedule, check_feasible
 from planner.scenario import Scenario, parse_scenario
 from planner.schedule import Schedule, VehicleSchedule
 from planner.schedulefile import vehicle_mission
+from planner.terrain import build_terrain
 from tests.planner.conftest import crossing_scenario, small_scenario
 
 

@@ -172,8 +172,8 @@ async def test_cli_rejects_bad_home_with_clear_message() -> None:
 
 async def test_cli_scenario_places_each_vehicle_at_its_start() -> None:
     from planner.geo import geodesic_distance_m
-    from planner.plan import build_terrain
     from planner.scenario import load_scenario
+    from planner.terrain import build_terrain
 
     path = Path(__file__).resolve().parents[2] / "scenarios" / "paper_three_uav.yaml"
     scenario = load_scenario(path)
