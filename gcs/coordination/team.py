@@ -449,7 +449,7 @@ class TeamController(ZoneGuard, TeamTime):
             item_speed = self._passed_items(m, m.last_seq, seq)
             m.last_seq = seq
             if m.in_loiter():
-                m.loiter_entered_s, m.loiter_flown_m = t, 0.0
+                m.loiter_entered_s, m.loiter_flown_m = self._loiter_entry(m, t, dt_s, fix)
         elif m.in_loiter():
             m.loiter_flown_m += (fix.groundspeed_m_s or 0.0) * dt_s
         self._watch_goal(m, fix, e, n, out)
@@ -1168,14 +1168,33 @@ class TeamController(ZoneGuard, TeamTime):
 
     # -- arrival --------------------------------------------------------------------------------
 
+    @staticmethod
+    def _loiter_entry(m: Member, t: float, dt_s: float, fix: act.Fix) -> tuple[float, float]:
+        """When a vehicle first seen in loiter turns (its mission item) entered them, and how
+        far round it has flown since (m): from where along the route it was at its previous
+        fix, ``dt_s`` before, at its ground speed. Fixes a second or two apart make that
+        about now and nothing; after a gap (a link down, the coordinator restarted from its
+        checkpoint) the turns flown meanwhile are counted, not taken for none: a vehicle
+        believed to have every turn still ahead reads as late and is taken out of them."""
+        gs_m_s = fix.groundspeed_m_s or m.groundspeed_m_s
+        done = m.loiters_done()
+        if dt_s <= 0.0 or gs_m_s <= 0.0 or m.s_m is None or done >= len(m.track.loiters):
+            return t, 0.0
+        to_entry_m = max(m.track.loiters[done].s_m - m.s_m, 0.0)
+        entered_s = min(t, t - dt_s + to_entry_m / gs_m_s)
+        return entered_s, (t - entered_s) * gs_m_s
+
     def _watch_goal(
         self, m: Member, fix: act.Fix, e: float, n: float, out: list[act.Action]
     ) -> None:
         radius = self.config.arrival_radius_m
         d = math.hypot(e - m.goal_en_m[0], n - m.goal_en_m[1])
-        # Near its goal along its route too (as last located): a route that passes near its
-        # own goal on the way round (a re-plan around a zone) is not arriving there.
-        along_m = math.inf if m.s_m is None else m.track.length_m - m.s_m
+        # Near its goal along its route too (as last located, loiter turns ahead included): a
+        # route that passes near its own goal on the way round (a re-plan around a zone), or
+        # a loiter circle that comes near it, is not arriving there.
+        along_m = math.inf
+        if m.s_m is not None and not m.in_loiter():
+            along_m = m.track.remaining_m(m.s_m, m.loiters_done())
         if along_m > radius + GOAL_ALONG_SLACK_M:
             m.near_goal.clear()
             return

@@ -9,6 +9,8 @@ import dataclasses
 import math
 from collections.abc import Callable
 
+import pytest
+
 from gcs.coordination import actions as act
 from gcs.coordination.events import EventKind
 from gcs.coordination.member import Member
@@ -197,3 +199,52 @@ def test_a_vehicle_its_turns_would_leave_without_a_speed_reserve_is_taken_out_of
     (said,) = [r for r in reports(out, EventKind.LOITER) if r.payload["action"] == "leave"]
     assert "within" in said.reason and "of its top speed" in said.reason, said.reason
     assert reports(out, EventKind.ARRIVAL) == [] and team.team_ref_s == ref
+
+
+def test_turns_flown_while_the_vehicle_was_not_heard_are_counted_and_keep_it_in_them(
+    team: TeamController,
+) -> None:
+    """Heard last on its route 400 m short of its loiter, on time for its slot at the speed
+    it flies, then not for 300 s (a link down, or the coordinator restarted from its
+    checkpoint): heard again in the turns. It entered them 400 m / its ground speed after
+    that fix and has flown round since: counted so (not as just entered, with every turn
+    still ahead, which reads as late by the time it flew round meanwhile and, past what its
+    speed range absorbs, takes it out of its turns), and with the turns it has left it is on
+    time: neither taken out of them nor moving the team time."""
+    vid = "UAV3"
+    m = team.members[vid]
+    t0, _, job = _early(team, vid)
+    (up,) = of(team.handle(act.Computed(job, job.run()), t0 + 1), act.Upload)
+    team.handle(act.Installed(up), t0 + 2)
+    if m.busy_command:
+        team.handle(act.SpeedCommanded(vid, 15.0, "early", t0), t0 + 2)
+    (lo,) = [x for x in m.track.loiters if x.s_m > job.s_m - 1.0]
+    k = next(k for k, it in enumerate(m.mission.items) if it.command == MAV_CMD_NAV_LOITER_TURNS)
+    eas_m_s = (m.limits.airspeed_min_m_s + m.limits.airspeed_max_m_s) / 2.0
+    t_short = t0 + 10.0
+    short = fix(team, vid, lo.s_m - 400.0, t_short, eas_m_s)
+    assert short.mission_seq is not None and short.mission_seq < k
+    gs = short.groundspeed_m_s
+    assert gs is not None
+    # The slot: the rest of the route, the turns included, at that ground speed (still air).
+    route_m = m.track.length_m - lo.s_m
+    ref = t_short + (400.0 + lo.length_m + route_m) / gs - m.offset_s
+    _retarget(team, ref)
+    _answered(team, vid, team.handle(short, t_short), t_short)
+    gap_s = 300.0
+    t = t_short + gap_s
+    entered_s = t_short + 400.0 / gs
+    flown_m = (t - entered_s) * gs
+    assert 0.0 < flown_m < lo.length_m - 2_000.0  # well inside the turns when heard again
+    base = dataclasses.replace(fix(team, vid, lo.s_m, t_short, eas_m_s), mission_seq=k)
+    again = dataclasses.replace(on_loiter_circle(team, base, lo, 0), utc_s=short.utc_s + gap_s)
+    m.next_decision_s = -math.inf
+    out = team.handle(again, t)
+    assert m.in_loiter()
+    # To the located point of the fix short of it (the route's geometry, centimetres).
+    assert m.loiter_entered_s == pytest.approx(entered_s, abs=0.01)
+    assert m.loiter_flown_m == pytest.approx(flown_m, abs=0.5)
+    assert of(out, act.LeaveLoiter) == [], [r.reason for r in reports(out, EventKind.LOITER)]
+    assert reports(out, EventKind.ARRIVAL) == [] and team.team_ref_s == ref
+    d = m.last_decision
+    assert d is not None and d.verdict == "on_time", d
