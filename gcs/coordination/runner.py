@@ -512,6 +512,9 @@ class FlightRunner:
                 case act.CommandAltitude():
                     self._spawn(self._command_altitude(a))
                 case act.Upload():
+                    # The team has it pending (a mission sent before a restart is known by
+                    # it), whether or not an event goes with it.
+                    changed = at_once = True
                     self._spawn(self._install(a))
                 case act.Compute():
                     self._spawn(self._compute(a))
