@@ -2,7 +2,11 @@
 the flight is flown on from its checkpoint on the same simulator vehicles (which kept flying
 meanwhile), nothing launched twice, the team time and its version as they were when the
 service died, and the arrivals still held: judged by the oracle from the simulator's truth
-log against the slots set before launch (:func:`tests.verdict.assert_flown`)."""
+log against the slots set before launch (:func:`tests.verdict.assert_flown`).
+
+The team is the paper's at a quarter of its size (:func:`tests.teams.compact_paper`: some
+1,450 s of flight in this wind instead of 5,500 s): the same three vehicles, threats, pop-up
+and holding areas, POPUP1 appearing 300 s after UAV1's takeoff across UAV2's route only."""
 
 from __future__ import annotations
 
@@ -24,7 +28,6 @@ from tests.paperbounds import team_time_move_max_s
 from tests.service.conftest import serve
 from tests.service.test_flights_http import (
     ARRIVAL_TOLERANCE_S,
-    TOGETHER_MIN_S,
     _all_events,
     _flight,
     _ok,
@@ -33,7 +36,7 @@ from tests.service.test_flights_http import (
 )
 from tests.verdict import assert_flown
 
-pytestmark = pytest.mark.slow  # about 45 s of wall time
+pytestmark = pytest.mark.slow  # about 14 s of wall time (37 s at full size)
 
 AWAY_S = 300.0
 """How long (flight s) the service is away: its simulator flies this far past the kill and
@@ -44,9 +47,21 @@ RESUMED_MOVE_MAX_S = 30.0
 longest route and late by then) had been commanded its top speed, or a step under it, before
 the kill, and flew on at that unwatched: the gap (:data:`AWAY_S` of flight) costs it at most
 one step (1 m/s of 30), under 15 s; 30 s leaves as much again for its arrival estimate. A team
-time lost in the restart would move by the pop-up's 100 s and more (and its version start
-again). The arrivals are then judged as in test_flights_http: the resumed coordinator has
-thousands of seconds to correct what the gap cost."""
+time lost in the restart (the one set before launch taken up again) is caught by its version,
+which the wind and the pop-up had moved on: the resumed flight's must be the kept one's, one
+more for each team arrival said since. The arrivals are then judged as in test_flights_http:
+the resumed coordinator has some 380 s of flight (from some 1,070 s to the team time, some
+1,450 s) to correct what the gap cost."""
+POPUP_NOT_BEFORE_S = 558.0
+"""Mission seconds before which POPUP1 does not appear: 300 s (1,200 s at full size) after
+UAV1's takeoff, which is at its planned 258 s or later (its slot moves with the team time,
+only later). The test looks for the re-plan from there; here it comes at some 730 s: before
+UAV1 took off, the north wind had moved the team time, and the takeoff with it, 170 s later."""
+TOGETHER_MIN_S = 800.0
+"""Every pair must be airborne together this long (the separation judged over it): UAV1, the
+last up, takes off at its planned 258 s or later (some 430 s here), moved with the team time,
+and the three pass their goals together at the team time (some 1,450 s here): some 1,000 s
+(1,012-1,018 s seen, the truth going on past the goals until the simulator stops)."""
 CHECKPOINT_WITHIN_S = 200.0
 """Flight seconds (one wall second at 200x) within which the service keeps a team time it
 has said in its checkpoint (a team-time move is checkpointed at once)."""
@@ -113,9 +128,11 @@ def _kept_team_time(data: Path, fid: str) -> tuple[float, int] | None:
 
 async def _kill_and_restart(data: Path) -> None:
     async with serve(data) as first, first.client() as client:
-        fid, _ = await _flight(client, {"speedup": 200.0, "wind_m_s": 4.0, "seed": 3})
+        fid, _ = await _flight(
+            client, {"speedup": 200.0, "wind_m_s": 4.0, "seed": 3}, scenario_name="compact"
+        )
         _ok(await client.post(f"/v1/flights/{fid}/launch", json={}), 202)
-        await _until(client, fid, 2000.0)  # launched, and past the pop-up re-plan
+        await _until(client, fid, POPUP_NOT_BEFORE_S)  # launched, and up to the pop-up
         before = await _all_events(client, fid)
         while not any(e["kind"] == "replan" for e in before):
             await asyncio.sleep(0.05)
@@ -183,7 +200,8 @@ async def _resumed(
     carried = _carried_on(said, after, said_seq, after[-1]["seq"])
     assert final == (pytest.approx(carried[0], abs=1e-3), carried[1]), (said, final)
     assert -1e-3 <= final[0] - said[0] <= RESUMED_MOVE_MAX_S, (said, final)  # kept to 1 ms
-    move_max_s = team_time_move_max_s(4.0, 0.0)  # the rehearsal's wind, from the north (default)
+    # The rehearsal's wind, from the north (the default), on the compact team.
+    move_max_s = team_time_move_max_s(4.0, 0.0, scenario_name="compact")
     moved_s = said[0] - record["planned_arrival_s"]
     assert 0.0 <= moved_s <= move_max_s, (moved_s, move_max_s)
     # Every vehicle on its slot, apart by the scenario's separation and out of the zones, the
