@@ -38,6 +38,10 @@ final seconds."""
 TOGETHER_MIN_S = 1800.0
 """Every pair is airborne together at least this long (UAV3 takes off within 300 s, UAV1
 from 300 s, and they arrive together after 5,000 s): the separation is judged over it."""
+COMPACT_TOGETHER_MIN_S = 600.0
+"""The same for the compact paper flight (:func:`tests.teams.compact_paper`): UAV1, the last
+up, takes off at some 258 s and the three arrive together at 1,260 s or later, so every pair
+flies together some 1,000 s."""
 
 
 def truth_log(service: Service, fid: str) -> Path:
@@ -143,13 +147,24 @@ async def _all_events(client: httpx.AsyncClient, fid: str) -> list[dict[str, Any
         after = page["next_after_seq"]
 
 
-def _uav3_box() -> list[tuple[float, float]]:
-    """A 3 km no-fly square on UAV3's planned route 75 % along it, at least 8 km from the
-    other two routes (the test's own plan of the same scenario and seed)."""
-    _, schedule = paper_schedule(1)
+UAV3_BOXES = {"paper": (0.75, 1_500.0, 8_000.0), "compact": (0.8, 375.0, 2_000.0)}
+"""Per scenario: how far along UAV3's planned route the no-fly square lies (fraction), its
+half side (m) and how close (m) the other routes may come to its centre. Full size: 3 km
+across, 75 % along (just past B3, 5.5 km from its centre) and 8 km from the others. Compact
+(0.25 scale): a quarter of each distance, 750 m across and 2 km from the others, but 80 %
+along: 75 % lies in B3 (600 m from its centre, radius 1.25 km), where UAV3 is to hold, while
+80 % is just past it (1.5 km from the centre) as 75 % is at full size."""
+
+
+def _uav3_box(scenario_name: str = "paper") -> list[tuple[float, float]]:
+    """A no-fly square on UAV3's planned route (:data:`UAV3_BOXES`: 3 km across 75 % along
+    it at full size, at least 8 km from the other two routes), from the test's own plan of
+    the scenario (``scenario_name`` "paper" or "compact") and seed."""
+    along, h, clear_m = UAV3_BOXES[scenario_name]
+    _, schedule = paper_schedule(1, scenario_name)
     vs = schedule.vehicle("UAV3")
     assert vs is not None
-    p = vs.path.pose_at(0.75 * vs.path.length_m)
+    p = vs.path.pose_at(along * vs.path.length_m)
     for other in ("UAV1", "UAV2"):
         o = schedule.vehicle(other)
         assert o is not None
@@ -157,8 +172,7 @@ def _uav3_box() -> list[tuple[float, float]]:
             math.hypot(q.east_m - p.east_m, q.north_m - p.north_m)
             for q in (o.path.pose_at(float(s)) for s in np.linspace(0, o.path.length_m, 400))
         )
-        assert d > 8000.0, other
-    h = 1500.0
+        assert d > clear_m, (other, d)
     e, n = p.east_m, p.north_m
     return [(e - h, n - h), (e + h, n - h), (e + h, n + h), (e - h, n + h)]
 

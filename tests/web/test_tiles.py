@@ -1,5 +1,7 @@
 """The console's tile layer in Chromium against ``python -m gcs serve`` with a tile source: an
-MBTiles file of solid-colour tiles over the paper scenario's area, each tile its own colour.
+MBTiles file of solid-colour tiles over the compact paper scenario's area
+(:func:`tests.teams.compact_paper`, the flight the test plans and uploads), each tile its own
+colour.
 The page asks the service (and nothing else) for the tiles the view shows and draws each where
 its corners fall in the scenario's local metres; the base-layer buttons switch between the
 tiles and the hillshade. Where a tile lands is checked by the canvas's pixels against points
@@ -17,17 +19,22 @@ from pathlib import Path
 import pytest
 
 from planner.geo import LocalFrame
-from planner.scenario import load_scenario
+from planner.scenario import parse_scenario
 from tests.api.mbtiles import solid_png, tile_of, write_mbtiles
-from tests.gcs.conftest import PAPER
 from tests.service.conftest import Service, serve
 from tests.service.test_flights_http import _flight
+from tests.teams import compact_paper
 from tests.web.conftest import Console
 
-pytestmark = pytest.mark.slow  # a flight planned and uploaded: about 15 s
+pytestmark = pytest.mark.slow  # a compact flight planned and uploaded: about 3 s
 
-ZOOMS = (8, 9)
-MARGIN_DEG = 0.3
+ZOOMS = (10, 11)
+"""The tile source's zooms. The view fitted to the compact area (50 km across) is four times
+as close as to the paper's (200 km), two zooms deeper: at 10 and 11 it shows as many tiles,
+as large, as 8 and 9 did over the paper's area (zoom 11 drawn, 12 wanted at 1:1)."""
+MARGIN_DEG = 0.075
+"""Tiles beyond the area's edges, as far as the view reaches past them (0.3 deg about the
+paper's area, a quarter of it about the compact one)."""
 SAMPLES = (0.03, 0.25, 0.5, 0.75, 0.97)
 """Where each tile is sampled, as fractions of its side (0.03: a few pixels inside)."""
 TILE_URL = re.compile(r"^http://127\.0\.0\.1:\d+/v1/tiles/(\d+)/(\d+)/(\d+)\.png$")
@@ -43,8 +50,8 @@ def _colour(k: int) -> Rgb:
 
 
 def _tile_set() -> tuple[dict[Tile, Rgb], tuple[float, float, float, float]]:
-    """A colour per tile of ZOOMS over the paper scenario's area (and a margin); the bounds."""
-    area = load_scenario(PAPER).area
+    """A colour per tile of ZOOMS over the compact scenario's area (and a margin); the bounds."""
+    area = parse_scenario(compact_paper()).area
     frame = LocalFrame(area.origin.lat_deg, area.origin.lon_deg)
     edge = [
         frame.to_geodetic(
@@ -88,7 +95,7 @@ async def service(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> AsyncItera
     """The service with the tile file as its tile source (``TCGCS_TILES_MBTILES``)."""
     tiles = {(z, x, (1 << z) - 1 - y): solid_png(c) for (z, x, y), c in COLOURS.items()}
     meta = {
-        "name": "paper area test tiles",
+        "name": "compact paper area test tiles",
         "format": "png",
         "bounds": ",".join(f"{v:.6f}" for v in BOUNDS),
         "minzoom": str(min(ZOOMS)),
@@ -101,9 +108,10 @@ async def service(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> AsyncItera
         yield s
 
 
-async def _samples(c: Console, zoom: int) -> list[tuple[Tile, Rgb | None]]:
+async def _samples(c: Console, zoom: int) -> list[tuple[Tile, Rgb | None, tuple[float, float]]]:
     """Per stored tile of ``zoom``, the canvas's colour at points inside it (None: off the
-    canvas), the points projected here into the scenario's local metres."""
+    canvas) and where on the canvas they are (CSS px), the points projected here into the
+    scenario's local metres."""
     origin = await c.js("tcgcs.state.mapDoc.origin")
     frame = LocalFrame(origin["lat_deg"], origin["lon_deg"])
     points: list[tuple[Tile, tuple[float, float]]] = []
@@ -114,13 +122,14 @@ async def _samples(c: Console, zoom: int) -> list[tuple[Tile, Rgb | None]]:
     rgbs = await c.js(
         """pts => { const m = tcgcs.map;
           return pts.map(([e, n]) => { const [x, y] = m.toScreen(e, n);
-            if (x < 0 || y < 0 || x >= m.width || y >= m.height) return null;
+            if (x < 0 || y < 0 || x >= m.width || y >= m.height) return [null, x, y];
             const d = m.ctx.getImageData(Math.floor(x * m.dpr), Math.floor(y * m.dpr), 1, 1).data;
-            return [d[0], d[1], d[2]]; }); }""",
+            return [[d[0], d[1], d[2]], x, y]; }); }""",
         [p for _, p in points],
     )
     return [
-        (t, None if rgb is None else tuple(rgb)) for (t, _), rgb in zip(points, rgbs, strict=True)
+        (t, None if rgb is None else tuple(rgb), (x, y))
+        for (t, _), (rgb, x, y) in zip(points, rgbs, strict=True)
     ]
 
 
@@ -141,7 +150,7 @@ def _tile_requests(c: Console) -> list[str]:
 async def test_the_console_draws_the_service_tiles_under_the_flight(console: Console) -> None:
     c, page = console, console.page
     async with c.service.client() as client:
-        fid, _ = await _flight(client, {"speedup": 200.0, "seed": 3})
+        fid, _ = await _flight(client, {"speedup": 200.0, "seed": 3}, scenario_name="compact")
     await c.open(f"/ui/?flight={fid}")
     await c.login()
     await c.until("id => tcgcs.state.flightId === id && tcgcs.state.mapDoc", fid)
@@ -182,17 +191,19 @@ async def test_the_console_draws_the_service_tiles_under_the_flight(console: Con
     await page.click('#map-base [data-base="hillshade"]')
     await c.until("() => tcgcs.geometry().base === 'hillshade' && !tcgcs.map.dirty")
     n_asked = len(_tile_requests(c))
-    shaded = [(t, rgb) for t, rgb in await _samples(c, zoom) if rgb is not None]
+    shaded = [(t, rgb) for t, rgb, _ in await _samples(c, zoom) if rgb is not None]
     assert not [t for t, rgb in shaded if _near(rgb, COLOURS[t])]
     await page.mouse.move(*(await _centre(c)))
     await page.mouse.wheel(0, -300)  # a new view: the hillshade needs no tile
     await c.until("() => !tcgcs.map.dirty")
     assert len(_tile_requests(c)) == n_asked
 
-    # Back to the tiles, then in close: the deepest zoom's tiles magnified, still in place.
+    # Back to the tiles, then in close: the deepest zoom's tiles magnified, still in place. The
+    # view closes in on the sample nearest its centre that shows its own tile (the centre
+    # itself lies in SAM1's disc, whose tint covers the one sample left in view about it).
     await page.click('#map-base [data-base="tiles"]')
     await _drawn(c)
-    await c.js("tcgcs.map.zoomAt(tcgcs.map.width / 2, tcgcs.map.height / 2, 8)")
+    await c.js("([x, y]) => tcgcs.map.zoomAt(x, y, 8)", await _own_spot(c))
     await _drawn(c)
     assert await c.js("tcgcs.map.tiles.idealZoom(tcgcs.map)") > max(ZOOMS) + 2
     _, own = await _placed(c)
@@ -205,7 +216,7 @@ async def _placed(c: Console) -> tuple[list[tuple[Tile, Rgb]], list[Tile]]:
     colour; none shows a neighbour's."""
     zoom = await c.js("tcgcs.map.tiles.zoom")
     palette = {COLOURS[t]: t for t in COLOURS if t[0] == zoom}
-    seen = [(t, rgb) for t, rgb in await _samples(c, zoom) if rgb is not None]
+    seen = [(t, rgb) for t, rgb, _ in await _samples(c, zoom) if rgb is not None]
     wrong = [
         (t, other)
         for t, rgb in seen
@@ -214,6 +225,16 @@ async def _placed(c: Console) -> tuple[list[tuple[Tile, Rgb]], list[Tile]]:
     ]
     assert not wrong, wrong[:5]
     return seen, [t for t, rgb in seen if _near(rgb, COLOURS[t])]
+
+
+async def _own_spot(c: Console) -> tuple[float, float]:
+    """Where on the canvas (CSS px) the sample nearest its centre that shows its own tile's
+    colour is."""
+    zoom = await c.js("tcgcs.map.tiles.zoom")
+    size = await c.js("[tcgcs.map.width, tcgcs.map.height]")
+    own = [xy for t, rgb, xy in await _samples(c, zoom) if _near(rgb, COLOURS[t])]
+    assert own
+    return min(own, key=lambda xy: math.dist(xy, (size[0] / 2, size[1] / 2)))
 
 
 async def _centre(c: Console) -> tuple[float, float]:
