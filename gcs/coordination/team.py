@@ -26,6 +26,7 @@ re-time without it or abort, as ``on_vehicle_lost`` says. The flight ends at its
 
 from __future__ import annotations
 
+import functools
 import math
 from collections.abc import Mapping, Sequence
 from typing import Any
@@ -592,7 +593,7 @@ class TeamController(ZoneGuard, TeamTime):
         cfg = self.config
         r = m.resolving
         if r is not None:
-            if t >= r.until_s:
+            if t >= r.until_s and self._past(m, t, r.other):
                 m.resolving = None
                 m.next_decision_s = -math.inf
                 out.append(
@@ -607,7 +608,7 @@ class TeamController(ZoneGuard, TeamTime):
             else:
                 self._fly_resolution(m, t, out)
         if m.vehicle_id in self.vertical:
-            self.vertical.fly(m, t, out)
+            self.vertical.fly(m, t, functools.partial(self._past, m, t), out)
         busy = self._resolving_from(m) is not None
         if cfg.resolve_horizon_s <= 0.0 or t < m.next_resolve_s:
             return
@@ -695,6 +696,20 @@ class TeamController(ZoneGuard, TeamTime):
             and res.keeps_separation
             and res.predicted_m >= RESOLVED_MARGIN * self.scenario.separation_m
         )
+
+    def _past(self, m: Member, t: float, other: str) -> bool:
+        """``m`` is past ``other`` as they fly now (the separation watch's latest positions and
+        velocities): apart horizontally by :data:`RESOLVED_MARGIN` separations and not
+        closing, or ``other`` not heard."""
+        pos = self.separation.positions
+        a, b = pos.get(m.vehicle_id), pos.get(other)
+        if a is None or b is None:
+            return True
+        ae, an, _ = a.at(t)
+        be, bn, _ = b.at(t)
+        de, dn = be - ae, bn - an
+        closing = de * (b.ve_m_s - a.ve_m_s) + dn * (b.vn_m_s - a.vn_m_s) < 0.0
+        return not closing and math.hypot(de, dn) >= RESOLVED_MARGIN * self.scenario.separation_m
 
     def _resolving_from(self, m: Member) -> str | None:
         """The vehicle ``m`` flies a resolution (speed or height) to keep apart from."""
@@ -1172,17 +1187,22 @@ class TeamController(ZoneGuard, TeamTime):
     def _loiter_entry(m: Member, t: float, dt_s: float, fix: act.Fix) -> tuple[float, float]:
         """When a vehicle first seen in loiter turns (its mission item) entered them, and how
         far round it has flown since (m): from where along the route it was at its previous
-        fix, ``dt_s`` before, at its ground speed. Fixes a second or two apart make that
-        about now and nothing; after a gap (a link down, the coordinator restarted from its
-        checkpoint) the turns flown meanwhile are counted, not taken for none: a vehicle
-        believed to have every turn still ahead reads as late and is taken out of them."""
-        gs_m_s = fix.groundspeed_m_s or m.groundspeed_m_s
+        fix, ``dt_s`` before, at its true airspeed (round a circle the ground speed swings
+        with the wind either side of it; a fix's own is the side it is on). Fixes a second or
+        two apart make that about now and nothing; after a gap (a link down, the coordinator
+        restarted from its checkpoint) the turns flown meanwhile are counted, not taken for
+        none: a vehicle believed to have every turn still ahead reads as late and is taken
+        out of them."""
         done = m.loiters_done()
-        if dt_s <= 0.0 or gs_m_s <= 0.0 or m.s_m is None or done >= len(m.track.loiters):
+        if dt_s <= 0.0 or m.s_m is None or done >= len(m.track.loiters):
             return t, 0.0
-        to_entry_m = max(m.track.loiters[done].s_m - m.s_m, 0.0)
-        entered_s = min(t, t - dt_s + to_entry_m / gs_m_s)
-        return entered_s, (t - entered_s) * gs_m_s
+        lo = m.track.loiters[done]
+        tas_m_s = (fix.airspeed_m_s or m.airspeed_m_s or 0.0) * m.tas_per_eas(lo.s_m)
+        if tas_m_s <= 0.0:
+            return t, 0.0
+        to_entry_m = max(lo.s_m - m.s_m, 0.0)
+        entered_s = min(t, t - dt_s + to_entry_m / tas_m_s)
+        return entered_s, (t - entered_s) * tas_m_s
 
     def _watch_goal(
         self, m: Member, fix: act.Fix, e: float, n: float, out: list[act.Action]

@@ -16,6 +16,7 @@ ceiling and the highest ground under the stretch it flies meanwhile plus its cle
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -105,16 +106,20 @@ class VerticalFlight:
                 },
             )
         )
-        self.fly(m, t_s, out)
+        self.fly(m, t_s, lambda _other: False, out)  # its height asked: not past yet
 
-    def fly(self, m: Member, t_s: float, out: list[act.Action]) -> None:
+    def fly(
+        self, m: Member, t_s: float, past: Callable[[str], bool], out: list[act.Action]
+    ) -> None:
         """At each fix of a vehicle flying a manoeuvre: its height asked again on a new
-        mission item; past its end, the item's own altitude asked and the manoeuvre over."""
+        mission item; once its end has come and it is ``past`` the other (as they fly now:
+        the encounter predicted minutes ahead may come later than foreseen), the item's own
+        altitude asked and the manoeuvre over."""
         man = self.flying.get(m.vehicle_id)
         if man is None or man.busy:
             return
         res = man.resolution
-        if t_s >= res.until_s:
+        if t_s >= res.until_s and past(res.other):
             del self.flying[m.vehicle_id]
             back = self._profile(m)
             if back is not None:

@@ -233,11 +233,17 @@ def test_turns_flown_while_the_vehicle_was_not_heard_are_counted_and_keep_it_in_
     _answered(team, vid, team.handle(short, t_short), t_short)
     gap_s = 300.0
     t = t_short + gap_s
-    entered_s = t_short + 400.0 / gs
-    flown_m = (t - entered_s) * gs
+    # At its true airspeed (still air here: its ground speed too) at the loiter.
+    tas_m_s = eas_m_s * m.tas_per_eas(lo.s_m)
+    entered_s = t_short + 400.0 / tas_m_s
+    flown_m = (t - entered_s) * tas_m_s
     assert 0.0 < flown_m < lo.length_m - 2_000.0  # well inside the turns when heard again
     base = dataclasses.replace(fix(team, vid, lo.s_m, t_short, eas_m_s), mission_seq=k)
-    again = dataclasses.replace(on_loiter_circle(team, base, lo, 0), utc_s=short.utc_s + gap_s)
+    # Heard again on the side of the circle a wind would slow it on: the ground speed there
+    # says nothing of how fast it went round (its true airspeed does).
+    again = dataclasses.replace(
+        on_loiter_circle(team, base, lo, 0), utc_s=short.utc_s + gap_s, groundspeed_m_s=0.7 * gs
+    )
     m.next_decision_s = -math.inf
     out = team.handle(again, t)
     assert m.in_loiter()
