@@ -68,8 +68,9 @@ the arrival radius and this much more (a fix or two of travel)."""
 
 
 RESOLVED_MARGIN = 1.1
-"""A resolution is counted on only if it keeps the pair this many separations apart as
-predicted; a speed resolution short of it gives way to one by height."""
+"""Pairs are screened for conflicts at this many separations, and a resolution is counted on
+only if it keeps the pair that far apart as predicted; a speed resolution short of it gives
+way to one by height."""
 NEIGHBOUR_SEPARATIONS = 2.0
 """A conflict's resolution is judged against the vehicles forecast within this many
 separations of either of the pair too (:func:`gcs.coordination.resolution.resolve`)."""
@@ -626,7 +627,9 @@ class TeamController(ZoneGuard, TeamTime):
         forecasts.update(mine, t)
         if busy:
             return
-        d_s = self.scenario.separation_m
+        # Screened and resolved with the margin a forecast minutes ahead needs (a pair
+        # forecast 5-10 % over the separation came under it as flown).
+        d_s = RESOLVED_MARGIN * self.scenario.separation_m
         for other in forecasts.near(m.vehicle_id, d_s, t):
             x = self.members[other]
             if x.over or self._resolving_from(x) == m.vehicle_id:

@@ -119,12 +119,16 @@ def resolve_vertical(
     end_s = min(bound, now_s + look_ahead_s)
     if end_s <= now_s:
         return None
-    t = np.arange(now_s, end_s + step_s, step_s)
+    # A conflict within the look-ahead is resolved as judged over twice it: a pair screened
+    # as it comes under the separation at the look-ahead's end meets beyond it (a manoeuvre
+    # sized for where it stood then left a head-on pair 180 m apart).
+    t = np.arange(now_s, min(bound, now_s + 2.0 * look_ahead_s) + step_s, step_s)
     pa = a.positions(t, a.airspeed_m_s, response_s)
     pb = b.positions(t, b.airspeed_m_s, response_s)
     flat = np.sqrt(((pa - pb) ** 2).sum(axis=1))
     as_flown = np.sqrt(flat**2 + (a.alt_m - b.alt_m) ** 2)
-    if np.isnan(as_flown).all() or not np.nanmin(as_flown) < separation_m:
+    within = as_flown[t <= end_s]
+    if np.isnan(within).all() or not np.nanmin(within) < separation_m:
         return None
     k = int(np.nanargmin(as_flown))
     unresolved_m, at_s = float(as_flown[k]), float(t[k])
