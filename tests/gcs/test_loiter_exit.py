@@ -14,6 +14,7 @@ import pytest
 from gcs.coordination import actions as act
 from gcs.coordination.events import EventKind
 from gcs.coordination.member import Member
+from gcs.coordination.replanning import MissionChanges
 from gcs.coordination.routetrack import LoiterSpec
 from gcs.coordination.team import TeamController
 from planner.mission import MAV_CMD_NAV_LOITER_TURNS
@@ -254,3 +255,29 @@ def test_turns_flown_while_the_vehicle_was_not_heard_are_counted_and_keep_it_in_
     assert reports(out, EventKind.ARRIVAL) == [] and team.team_ref_s == ref
     d = m.last_decision
     assert d is not None and d.verdict == "on_time", d
+
+
+def test_a_vehicle_in_its_turns_is_timed_to_a_splice_at_its_true_airspeed_not_one_fixs_ground_speed(
+    team: TeamController,
+) -> None:
+    """When a re-plan times where a vehicle in its loiter turns will be (the waypoint its new
+    route is spliced at): the turns it has left (less what it has flown round them) and the
+    path after them at its true airspeed, not at the ground speed of the fix it was last
+    heard at, which round a circle in wind is the side of the wind it is on (14 m/s on the
+    upwind side for a vehicle averaging 17 m/s round it set a splice 200 s late)."""
+    vid = "UAV3"
+    m, lo, _, t1, on_circle = _in_turns(team, vid)
+    i = SETTLED + 1
+    t = t1 + 2.0 * i
+    upwind = dataclasses.replace(on_circle(i), groundspeed_m_s=0.6 * on_circle(i).groundspeed_m_s)
+    team.handle(upwind, t)
+    assert m.in_loiter() and m.airspeed_m_s is not None
+    tas_m_s = m.airspeed_m_s * m.tas_per_eas(m.s_m)
+    assert m.groundspeed_m_s < 0.7 * tas_m_s  # the fix's own: the slow side
+    speed = MissionChanges._speed_ahead_m_s(m)
+    assert speed == pytest.approx(tas_m_s)
+    s_k = m.track.length_m - 100.0
+    left_m = lo.length_m - m.loiter_flown_m
+    assert 0.0 < left_m < lo.length_m
+    expected = t + (left_m + s_k - m.s_m) / tas_m_s
+    assert MissionChanges._reaches_s(m, t, s_k, speed) == pytest.approx(expected, abs=1e-6)
