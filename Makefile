@@ -41,15 +41,11 @@ typecheck: $(STAMP)
 TEST_WORKERS ?= $(shell echo $$(( $$(nproc) + 1 )))
 PYTEST := $(VENV)/bin/pytest -q -n $(TEST_WORKERS) --dist loadgroup
 
-# The sources are byte-compiled once first: with PYTHONDONTWRITEBYTECODE set (as in CI) every
-# simulator, rehearsal and service a test starts compiled them again (a fifth of its start-up).
 pytest: $(STAMP)
-	$(PY) -m compileall -q planner gcs sitl_stub >/dev/null
 	$(PYTEST) --durations=30
 
 # Everything but the whole flights and the other long tests (marked slow).
 test-quick: $(STAMP) browser lint typecheck
-	$(PY) -m compileall -q planner gcs sitl_stub >/dev/null
 	$(PYTEST) -m "not slow"
 
 demo: $(STAMP)
