@@ -345,6 +345,8 @@ class PopupJob:
     lead_s: float
     holding: frozenset[str] = frozenset()
     """Vehicles re-planned from the point they hold at (anchored there, not ahead)."""
+    missions: Mapping[str, PathMission] = field(default_factory=dict)
+    """Each vehicle's mission as it was when the job was decided (``keeps`` are its items)."""
     time_up: Callable[[], bool] | None = None
     """Ends the route search with the best routes so far (the runner's wall-clock budget:
     :attr:`planner.aco.AcoOptions.time_up`)."""

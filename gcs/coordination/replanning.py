@@ -497,6 +497,7 @@ class MissionChanges:
             t,
             lead,
             frozenset(holding),
+            {vid: self.members[vid].mission for vid in keeps},
         )
         out.append(act.Compute(job))
 
@@ -620,6 +621,22 @@ class MissionChanges:
                 continue  # re-timed to a team time that does not come
             if m.vehicle_id in outcome.affected:
                 m.planned_paths.append({"label": f"after {zone.id}", "t_s": t, "en_m": path_en(vs)})
+            if job.missions.get(m.vehicle_id, m.mission) is not m.mission:
+                # Its mission changed while the route was worked out (loiter turns put in):
+                # the item the route was to be spliced at is not the one it was.
+                out.append(
+                    act.Report(
+                        EventKind.POPUP,
+                        f"{zone.id}: its mission changed while its new route was worked out; "
+                        "not sent: it flies on as it is (held short of the zone if it "
+                        "crosses it, and re-planned from there)",
+                        m.vehicle_id,
+                        t_s=t,
+                    )
+                )
+                self._no_route(m.vehicle_id, "its mission changed during its re-plan", t, None)
+                self._replan_now(m.vehicle_id, zone.id)
+                continue
             if m.phase == "ground":
                 m.takeoff_s = vs.takeoff_s
             keep = job.keeps[m.vehicle_id]

@@ -542,6 +542,30 @@ def test_a_popup_re_plans_the_vehicles_whose_routes_it_touches_and_no_other(
     assert team.team_ref_s == outcome.schedule.required_arrival_s
 
 
+def test_a_re_plan_whose_vehicle_changed_mission_meanwhile_is_not_spliced_into_it(
+    team: TeamController,
+) -> None:
+    """While the re-plan round a pop-up is worked out, one of its vehicles is given a new
+    mission (loiter turns put in): the items the new route was to be spliced at are the old
+    mission's, not this one's (a splice there raised in flight, or would start the route from
+    the wrong waypoint). Its route is not sent, said so; the others' are."""
+    zones = build_threats(team.scenario, {vid: m.takeoff_s for vid, m in team.members.items()})
+    (zone,) = popup_zones(zones)
+    t_p = float(zone.appears_at_s or 0.0)
+    _on_schedule(team, t_p - 1.0)
+    (job,) = [a.job for a in of(team.handle(act.Tick(), t_p), act.Compute)]
+    assert isinstance(job, act.PopupJob)
+    outcome = job.run()
+    assert "UAV1" in outcome.affected
+    m = team.members["UAV1"]
+    m.mission = dataclasses.replace(m.mission)  # another mission installed meanwhile
+    out = team.handle(act.Computed(job, outcome), t_p + 1.0)
+    uploads = {u.vehicle_id for u in of(out, act.Upload)}
+    assert "UAV1" not in uploads and uploads, uploads
+    (said,) = [r for r in reports(out, EventKind.POPUP) if r.vehicle == "UAV1"]
+    assert "its mission changed while its new route was worked out" in said.reason
+
+
 def test_a_re_plan_pair_left_under_the_separation_is_alarmed_before_any_upload(
     team: TeamController,
 ) -> None:
