@@ -222,6 +222,12 @@ class MissionChanges:
             max_spacing_m=self.config.waypoint_spacing_m,
         )
 
+    def _mission_to_be(self, vehicle_id: str) -> PathMission:
+        """The mission a vehicle flies once what is on its way to it is installed (the item
+        numbers a re-plan's splice refers to)."""
+        up = self.pending.get(vehicle_id)
+        return up.mission if up is not None else self.members[vehicle_id].mission
+
     def _spliced(self, m: Member, vs: VehicleSchedule, keep: int | None) -> PathMission:
         new = self._path_mission(vs)
         return new if keep is None else splice_mission(m.mission, keep, new)
@@ -497,7 +503,7 @@ class MissionChanges:
             t,
             lead,
             frozenset(holding),
-            {vid: self.members[vid].mission for vid in keeps},
+            {vid: self._mission_to_be(vid) for vid in keeps},
         )
         out.append(act.Compute(job))
 
@@ -619,9 +625,7 @@ class MissionChanges:
                 continue
             if stuck and m.vehicle_id not in outcome.affected:
                 continue  # re-timed to a team time that does not come
-            if m.vehicle_id in outcome.affected:
-                m.planned_paths.append({"label": f"after {zone.id}", "t_s": t, "en_m": path_en(vs)})
-            if job.missions.get(m.vehicle_id, m.mission) is not m.mission:
+            if job.missions.get(m.vehicle_id) is not self._mission_to_be(m.vehicle_id):
                 # Its mission changed while the route was worked out (loiter turns put in):
                 # the item the route was to be spliced at is not the one it was.
                 out.append(
@@ -629,7 +633,7 @@ class MissionChanges:
                         EventKind.POPUP,
                         f"{zone.id}: its mission changed while its new route was worked out; "
                         "not sent: it flies on as it is (held short of the zone if it "
-                        "crosses it, and re-planned from there)",
+                        "crosses a forbidden one, and re-planned from there)",
                         m.vehicle_id,
                         t_s=t,
                     )
@@ -637,6 +641,8 @@ class MissionChanges:
                 self._no_route(m.vehicle_id, "its mission changed during its re-plan", t, None)
                 self._replan_now(m.vehicle_id, zone.id)
                 continue
+            if m.vehicle_id in outcome.affected:
+                m.planned_paths.append({"label": f"after {zone.id}", "t_s": t, "en_m": path_en(vs)})
             if m.phase == "ground":
                 m.takeoff_s = vs.takeoff_s
             keep = job.keeps[m.vehicle_id]

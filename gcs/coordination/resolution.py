@@ -119,6 +119,9 @@ class Resolution:
     """When that would be."""
     keeps_separation: bool = True
     """Whether :attr:`predicted_m` is the whole separation or more."""
+    hold_end_s: float = math.inf
+    """The latest it can be held and its mover still make its slot (:func:`longest_hold_s`):
+    held on past :attr:`until_s` until the pair is past each other, never past this."""
 
 
 def closest_m(
@@ -216,7 +219,7 @@ def resolve(
         # as they fly instead.
         until = max(until, at + release_after_s)
     until = min(until, hold_end)
-    return Resolution(vid, other, speed, until, d, as_flown, at, d >= separation_m)
+    return Resolution(vid, other, speed, until, d, as_flown, at, d >= separation_m, hold_end)
 
 
 def longest_hold_s(mover: Ahead, airspeed_m_s: float, now_s: float) -> float:

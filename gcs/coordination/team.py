@@ -71,9 +71,13 @@ RESOLVED_MARGIN = 1.1
 """Pairs are screened for conflicts at this many separations, and a resolution is counted on
 only if it keeps the pair that far apart as predicted; a speed resolution short of it gives
 way to one by height."""
+HOLD_ROOM_S = 60.0
+"""A height resolution held on past its end (the pair not yet past) keeps its height only while
+it has room over the ground it flies this far ahead (flight s)."""
 NEIGHBOUR_SEPARATIONS = 2.0
 """A conflict's resolution is judged against the vehicles forecast within this many
-separations of either of the pair too (:func:`gcs.coordination.resolution.resolve`)."""
+screening separations (:data:`RESOLVED_MARGIN` separations each) of either of the pair too
+(:func:`gcs.coordination.resolution.resolve`)."""
 LANDING_MARGIN_S = 120.0
 """Flare, roll-out and the disarm delay, on top of the glide (see ``landing_bound_s``)."""
 POPUP_SEEN_LATE_S = 5.0
@@ -594,7 +598,7 @@ class TeamController(ZoneGuard, TeamTime):
         cfg = self.config
         r = m.resolving
         if r is not None:
-            if t >= r.until_s and self._past(m, t, r.other):
+            if t >= r.until_s and (self._past(m, t, r.other) or t >= r.hold_end_s):
                 m.resolving = None
                 m.next_decision_s = -math.inf
                 out.append(
@@ -609,7 +613,7 @@ class TeamController(ZoneGuard, TeamTime):
             else:
                 self._fly_resolution(m, t, out)
         if m.vehicle_id in self.vertical:
-            self.vertical.fly(m, t, functools.partial(self._past, m, t), out)
+            self.vertical.fly(m, t, functools.partial(self._manoeuvre_over, m, t), out)
         busy = self._resolving_from(m) is not None
         if cfg.resolve_horizon_s <= 0.0 or t < m.next_resolve_s:
             return
@@ -700,10 +704,33 @@ class TeamController(ZoneGuard, TeamTime):
             and res.predicted_m >= RESOLVED_MARGIN * self.scenario.separation_m
         )
 
+    def _manoeuvre_over(self, m: Member, t: float, res: VerticalResolution) -> str | None:
+        """Why ``m``'s height resolution, its end come, is over (None: held on): the pair is
+        past each other, or the height it holds has no room over the ground it flies next
+        (checked over the minute ahead: the manoeuvre's own room was checked only as far as
+        it was foreseen to last)."""
+        if self._past(m, t, res.other):
+            return "past"
+        if self.world is None:
+            return None
+        room = room_ahead(
+            m, self.scenario.vehicle(m.vehicle_id), self.world.terrain, t, t + HOLD_ROOM_S
+        )
+        if room is not None and not room.floor_m <= res.alt_m <= room.ceiling_m:
+            return (
+                f"{res.alt_m:.0f} m AMSL is outside its room over the ground ahead "
+                f"({room.floor_m:.0f}-{room.ceiling_m:.0f} m)"
+            )
+        return None
+
     def _past(self, m: Member, t: float, other: str) -> bool:
         """``m`` is past ``other`` as they fly now (the separation watch's latest positions and
         velocities): apart horizontally by :data:`RESOLVED_MARGIN` separations and not
-        closing, or ``other`` not heard."""
+        closing; or ``other`` no longer flying its mission (arrived, lost, aborted) or never
+        heard."""
+        x = self.members.get(other)
+        if x is None or x.over:
+            return True
         pos = self.separation.positions
         a, b = pos.get(m.vehicle_id), pos.get(other)
         if a is None or b is None:
@@ -744,8 +771,12 @@ class TeamController(ZoneGuard, TeamTime):
         rates: list[float] = []
         for ahead in (a, b):
             v = self.scenario.vehicle(ahead.vehicle)
-            room = room_ahead(
-                self.members[ahead.vehicle], v, self.world.terrain, t, t + cfg.vertical_horizon_s
+            room = room_ahead(  # over all the manoeuvre may last (judged over twice it)
+                self.members[ahead.vehicle],
+                v,
+                self.world.terrain,
+                t,
+                t + 2.0 * cfg.vertical_horizon_s,
             )
             if room is not None:
                 rooms[ahead.vehicle] = room

@@ -106,20 +106,36 @@ class VerticalFlight:
                 },
             )
         )
-        self.fly(m, t_s, lambda _other: False, out)  # its height asked: not past yet
+        self.fly(m, t_s, lambda _res: None, out)  # its height asked: not over yet
 
     def fly(
-        self, m: Member, t_s: float, past: Callable[[str], bool], out: list[act.Action]
+        self,
+        m: Member,
+        t_s: float,
+        over: Callable[[VerticalResolution], str | None],
+        out: list[act.Action],
     ) -> None:
         """At each fix of a vehicle flying a manoeuvre: its height asked again on a new
-        mission item; once its end has come and it is ``past`` the other (as they fly now:
-        the encounter predicted minutes ahead may come later than foreseen), the item's own
-        altitude asked and the manoeuvre over."""
+        mission item; once its end has come and it is ``over`` (the pair past each other as
+        they fly now: the encounter predicted minutes ahead may come later than foreseen; or
+        its height without room ahead, said in an alarm), the item's own altitude asked and
+        the manoeuvre over."""
         man = self.flying.get(m.vehicle_id)
         if man is None or man.busy:
             return
         res = man.resolution
-        if t_s >= res.until_s and past(res.other):
+        why = over(res) if t_s >= res.until_s else None
+        if why is not None and why != "past":
+            out.append(
+                act.Report(
+                    EventKind.ALARM,
+                    f"{m.vehicle_id} back to its profile before it is past {res.other}: {why}",
+                    m.vehicle_id,
+                    t_s=t_s,
+                    payload={"other": res.other, "why": "no room to hold the height"},
+                )
+            )
+        if why is not None:
             del self.flying[m.vehicle_id]
             back = self._profile(m)
             if back is not None:

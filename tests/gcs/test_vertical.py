@@ -15,7 +15,7 @@ import pytest
 from gcs.coordination import actions as act
 from gcs.coordination.config import FlightConfig
 from gcs.coordination.events import EventKind
-from gcs.coordination.resolution import Ahead, resolve
+from gcs.coordination.resolution import Ahead, Resolution, resolve
 from gcs.coordination.team import TeamController
 from gcs.coordination.vertical import Room, resolve_vertical
 from tests.gcs.test_resolution import timed_alike
@@ -284,3 +284,35 @@ def test_a_height_resolution_is_kept_until_the_pair_is_past_when_the_encounter_c
     assert len(back) == 1 and back[0].t_s is not None
     assert back[0].t_s > flown.met_s, (back[0].t_s, flown.met_s)
     assert flown.closest_m >= d_s, f"{flown.closest_m:.0f} m"
+
+
+@pytest.mark.parametrize("hold_end", ["to come", "come"])
+def test_a_speed_resolution_not_yet_past_is_held_on_only_while_its_slot_can_still_be_made(
+    hold_end: str,
+) -> None:
+    """A speed resolution whose end has come while the pair is still closing is held on, but
+    not past the last moment its mover can still make its slot (``hold_end_s``): then it is
+    timed for its slot again, past or not."""
+    team = _head_on_team()
+    t = max(m.schedule.climb_end_s for m in team.members.values()) + 1.0
+    for vid, m in team.members.items():
+        airborne(team, vid, m.takeoff_s)
+    a, b = team.members["A"], team.members["B"]
+    for x in (a, b):  # both on their routes, closing head-on (far apart yet)
+        _, s_m, level = x.schedule.state_at(t)
+        team.handle(fix(team, x.vehicle_id, s_m, t, level), t)
+    a.resolving = Resolution(
+        "A", "B", a.limits.airspeed_min_m_s, until_s=t, predicted_m=400.0, unresolved_m=100.0,
+        at_s=t + 300.0, hold_end_s=t + (600.0 if hold_end == "to come" else 0.5),
+    )  # fmt: skip
+    a.next_resolve_s = math.inf
+    t += 1.0
+    _, s_m, level = a.schedule.state_at(t)
+    out = team.handle(fix(team, "A", s_m, t, level), t)
+    released = [
+        r for r in reports(out, EventKind.CONFLICT) if "timed for its slot again" in r.reason
+    ]
+    if hold_end == "to come":
+        assert a.resolving is not None and not released
+    else:
+        assert a.resolving is None and released
