@@ -516,8 +516,9 @@ async def test_runner_never_hangs_on_a_silent_vehicle() -> None:
     async with asyncio.timeout(2.0):
         with pytest.raises(CommandTimeout):
             await command_long(link, 1, CMD_ARM, timeout_s=0.05, retries=3)
-    assert len(link.sent) == 4
-    assert 0.19 <= loop.time() - t0 < 1.0
+    assert len(link.sent) == 4  # the first and three retries
+    # Each timeout waited out (a busy machine only makes it longer; the 2 s above is the hang).
+    assert loop.time() - t0 >= 4 * 0.05 - 1e-3
 
 
 async def test_runner_command_int_sends_command_int() -> None:
