@@ -186,6 +186,13 @@ class Member:
         (the autopilot commands equivalent airspeed) times the scale learnt in flight."""
         return self.schedule.tas_per_eas(s_m) * self.bias.scale
 
+    def tas_m_s(self, s_m: float) -> float | None:
+        """Its true airspeed from ``s_m`` on (m/s): its last airspeed reported, as flown there
+        (:meth:`tas_per_eas`); None before one is reported."""
+        if not self.airspeed_m_s:
+            return None
+        return self.airspeed_m_s * self.tas_per_eas(s_m)
+
     @property
     def done(self) -> bool:
         """No longer timed (arrived, aborted or lost)."""

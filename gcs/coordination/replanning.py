@@ -513,9 +513,8 @@ class MissionChanges:
         in loiter turns its true airspeed (round a circle the ground speed of one fix is the
         side of the wind it is on: 14 m/s upwind for one averaging 17 m/s round its circle
         set a splice 200 s late, and the team time moved for it)."""
-        if m.in_loiter() and m.airspeed_m_s:
-            return max(m.airspeed_m_s * m.tas_per_eas(m.s_m or 0.0), 10.0)
-        return max(m.groundspeed_m_s, 10.0)
+        tas_m_s = m.tas_m_s(m.s_m or 0.0) if m.in_loiter() else None
+        return max(m.groundspeed_m_s if tas_m_s is None else tas_m_s, 10.0)
 
     @staticmethod
     def _reaches_s(m: Member, t: float, s_k: float, gs_m_s: float) -> float:

@@ -1231,8 +1231,8 @@ class TeamController(ZoneGuard, TeamTime):
         if dt_s <= 0.0 or m.s_m is None or done >= len(m.track.loiters):
             return t, 0.0
         lo = m.track.loiters[done]
-        tas_m_s = (fix.airspeed_m_s or m.airspeed_m_s or 0.0) * m.tas_per_eas(lo.s_m)
-        if tas_m_s <= 0.0:
+        tas_m_s = m.tas_m_s(lo.s_m)  # the fix's own airspeed is the member's by now
+        if tas_m_s is None or tas_m_s <= 0.0:
             return t, 0.0
         to_entry_m = max(lo.s_m - m.s_m, 0.0)
         entered_s = min(t, t - dt_s + to_entry_m / tas_m_s)

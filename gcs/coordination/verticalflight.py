@@ -148,7 +148,8 @@ class VerticalFlight:
             out.append(
                 act.Report(
                     EventKind.CONFLICT,
-                    f"past {res.other}: back to its profile",
+                    f"{'past' if why == 'past' else 'not yet past'} {res.other}: back to its "
+                    "profile",
                     m.vehicle_id,
                     t_s=t_s,
                     payload={"other": res.other, "resolution": "released"},

@@ -24,12 +24,9 @@ SETTLED = 40
 """Fixes round the circle (2 s apart) before a test's own."""
 
 
-def _in_turns(
-    team: TeamController, vid: str
-) -> tuple[Member, LoiterSpec, int, float, Callable[[int], act.Fix]]:
-    """``vid`` given loiter turns (installed) and flying them from ``t1``, settled: the
-    member, its loiter, the loiter's item, ``t1`` and fix ``i`` (at ``t1 + 2 i``) round the
-    circle; fixes up to :data:`SETTLED` have been handled."""
+def _turns_installed(team: TeamController, vid: str) -> tuple[Member, LoiterSpec, int, float]:
+    """``vid`` early, given loiter turns (installed): the member, its loiter, the loiter's
+    item and the mission time the turns were worked out at."""
     m = team.members[vid]
     t0, _, job = _early(team, vid)
     (up,) = of(team.handle(act.Computed(job, job.run()), t0 + 1), act.Upload)
@@ -38,6 +35,16 @@ def _in_turns(
         team.handle(act.SpeedCommanded(vid, 15.0, "early", t0), t0 + 2)
     (lo,) = [x for x in m.track.loiters if x.s_m > job.s_m - 1.0]
     k = next(k for k, it in enumerate(m.mission.items) if it.command == MAV_CMD_NAV_LOITER_TURNS)
+    return m, lo, k, t0
+
+
+def _in_turns(
+    team: TeamController, vid: str
+) -> tuple[Member, LoiterSpec, int, float, Callable[[int], act.Fix]]:
+    """``vid`` given loiter turns (installed) and flying them from ``t1``, settled: the
+    member, its loiter, the loiter's item, ``t1`` and fix ``i`` (at ``t1 + 2 i``) round the
+    circle; fixes up to :data:`SETTLED` have been handled."""
+    m, lo, k, t0 = _turns_installed(team, vid)
     t1 = t0 + 600.0
     base = dataclasses.replace(fix(team, vid, lo.s_m, t1, 20.0), mission_seq=k)
     for c in of(team.handle(base, t1), act.CommandSpeed):
@@ -213,14 +220,7 @@ def test_turns_flown_while_the_vehicle_was_not_heard_are_counted_and_keep_it_in_
     speed range absorbs, takes it out of its turns), and with the turns it has left it is on
     time: neither taken out of them nor moving the team time."""
     vid = "UAV3"
-    m = team.members[vid]
-    t0, _, job = _early(team, vid)
-    (up,) = of(team.handle(act.Computed(job, job.run()), t0 + 1), act.Upload)
-    team.handle(act.Installed(up), t0 + 2)
-    if m.busy_command:
-        team.handle(act.SpeedCommanded(vid, 15.0, "early", t0), t0 + 2)
-    (lo,) = [x for x in m.track.loiters if x.s_m > job.s_m - 1.0]
-    k = next(k for k, it in enumerate(m.mission.items) if it.command == MAV_CMD_NAV_LOITER_TURNS)
+    m, lo, k, t0 = _turns_installed(team, vid)
     eas_m_s = (m.limits.airspeed_min_m_s + m.limits.airspeed_max_m_s) / 2.0
     t_short = t0 + 10.0
     short = fix(team, vid, lo.s_m - 400.0, t_short, eas_m_s)

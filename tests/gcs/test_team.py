@@ -504,6 +504,18 @@ def _on_schedule(team: TeamController, t_s: float) -> None:
         m.next_decision_s = math.inf  # only the pop-up is looked at here
 
 
+def _popup_job(team: TeamController) -> tuple[float, act.PopupJob]:
+    """Every vehicle on its schedule as the scenario's pop-up appears: when, and the re-plan
+    job it starts."""
+    zones = build_threats(team.scenario, {vid: m.takeoff_s for vid, m in team.members.items()})
+    (zone,) = popup_zones(zones)
+    t_p = float(zone.appears_at_s or 0.0)
+    _on_schedule(team, t_p - 1.0)
+    (job,) = [a.job for a in of(team.handle(act.Tick(), t_p), act.Compute)]
+    assert isinstance(job, act.PopupJob)
+    return t_p, job
+
+
 def test_a_popup_re_plans_the_vehicles_whose_routes_it_touches_and_no_other(
     team: TeamController,
 ) -> None:
@@ -549,12 +561,7 @@ def test_a_re_plan_whose_vehicle_changed_mission_meanwhile_is_not_spliced_into_i
     mission (loiter turns put in): the items the new route was to be spliced at are the old
     mission's, not this one's (a splice there raised in flight, or would start the route from
     the wrong waypoint). Its route is not sent, said so; the others' are."""
-    zones = build_threats(team.scenario, {vid: m.takeoff_s for vid, m in team.members.items()})
-    (zone,) = popup_zones(zones)
-    t_p = float(zone.appears_at_s or 0.0)
-    _on_schedule(team, t_p - 1.0)
-    (job,) = [a.job for a in of(team.handle(act.Tick(), t_p), act.Compute)]
-    assert isinstance(job, act.PopupJob)
+    t_p, job = _popup_job(team)
     outcome = job.run()
     assert "UAV1" in outcome.affected
     m = team.members["UAV1"]
@@ -572,12 +579,7 @@ def test_a_re_plan_pair_left_under_the_separation_is_alarmed_before_any_upload(
     """The re-plan says a pair it could not separate (:mod:`planner.replanseparation`): the
     coordinator reports its conflict and its alarm, with the pair, the distance and the time,
     before it sends the first of the new missions."""
-    zones = build_threats(team.scenario, {vid: m.takeoff_s for vid, m in team.members.items()})
-    (zone,) = popup_zones(zones)
-    t_p = float(zone.appears_at_s or 0.0)
-    _on_schedule(team, t_p - 1.0)
-    (job,) = [a.job for a in of(team.handle(act.Tick(), t_p), act.Compute)]
-    assert isinstance(job, act.PopupJob)
+    t_p, job = _popup_job(team)
     outcome = job.run()
     pair = {"pair": ["UAV1", "UAV2"], "distance_m": 212.0, "at_s": t_p + 900.0}
     said = "UAV1 and UAV2 would come within 212 m of each other"
