@@ -116,7 +116,10 @@ def separation_events(
         sep = separation_kind(ev)
         if sep is None:
             continue
-        from_utc, to_utc = start_utc_s + ev.t_s, start_utc_s + sep.until_s
+        # The window the entry states (to the millisecond), so that whoever measures it again
+        # from the same samples finds the same closest distance.
+        from_utc = round(start_utc_s + ev.t_s, 3)
+        to_utc = round(start_utc_s + sep.until_s, 3)
         pair = {}
         for k, vid in enumerate((sep.vehicle, sep.other)):
             track = tracks.get(vid, ())
@@ -129,8 +132,8 @@ def separation_events(
                 "kind": sep.kind,
                 "pair": [sep.vehicle, sep.other],
                 "t_s": round(ev.t_s, 3),
-                "utc_s": round(from_utc, 3),
-                "until_utc_s": round(to_utc, 3),
+                "utc_s": from_utc,
+                "until_utc_s": to_utc,
                 "seq": ev.seq,
                 "action": sep.action,
                 "said_m": sep.said_m,

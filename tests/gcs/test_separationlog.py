@@ -108,3 +108,18 @@ def test_a_pair_not_flying_then_has_no_closest() -> None:
     events = [_event(EventKind.CONFLICT, "A", 50.0, other="B", distance_m=100.0, at_s=80.0)]
     (e,) = separation_events(events, tracks, START_UTC)
     assert e["closest_m"] is None and e["closest_utc_s"] is None
+
+
+def test_the_closest_distance_is_over_the_window_the_entry_states() -> None:
+    """An event 0.4 ms after a sample: the entry states its window to the millisecond, so it
+    starts at that sample, and the closest distance is measured from it (the pair opening
+    after their pass, the sample at the window's start is the nearest). Whoever measures the
+    stated window again from the same samples finds the same distance."""
+    tracks = {"A": _track(0.0, 20.0, 0.0, 800.0), "B": _track(15_000.0, -30.0, 200.0, 900.0)}
+    t_s = 330.0 + 4e-4
+    events = [_event(EventKind.CONFLICT, "A", t_s, other="B", resolution="released")]
+    (e,) = separation_events(events, tracks, START_UTC)
+    assert e["utc_s"] == START_UTC + 330.0
+    assert e["closest_utc_s"] == START_UTC + 330.0
+    expected = _closest_m(0.0, 15_000.0, 20.0, -30.0, 200.0, 100.0, 330.0, 330.0 + 60.0)
+    assert e["closest_m"] == pytest.approx(expected, rel=2e-3)  # the next sample: 50 m more
