@@ -9,7 +9,8 @@ still to fly (the geometry lives in :mod:`planner.retime`):
   path pieces. An exact arrival comes from two speeds: the first part of the path at one, the
   rest at another, the split point chosen so that the time comes out exact;
 * loiter (eqs. 8-9): ``n`` whole turns of radius ``r`` add ``D_add = 2 n pi r``; the fewest
-  turns after which the speed range can absorb the rest.
+  turns after which the speed range can absorb the rest (more, where two discrete speeds
+  cannot fly the fewest in exactly the time).
 
 A vehicle's feasible arrival window from a moment is ``[t_min, t_max]`` (eq. 1): speed range
 always, takeoff freedom only on the ground, ``t_max = inf`` where a loiter is possible.
@@ -18,7 +19,7 @@ always, takeoff freedom only on the ground, ``t_max = inf`` where a loiter is po
 from __future__ import annotations
 
 import math
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Callable, Iterator, Mapping, Sequence
 from dataclasses import dataclass
 from typing import Literal
 
@@ -407,15 +408,18 @@ def time_path(
     Timing
         Pieces in flying order, their lengths in metres / ``tas_per_eas`` (loiters: /
         ``loiter_tas_per_eas``). Without a loiter:
-        at most two legs at adjacent grid speeds. With one: the fewest turns (eq. 8); the
-        loiter flown at the speed of the leg that leads to it (ArduPlane keeps the airspeed
-        through NAV_LOITER_TURNS).
+        at most two legs at adjacent grid speeds. With one: the fewest turns (eq. 8), or
+        when two discrete speeds cannot fly those in exactly ``duration_s``, the fewest more
+        that they can; the loiter flown at the speed of the leg that leads to it (ArduPlane
+        keeps the airspeed through NAV_LOITER_TURNS).
 
     Raises
     ------
     InfeasibleError
         Too little time even at the top speed, or too much with no buffer to loiter in; the
-        message names the vehicle and the shortfall in seconds.
+        message names the vehicle and the shortfall in seconds. Also when no whole number of
+        turns fits the speed range, or none that fits can be flown with the path in exactly
+        ``duration_s`` at two discrete speeds.
     """
     vmin, vmax = limits.speed_min_m_s, limits.speed_max_m_s
     km = remaining_m / 1000.0
@@ -456,15 +460,46 @@ def time_path(
             f"be trimmed to {duration_s:.1f} s within [{vmin:g}, {vmax:g}] m/s",
             vehicle=vehicle_id,
         ) from None
-    loiter_m = site.detour_m + 2.0 * math.pi * site.radius_m * n
-    split = _loiter_split(remaining_m, duration_s, limits, site.at_m, loiter_m, current_m_s)
-    if split is None:
-        raise InfeasibleError(
-            f"vehicle {vehicle_id}: no pair of discrete speeds flies {n} loiter turns "
-            f"and {km:.1f} km in {duration_s:.1f} s",
-            vehicle=vehicle_id,
-        )
-    return Timing(split, n)
+    per_turn_m = 2.0 * math.pi * site.radius_m
+    tried: list[int] = []
+    for turns in _turn_counts(remaining_m, duration_s, limits, site, n):
+        loiter_m = site.detour_m + per_turn_m * turns
+        split = _loiter_split(remaining_m, duration_s, limits, site.at_m, loiter_m, current_m_s)
+        if split is not None:
+            return Timing(split, turns)
+        tried.append(turns)
+    counts = f"{min(tried)}" if len(tried) == 1 else f"{min(tried)} to {max(tried)}"
+    raise InfeasibleError(
+        f"vehicle {vehicle_id}: no pair of discrete speeds flies {counts} loiter turns "
+        f"and {km:.1f} km in {duration_s:.1f} s",
+        vehicle=vehicle_id,
+    )
+
+
+def _turn_counts(
+    remaining_m: float, duration_s: float, limits: SpeedLimits, site: LoiterSite, first: int
+) -> Iterator[int]:
+    """Loiter turn counts to try, in order: ``first`` (from :func:`fewest_turns`), then one
+    more turn at a time while path, detour and turns still fit in ``duration_s`` at the
+    maximum speed, then the counts below ``first`` that the minimum speed can still stretch
+    to ``duration_s`` (``first`` is above the fewest when it keeps a margin above the minimum
+    speed).
+
+    The loiter is flown at one discrete speed, so only the legs can trim the time; with the
+    loiter part-way along they may not reach between two of the times the loiter's speeds
+    give, and a count with the loiter longer or shorter by a turn moves those times.
+    """
+    per_turn_m = 2.0 * math.pi * site.radius_m
+    turns = first
+    while True:
+        yield turns
+        turns += 1
+        if (
+            remaining_m + site.detour_m + turns * per_turn_m
+            > duration_s * limits.speed_max_m_s + 1e-9
+        ):
+            break
+    yield from range(fewest_turns(remaining_m, duration_s, limits, site), first)
 
 
 def _loiter_split(

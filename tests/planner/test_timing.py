@@ -5,15 +5,16 @@ from __future__ import annotations
 import math
 
 import pytest
-from hypothesis import given, settings
+from hypothesis import example, given, settings
 from hypothesis import strategies as st
 
 from planner.errors import InfeasibleError
 from planner.timing import (
+    MIN_PIECE_M,
     ArrivalWindow,
     LoiterSite,
     SpeedLimits,
-    fewest_turns,
+    Timing,
     flyable_loiter_radius_m,
     speed_grid,
     split_speeds,
@@ -117,6 +118,84 @@ def test_disjoint_windows_name_the_vehicle_and_shortfall() -> None:
         team_arrival([_w("A", 100, 200), _w("B", 250, 400)], None)
 
 
+def _fewest_timed_turns(
+    length_m: float, duration_s: float, limits: SpeedLimits, site: LoiterSite
+) -> int | None:
+    """The fewest loiter turns that two grid speeds fly with the path in ``duration_s``, by
+    trying every speed pair at every turn count that fits the speed range; None if none can.
+
+    The path is flown at one speed up to a change point and at the other after it; the
+    loiter (and its detour) at the speed of the path leading to it, so the change comes
+    after the loiter point or at least ``MIN_PIECE_M`` before it. The time is linear in the
+    change point, so each pair reaches the times between those at the ends of its range.
+    """
+    grid = speed_grid(limits.speed_min_m_s, limits.speed_max_m_s, limits.step_m_s)
+    tol_s = 1e-9
+    per_turn_m = 2 * math.pi * site.radius_m
+    turns = 1
+    while length_m + site.detour_m + turns * per_turn_m <= duration_s * limits.speed_max_m_s:
+        loiter_m = site.detour_m + turns * per_turn_m
+        if (length_m + loiter_m) / limits.speed_min_m_s < duration_s - tol_s:
+            turns += 1
+            continue
+        for first_m_s in grid:
+            for second_m_s in grid:
+                # Change at or after the loiter point: the loiter at the first speed.
+                ranges_m = [(site.at_m, length_m, first_m_s)]
+                if site.at_m >= MIN_PIECE_M:
+                    # Change before it: the loiter at the second speed.
+                    ranges_m.append((0.0, site.at_m - MIN_PIECE_M, second_m_s))
+                for lo_m, hi_m, loiter_m_s in ranges_m:
+                    times_s = [
+                        change_m / first_m_s
+                        + (length_m - change_m) / second_m_s
+                        + loiter_m / loiter_m_s
+                        for change_m in (lo_m, hi_m)
+                    ]
+                    if min(times_s) - tol_s <= duration_s <= max(times_s) + tol_s:
+                        return turns
+        turns += 1
+    return None
+
+
+def _check_timing(timing: Timing, length_m: float, duration_s: float, limits: SpeedLimits) -> None:
+    """Flies ``duration_s`` within 0.1 s and the whole path, every speed on the grid."""
+    assert abs(timing.duration_s - duration_s) < 0.1
+    legs_m = math.fsum(p.length_m for p in timing.pieces if p.kind == "leg")
+    assert legs_m == pytest.approx(length_m)
+    for p in timing.pieces:
+        assert limits.speed_min_m_s <= p.speed_m_s <= limits.speed_max_m_s
+        assert _on_grid(p.speed_m_s)
+
+
+def test_one_more_turn_when_the_fewest_cannot_be_timed() -> None:
+    # 3.1 km in 855 s at 10-11 m/s, loiters of 100 m radius 900 m along. 9 turns (5655 m)
+    # are the fewest: flown at 10 m/s with the first 900 m and the rest at 11 m/s they take
+    # 855.5 s at the least; at 10.5 m/s with only the first 895 m at 10 m/s, 838.1 s at the
+    # most. 10 turns: the loiter at 11 m/s, some of the first 895 m at 10.5 m/s.
+    limits = SpeedLimits(10.0, 11.0, 10.5)
+    site = LoiterSite(at_m=900.0, radius_m=100.0)
+    assert _fewest_timed_turns(3100.0, 855.0, limits, site) == 10
+    timing = time_path("V", 3100.0, 855.0, limits, site=site)
+    assert timing.turns == 10
+    assert timing.added_m == pytest.approx(10 * 2 * math.pi * 100.0)
+    _check_timing(timing, 3100.0, 855.0, limits)
+
+
+def test_no_turn_count_times_a_loiter_part_way_along() -> None:
+    # 3142 m in 609 s at 10-11 m/s, loiters of 100 m radius 1500 m along: 5 turns (3142 m,
+    # no longer than the path) take at least 613.4 s at 10 m/s (the 1642 m after the loiter
+    # at 11 m/s) and at most 605.6 s at 10.5 m/s (the first 1495 m at 10 m/s); 6 turns would
+    # need 6912 m in 609 s, above 11 m/s.
+    limits = SpeedLimits(10.0, 11.0, 10.5)
+    site = LoiterSite(at_m=1500.0, radius_m=100.0)
+    assert _fewest_timed_turns(3142.0, 609.0, limits, site) is None
+    with pytest.raises(
+        InfeasibleError, match=r"vehicle V: no pair of discrete speeds flies 5 loiter turns"
+    ):
+        time_path("V", 3142.0, 609.0, limits, site=site)
+
+
 @st.composite
 def _cases(draw: st.DrawFn) -> tuple[SpeedLimits, float, float, LoiterSite | None]:
     vmin = draw(st.integers(20, 40)) * 0.5
@@ -137,35 +216,29 @@ def _cases(draw: st.DrawFn) -> tuple[SpeedLimits, float, float, LoiterSite | Non
 
 @settings(max_examples=300, deadline=None)
 @given(_cases())
+@example((SpeedLimits(10.0, 11.0, 10.5), 3142.0, 609.0, LoiterSite(1500.0, 100.0)))
+@example((SpeedLimits(10.0, 11.0, 10.5), 3100.0, 855.0, LoiterSite(900.0, 100.0)))
 def test_timing_properties(case: tuple[SpeedLimits, float, float, LoiterSite | None]) -> None:
     limits, length, duration, site = case
     try:
         timing = time_path("V", length, duration, limits, site=site)
     except InfeasibleError as err:
         assert site is not None
-        if "no pair of discrete speeds" in str(err):
-            # Known limit: the loiter is flown at one speed, so the path must be long enough
-            # to trim the loiter's quantisation; it is only hit when the loiter dominates.
-            n = fewest_turns(length, duration, limits, site)
-            assert site.detour_m + n * 2 * math.pi * site.radius_m > length
-        else:
-            # Whole turns overshoot the speed range (checked by fewest_turns).
-            with pytest.raises(ValueError):
-                fewest_turns(length, duration, limits, site)
+        # The loiter is flown at one speed and only the legs trim the time: no turn count
+        # that fits the speed range can be flown in the duration at two grid speeds.
+        assert _fewest_timed_turns(length, duration, limits, site) is None
+        if "no pair of discrete speeds" not in str(err):
+            # Whole turns overshoot the speed range.
+            per_turn = 2 * math.pi * site.radius_m
+            lo = (duration * limits.speed_min_m_s - length - site.detour_m) / per_turn
+            hi = (duration * limits.speed_max_m_s - length - site.detour_m) / per_turn
+            assert math.floor(hi) < max(1, math.ceil(lo))
         return
-    assert abs(timing.duration_s - duration) < 0.1
-    assert math.fsum(p.length_m for p in timing.pieces if p.kind == "leg") == pytest.approx(length)
-    for p in timing.pieces:
-        assert limits.speed_min_m_s <= p.speed_m_s <= limits.speed_max_m_s
-        assert _on_grid(p.speed_m_s)
+    _check_timing(timing, length, duration, limits)
     slowest = length / limits.speed_min_m_s
     # Loiter only when the speed range cannot absorb the surplus ...
     assert (timing.turns > 0) == (duration > slowest + 1e-6)
     if timing.turns:
         assert site is not None
-        per_turn = 2 * math.pi * site.radius_m
-        # ... with the fewest turns: one fewer would still arrive early at the minimum speed.
-        fewer = length
-        if timing.turns > 1:
-            fewer += site.detour_m + (timing.turns - 1) * per_turn
-        assert fewer / limits.speed_min_m_s < duration
+        # ... with the fewest turns two grid speeds can fly in the duration.
+        assert timing.turns == _fewest_timed_turns(length, duration, limits, site)
