@@ -70,6 +70,11 @@ class MissionChanges:
         and short of ``before_s_m``; None: it does not, or no zone guard."""
         return None
 
+    def holds_now(self, m: Member, s_hold_m: float, s_now_m: float) -> bool:
+        """Whether the guard holds the vehicle at ``s_now_m`` (m along its path) now, short of
+        a zone it would hold at ``s_hold_m``; False with no zone guard."""
+        return False
+
     def _no_route(self, vehicle_id: str, problem: str, now: float, zone_id: str | None) -> None:
         """No route around a zone (or any, ``zone_id`` None) will come for the vehicle now."""
 
@@ -221,12 +226,6 @@ class MissionChanges:
             runout_m=self.config.runout_m,
             max_spacing_m=self.config.waypoint_spacing_m,
         )
-
-    def _mission_to_be(self, vehicle_id: str) -> PathMission:
-        """The mission a vehicle flies once what is on its way to it is installed (the item
-        numbers a re-plan's splice refers to)."""
-        up = self.pending.get(vehicle_id)
-        return up.mission if up is not None else self.members[vehicle_id].mission
 
     def _spliced(self, m: Member, vs: VehicleSchedule, keep: int | None) -> PathMission:
         new = self._path_mission(vs)
@@ -464,6 +463,15 @@ class MissionChanges:
                 anchors[m.vehicle_id] = Anchor(s_short, self._speed_now(m), t_hold)
                 keeps[m.vehicle_id] = keep_short
                 continue
+            if s_short is not None and self.holds_now(m, s_short, m.s_m or 0.0):
+                # No waypoint between it and where it will hold, and so near that the guard
+                # holds it there now: re-planned from that point, as one holding there (a
+                # route from the waypoint past the zone would keep out of it, and it would be
+                # held with none on board and re-planned again).
+                anchors[m.vehicle_id] = Anchor(s_short, self._speed_now(m), at_s)
+                keeps[m.vehicle_id] = keep_short
+                holding.add(m.vehicle_id)
+                continue
             if keep is None:
                 out.append(
                     act.Report(
@@ -503,7 +511,7 @@ class MissionChanges:
             t,
             lead,
             frozenset(holding),
-            {vid: self._mission_to_be(vid) for vid in keeps},
+            {vid: self.members[vid].mission for vid in keeps},
         )
         out.append(act.Compute(job))
 
@@ -624,9 +632,11 @@ class MissionChanges:
                 continue
             if stuck and m.vehicle_id not in outcome.affected:
                 continue  # re-timed to a team time that does not come
-            if job.missions.get(m.vehicle_id) is not self._mission_to_be(m.vehicle_id):
-                # Its mission changed while the route was worked out (loiter turns put in):
-                # the item the route was to be spliced at is not the one it was.
+            if job.missions.get(m.vehicle_id) is not m.mission or m.vehicle_id in self.pending:
+                # Its mission changed while the route was worked out (loiter turns put in), or
+                # a change is on its way to it: the item the route was to be spliced at (an
+                # item of the mission on board when the re-plan was decided) is not, or may
+                # not stay, the one it was.
                 out.append(
                     act.Report(
                         EventKind.POPUP,

@@ -192,9 +192,8 @@ class ZoneGuard(MissionChanges):
                     self._resume(m, exp, t, out)
                 continue
             if exp.state == "watching":
-                gs = max(m.groundspeed_m_s, 10.0)
-                at_hold_s = t + (exp.hold_s_m - s_now) / gs
-                if t >= at_hold_s - self.config.hold_guard_s:
+                if self.holds_now(m, exp.hold_s_m, s_now):
+                    gs = max(m.groundspeed_m_s, 10.0)
                     self._hold(m, exp, t, t + (exp.entry_s_m - s_now) / gs, out)
             elif (
                 exp.state == "holding"
@@ -235,17 +234,23 @@ class ZoneGuard(MissionChanges):
         k = int(np.argmax(ok)) if ok.any() else int(np.argmax(d))
         return float(s[k]), (float(e[k]), float(nn[k])), float(alt[k]), float(d[k])
 
+    def holds_now(self, m: Member, s_hold_m: float, s_now_m: float) -> bool:
+        """Whether the vehicle at ``s_now_m`` is within ``hold_guard_s`` of its hold point at
+        ``s_hold_m`` along its path, at its ground speed: it is held there now."""
+        gs = max(m.groundspeed_m_s, 10.0)
+        return (s_hold_m - s_now_m) / gs <= self.config.hold_guard_s
+
     def hold_short_s_m(self, m: Member, zone: ThreatZone, before_s_m: float) -> float | None:
         """Where the vehicle would hold short of a forbidden zone its route enters ahead of
-        it, short of ``before_s_m`` (m along its path), else None."""
+        it, short of ``before_s_m`` (m along its path), else None. So near the zone that no
+        point ahead of it is far enough outside for the hold's circle, the point is behind it
+        (the guard flies it back there)."""
         if not zone.forbidden:
             return None
-        s_now = m.s_m or 0.0
-        entry = route_entry_m(m, zone, s_now)
+        entry = route_entry_m(m, zone, m.s_m or 0.0)
         if entry is None or entry >= before_s_m:
             return None
-        s_hold = self._hold_point(m, zone, entry)[0]
-        return s_hold if s_hold > s_now else None
+        return self._hold_point(m, zone, entry)[0]
 
     # -- the fallback ------------------------------------------------------------------------
 

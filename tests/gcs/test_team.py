@@ -573,6 +573,73 @@ def test_a_re_plan_whose_vehicle_changed_mission_meanwhile_is_not_spliced_into_i
     assert "its mission changed while its new route was worked out" in said.reason
 
 
+def test_a_re_plan_decided_while_a_change_was_on_its_way_is_not_spliced_once_it_lands(
+    team: TeamController,
+) -> None:
+    """A change (loiter turns) is on its way to UAV1 when the pop-up appears: the re-plan's
+    splice item is one of the mission on board then. The change lands while the route is
+    worked out: that item is not the one it was, and the route is not spliced into the new
+    mission (said so); nor while a change is still on its way when the route is done."""
+    zones = build_threats(team.scenario, {vid: m.takeoff_s for vid, m in team.members.items()})
+    (zone,) = popup_zones(zones)
+    t_p = float(zone.appears_at_s or 0.0)
+    _on_schedule(team, t_p - 1.0)
+    m = team.members["UAV1"]
+    on_its_way = act.Upload(
+        "UAV1", dataclasses.replace(m.mission), m.schedule, None, "loiter inserted", True, (), t_p
+    )
+    team.pending["UAV1"] = on_its_way
+    (job,) = [a.job for a in of(team.handle(act.Tick(), t_p), act.Compute)]
+    assert isinstance(job, act.PopupJob) and job.missions["UAV1"] is m.mission
+    outcome = job.run()
+    assert "UAV1" in outcome.affected
+    for lands in (True, False):
+        if lands:
+            del team.pending["UAV1"]
+            m.mission = on_its_way.mission
+        out = team.handle(act.Computed(job, outcome), t_p + 1.0)
+        assert "UAV1" not in {u.vehicle_id for u in of(out, act.Upload)}
+        (said,) = [r for r in reports(out, EventKind.POPUP) if r.vehicle == "UAV1"]
+        assert "its mission changed while its new route was worked out" in said.reason
+        m.mission, team.pending["UAV1"] = job.missions["UAV1"], on_its_way
+
+
+def test_a_vehicle_at_the_zone_with_no_waypoint_short_of_its_hold_is_re_planned_from_there(
+    team: TeamController,
+) -> None:
+    """The pop-up appears 200 m ahead of UAV1 on its route: the point it holds at, far enough
+    outside for the hold's circle, is behind it, and the guard holds it there now. Its route
+    round the zone is planned from that point, as one holding there, at once (a route from
+    the first waypoint past the zone would keep out of it, leaving it held with none)."""
+    zones = build_threats(team.scenario, {vid: m.takeoff_s for vid, m in team.members.items()})
+    (zone,) = popup_zones(zones)
+    t_p = float(zone.appears_at_s or 0.0)
+    _on_schedule(team, t_p - 1.0)
+    vid = "UAV1"
+    m = team.members[vid]
+    path = m.schedule.path
+    cx, cy, r = zone.east_m, zone.north_m, zone.radius_m
+    entry = next(
+        float(s)
+        for s in np.arange(0.0, path.length_m, 10.0)
+        if math.hypot(path.pose_at(float(s)).east_m - cx, path.pose_at(float(s)).north_m - cy) < r
+    )
+    s_now = entry - 200.0
+    team.handle(fix(team, vid, s_now, t_p - 0.5, 25.0), t_p - 0.5)
+    out = team.handle(act.Tick(), t_p)
+    (job,) = [a.job for a in of(out, act.Compute)]
+    assert isinstance(job, act.PopupJob)
+    assert vid in job.holding
+    anchor = job.anchors[vid]
+    p = path.pose_at(anchor.s_m)
+    clearance = max(FlightConfig().hold_radius_m, team.scenario.vehicle(vid).min_turn_radius_m)
+    assert anchor.s_m < s_now and math.hypot(p.east_m - cx, p.north_m - cy) - r >= clearance
+    keep = job.keeps[vid]
+    assert keep is None or m.mission.item_s_m[keep] <= anchor.s_m + 1e-6
+    held = [a for a in out if isinstance(a, act.Hold) and a.vehicle_id == vid]
+    assert held, "the guard holds it as the zone appears"
+
+
 def test_a_re_plan_pair_left_under_the_separation_is_alarmed_before_any_upload(
     team: TeamController,
 ) -> None:
