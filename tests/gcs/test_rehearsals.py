@@ -188,28 +188,40 @@ async def test_paper_rehearsal_absorbs_airspeed_errors_and_wrong_clocks_with_a_s
     assert said["UAV3"] == pytest.approx(-4.0, abs=DEFAULT_LEAD_S)
 
 
+COMPACT_SPACED = {"kind": "spaced", "interval_s": 60, "order": ["UAV2", "UAV3", "UAV1"]}
+"""The compact team's slots 60 s apart (the paper's spaced scenario, :data:`SPACED`, has UAV1
+before UAV3): in the compact team UAV1's final heading points at UAV3's goal 1.4 km on, and
+the hold it circles once past its goal would lie across UAV3's final approach."""
+OP1_APPEARS_S = 750.0
+"""When the operator's box (:data:`OP1_BOX_EN_M`) appears: UAV3 is some 4 km short of it
+then, over four minutes, on the compact team's spaced plan."""
+OP1_BOX_EN_M = ((194_900, 200_900), (196_900, 200_900), (196_900, 202_900), (194_900, 202_900))
+"""A 2 km square across UAV3's last leg in the compact team (:func:`_compact`), 2 km short of
+its goal and 2.4 km north of UAV1's approach."""
+
+
 async def test_spaced_rehearsal_meets_each_60_s_slot_with_an_operator_threat(
     tmp_path: Path, pg_url: str
 ) -> None:
-    """Slots 60 s apart; besides the scenario's pop-up, the operator adds a no-fly box across
-    UAV3's approach (``--threats-from``, appearing at 2500 s): UAV3 is re-planned from a
-    waypoint ahead and re-timed for its same slot. The flight is kept in PostgreSQL as it
-    happens."""
+    """Slots 60 s apart (the compact team, :func:`_compact`); besides the scenario's pop-up,
+    the operator adds a no-fly box across UAV3's approach (``--threats-from``, appearing at
+    :data:`OP1_APPEARS_S`): UAV3 is re-planned round it as it appears (from a waypoint ahead, or
+    from the point it holds at short of the box when none lies between) and re-timed for its
+    same slot. The flight is kept in PostgreSQL as it happens."""
     threats = tmp_path / "threats.jsonl"
-    box = [[185_600, 203_200], [189_600, 203_200], [189_600, 207_200], [185_600, 207_200]]
     op1 = {
         "kind": "no_fly",
         "id": "OP1",
-        "polygon": [{"east_m": e, "north_m": n} for e, n in box],
-        "appears": {"at_s": 2500},
+        "polygon": [{"east_m": e, "north_m": n} for e, n in OP1_BOX_EN_M],
+        "appears": {"at_s": OP1_APPEARS_S},
     }
     threats.write_text(json.dumps(op1) + "\n")
-    scenario = load_scenario(SPACED)
+    path = _compact(tmp_path, arrival=COMPACT_SPACED)
     truth = tmp_path / "truth.jsonl"
     record = await rehearse(
         RehearsalOptions(
-            scenario_path=SPACED,
-            scenario=scenario,
+            scenario_path=path,
+            scenario=load_scenario(path),
             speedup=200.0,
             wind=(5.0, 270.0),
             loss=0.1,
@@ -223,21 +235,21 @@ async def test_spaced_rehearsal_meets_each_60_s_slot_with_an_operator_threat(
     assert_flight_kept(pg_url, record)
     # The slots are the scenario's order, 60 s apart (checked against the rule), and the true
     # passages keep them; nobody inside OP1 from its time, nor in the scenario's zones.
-    scenario_doc = yaml.safe_load(SPACED.read_text())
     verdict = _paper_verdict(
         record,
         truth,
-        scenario=scenario_doc,
-        extra_zones=[oracle.Zone.of(op1, record["start_utc_s"] + 2500.0)],
+        scenario=yaml.safe_load(path.read_text()),
+        extra_zones=[oracle.Zone.of(op1, record["start_utc_s"] + OP1_APPEARS_S)],
+        **COMPACT_BOUNDS,
     )
-    order = ["UAV2", "UAV1", "UAV3"]
+    order = COMPACT_SPACED["order"]
     planned = [verdict.slots_s[v][0] for v in order]
     assert [b - a for a, b in itertools.pairwise(planned)] == pytest.approx([60.0, 60.0])
     # OP1 appeared on time and UAV3 alone was re-planned around it, for the same team time.
     appeared = {t["id"]: t for t in record["threats_appeared"]}
     assert set(appeared) == {"POPUP1", "OP1"}
     t_op1 = appeared["OP1"]["utc_s"] - record["start_utc_s"]
-    assert 2500.0 <= t_op1 <= 2510.0
+    assert OP1_APPEARS_S <= t_op1 <= OP1_APPEARS_S + 10.0
     after = [e for e in record["events"] if e["t_s"] >= t_op1 - 0.5]
     replans = [e for e in after if e["kind"] == "replan" and "OP1" in e["reason"]]
     told = story(record["events"])
