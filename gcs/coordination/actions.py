@@ -345,6 +345,9 @@ class PopupJob:
     lead_s: float
     holding: frozenset[str] = frozenset()
     """Vehicles re-planned from the point they hold at (anchored there, not ahead)."""
+    from_hold: bool = False
+    """Asked for by a vehicle holding short of the zone with no route around it (not as the
+    zone appeared, nor again after a re-plan that failed)."""
     missions: Mapping[str, PathMission] = field(default_factory=dict)
     """Each vehicle's mission as it was when the job was decided (``keeps`` are its items)."""
     time_up: Callable[[], bool] | None = None

@@ -139,7 +139,8 @@ class FlightConfig:
     """A vehicle holding with no route around its zone asks for a re-plan from its hold
     point at most this often."""
     replan_delay_wall_s: float = 0.0
-    """Test hook: wall seconds added to every pop-up re-plan job but those from a hold point
-    (a re-plan that comes back too late); not counted in the planning time that sets the
-    lead. On a pace clock it is this many wall seconds at the clock's rate, waited in mission
-    time, so that a busy machine does not shorten the stretch of flight it covers."""
+    """Test hook: wall seconds added to every pop-up re-plan job but those a vehicle holding
+    short of the zone asks for (a re-plan that comes back too late); not counted in the
+    planning time that sets the lead. On a pace clock it is this many wall seconds at the
+    clock's rate, waited in mission time, so that a busy machine does not shorten the stretch
+    of flight it covers."""

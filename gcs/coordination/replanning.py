@@ -427,9 +427,12 @@ class MissionChanges:
         lead: float,
         out: list[act.Action],
         why: str | None = None,
+        *,
+        from_hold: bool = False,
     ) -> None:
         """Hand out the re-plan around a new threat from waypoints ``lead`` s ahead (a vehicle
-        holding short of it: from its hold point)."""
+        holding short of it: from its hold point); ``from_hold``: asked for by a vehicle
+        holding short of it with no route around it."""
         at_s = t + lead
         anchors: dict[str, Anchor] = {}
         keeps: dict[str, int | None] = {}
@@ -511,6 +514,7 @@ class MissionChanges:
             t,
             lead,
             frozenset(holding),
+            from_hold,
             {vid: self.members[vid].mission for vid in keeps},
         )
         out.append(act.Compute(job))

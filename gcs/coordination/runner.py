@@ -742,7 +742,7 @@ class FlightRunner:
             self.loiter_wall_s = max(self.loiter_wall_s, wall)
         if isinstance(a.job, act.PopupJob):
             self.plan_wall_s = max(self.plan_wall_s, wall)
-            if self.config.replan_delay_wall_s > 0.0 and not a.job.holding:
+            if self.config.replan_delay_wall_s > 0.0 and not a.job.from_hold:
                 await self._late_by(self.config.replan_delay_wall_s)  # the test hook
         self._feed(act.Computed(a.job, result, error, wall))
         self._feed(self._planning_lead())

@@ -205,6 +205,7 @@ class ZoneGuard(MissionChanges):
                 self._popup(
                     zone, t, self.lead_s, out,
                     why=f"{m.vehicle_id} holds short of it with no route around it",
+                    from_hold=True,
                 )  # fmt: skip
 
     def _locate(self, m: Member, exp: Exposure, s_now: float) -> None:
