@@ -882,8 +882,9 @@ class FlightRunner:
         return max(cfg.link_silence_s, cfg.link_silence_wall_s * self.clock.rate)
 
     async def _fly(self, vid: str) -> None:
-        """Feed one vehicle's fixes, heartbeats and critical texts to the controller; say when
-        its fixes stop and come back."""
+        """Feed one vehicle's fixes, heartbeats and critical texts to the controller, while it
+        is in the air (past its slot or aborted too: its separation is still watched); say
+        when its fixes stop and come back."""
         vehicle = self.vehicles[vid]
         m = self._team().members[vid]
         sub = vehicle.link.subscribe(
@@ -891,7 +892,7 @@ class FlightRunner:
         )
         try:
             silent = False
-            while not m.over and not self._over():
+            while m.phase != "lost" and not self._over():
                 # Look for silence often enough to see the shortest one reported.
                 poll_s = self._silence_s() / max(self.clock.rate, 1.0) / 2.0
                 msg = await sub.get(timeout_s=min(0.05, max(0.005, poll_s)))

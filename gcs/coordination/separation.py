@@ -77,8 +77,8 @@ class SeparationWatch:
         self.__dict__.setdefault("said_m", dict(self.close))
 
     def update(self, vehicle: str, pos: Position, flying: Iterable[str]) -> list[Shortfall]:
-        """The vehicle's new fix; ``flying`` the other vehicles that count (airborne, not
-        arrived). Returns the pairs that have just fallen below the separation, or a step
+        """The vehicle's new fix; ``flying`` the other vehicles that count (in the air, past
+        their slots too). Returns the pairs that have just fallen below the separation, or a step
         closer than when last said."""
         self.positions[vehicle] = pos
         here = (pos.east_m, pos.north_m, pos.alt_m)

@@ -408,7 +408,11 @@ class TeamController(ZoneGuard, TeamTime):
 
     def _fix(self, fix: act.Fix, out: list[act.Action]) -> None:
         m = self.members.get(fix.vehicle_id)
-        if m is None or self.start_utc_s is None or m.over:
+        if m is None or self.start_utc_s is None:
+            return
+        if m.over:
+            if m.phase != "lost":
+                self._watch_after(m, fix, out)
             return
         t = self._t(fix.utc_s)
         if m.last_fix_s is not None and t <= m.last_fix_s:
@@ -493,6 +497,18 @@ class TeamController(ZoneGuard, TeamTime):
 
     # -- supervision ----------------------------------------------------------------------------
 
+    def _watch_after(self, m: Member, fix: act.Fix, out: list[act.Action]) -> None:
+        """A vehicle past its slot (circling where its mission ends) or aborted (flying home)
+        is no longer timed but is still in the air: its fixes still count for the separation
+        (an alarm when a pair comes under it)."""
+        t = self._t(fix.utc_s)
+        if m.last_fix_s is not None and t <= m.last_fix_s:
+            return
+        m.last_fix_s = t
+        e, n = self.frame.to_local(fix.lat_deg, fix.lon_deg)
+        m.east_m, m.north_m, m.alt_amsl_m = float(e), float(n), fix.alt_amsl_m
+        self._watch_separation(m, t, fix, out)
+
     def _watch_separation(self, m: Member, t: float, fix: act.Fix, out: list[act.Action]) -> None:
         """An alarm when the vehicle comes closer than the separation to another one flying
         (once per encounter, and again each time it comes a step closer), and a conflict
@@ -502,14 +518,18 @@ class TeamController(ZoneGuard, TeamTime):
             return
         watch = self.separation
         pos = Position(t, m.east_m, m.north_m, fix.alt_amsl_m, fix.ve_m_s or 0.0, fix.vn_m_s or 0.0)
+        # Every vehicle in the air counts, those past their slots or aborted too (they are
+        # predicted for no one: they fly no route that is timed).
         flying = [
-            x.vehicle_id for x in self.members.values() if x.launched_s is not None and not x.over
+            x.vehicle_id
+            for x in self.members.values()
+            if x.launched_s is not None and x.phase != "lost"
         ]
         shortfalls = watch.update(m.vehicle_id, pos, flying)
         ahead = {
             vid: min(self.config.conflict_horizon_s, max(x.target_s - t, 0.0))
             for vid in flying
-            if not (x := self.members[vid]).in_loiter() and x.hold_zone is None
+            if not (x := self.members[vid]).over and not x.in_loiter() and x.hold_zone is None
         }
         for c in watch.predict(m.vehicle_id, ahead):
             out.append(

@@ -1036,6 +1036,48 @@ def test_two_vehicles_closer_than_the_separation_are_an_alarm_once_per_encounter
     assert m1.launched_s is not None and m2.launched_s is not None
 
 
+def test_a_vehicle_past_its_slot_is_still_in_the_air_and_its_separation_still_watched(
+    team: TeamController,
+) -> None:
+    """UAV2 has passed its goal and circles where its mission ends: no longer timed, it is
+    still in the air. Its fixes still count: UAV1 coming 300 m beside it is an alarm, as
+    beside any other vehicle, and so is UAV2 coming to it (the distances measured here from
+    the positions), but it is predicted for no one. A vehicle lost (crashed) counts for no
+    one."""
+    d_s = team.scenario.separation_m
+    _, t0 = flying(team, "UAV1", 600.0)
+    m2 = team.members["UAV2"]
+    airborne(team, "UAV2", t0)
+    f2 = fix(team, "UAV2", 20_000.0, t0, 25.0)
+    team.handle(f2, t0)
+    m2.phase, m2.arrival_s = "arrived", t0  # past its slot
+    assert m2.over
+    e2, n2 = (float(x) for x in team.frame.to_local(f2.lat_deg, f2.lon_deg))
+
+    def at(vid: str, east_m: float, t_s: float) -> act.Fix:
+        lat, lon = team.frame.to_geodetic(east_m, n2)
+        f = fix(team, vid, 20_000.0, t_s, 25.0)
+        return dataclasses.replace(
+            f, lat_deg=float(lat), lon_deg=float(lon), alt_amsl_m=f2.alt_amsl_m,
+            ve_m_s=0.0, vn_m_s=0.0,
+        )  # fmt: skip
+
+    team.handle(at("UAV2", e2, t0 + 0.5), t0 + 0.5)  # circling: still heard
+    out = team.handle(at("UAV1", e2 + 300.0, t0 + 1.0), t0 + 1.0)
+    (alarm,) = reports(out, EventKind.ALARM)
+    assert alarm.vehicle == "UAV1" and alarm.payload["other"] == "UAV2"
+    assert alarm.value == pytest.approx(300.0, abs=0.5) and d_s > 300.0
+    assert not reports(out, EventKind.CONFLICT)  # predicted for no one
+    team.handle(at("UAV1", e2 + 5_000.0, t0 + 1.5), t0 + 1.5)
+    out = team.handle(at("UAV2", e2 + 4_800.0, t0 + 2.0), t0 + 2.0)
+    (alarm,) = reports(out, EventKind.ALARM)
+    assert alarm.vehicle == "UAV2" and alarm.value == pytest.approx(200.0, abs=0.5)
+    m2.phase = "lost"
+    team.handle(at("UAV1", e2 + 10_000.0, t0 + 2.5), t0 + 2.5)  # apart: the encounter over
+    out = team.handle(at("UAV1", e2 + 4_800.0, t0 + 3.0), t0 + 3.0)
+    assert not reports(out, EventKind.ALARM)
+
+
 def test_a_conflict_is_predicted_within_the_look_ahead_said_once_and_dropped() -> None:
     """Head-on at 25 m/s each, 2 km apart, 100 m off each other's line: they would pass 100 m
     apart in 40 s (worked out here by hand). Not within a 30 s look-ahead, then within it,
