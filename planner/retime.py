@@ -479,6 +479,26 @@ def anchored_state(
     return "leg", anchor[0], anchor[1]
 
 
+def can_loiter_after(
+    scenario: Scenario,
+    v: Vehicle,
+    vs: VehicleSchedule,
+    s_from_m: float,
+    threats: Sequence[ThreatZone],
+    terrain: Terrain | None = None,
+) -> bool:
+    """Whether loiter turns can be flown on the vehicle's path after ``s_from_m``: in a buffer
+    it may use (:func:`find_loiter_site`), or with ``terrain`` on the path where the airspace
+    and the terrain allow (:func:`free_loiter_site`), as :func:`retime_on_path` would put
+    them."""
+    radius = flyable_loiter_radius_m(v.min_turn_radius_m)
+    if find_loiter_site(scenario, v, vs.path, s_from_m, radius, threats) is not None:
+        return True
+    return terrain is not None and (
+        free_loiter_site(v, vs, s_from_m, radius, threats, terrain) is not None
+    )
+
+
 def arrival_window(
     scenario: Scenario,
     v: Vehicle,
@@ -501,12 +521,8 @@ def arrival_window(
         s0, climb_s = vs.climb_s_m, vs.climb_end_s - vs.takeoff_s
     elif phase == "climb":
         s0, start = vs.climb_s_m, max(vs.climb_end_s, now_s)
-    radius = flyable_loiter_radius_m(v.min_turn_radius_m)
-    site = find_loiter_site(scenario, v, vs.path, s0, radius, threats)
-    can_loiter = site is not None or (
-        terrain is not None
-        and phase != "ground"
-        and free_loiter_site(v, vs, s0, radius, threats, terrain) is not None
+    can_loiter = can_loiter_after(
+        scenario, v, vs, s0, threats, None if phase == "ground" else terrain
     )
     return vehicle_window(
         v.id,

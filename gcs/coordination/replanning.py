@@ -26,6 +26,7 @@ from planner.errors import InfeasibleError
 from planner.mission import MAV_CMD_NAV_WAYPOINT
 from planner.plan import World
 from planner.popup import PopupOutcome, popup_zones
+from planner.retime import can_loiter_after
 from planner.scenario import Appearance, Scenario, Threat
 from planner.schedule import Adjustment, Anchor, Schedule, VehicleSchedule
 from planner.schedulefile import PathMission, path_mission, splice_mission
@@ -95,6 +96,18 @@ class MissionChanges:
             if it.command == MAV_CMD_NAV_WAYPOINT and s is not None and s >= s_now + lead_m:
                 return k
         return None
+
+    def _can_loiter_after(self, m: Member, s_m: float) -> bool:
+        """Whether loiter turns can be flown on the vehicle's path after ``s_m``: where its
+        loiter job would look for them, clear of the zones in force at its last fix."""
+        return can_loiter_after(
+            self.scenario,
+            self.scenario.vehicle(m.vehicle_id),
+            m.schedule,
+            s_m,
+            self.in_force(m.last_fix_s or 0.0),
+            self.world.terrain,
+        )
 
     def _speed_now(self, m: Member) -> float:
         return float(m.level_m_s or self.scenario.vehicle(m.vehicle_id).cruise_m_s)

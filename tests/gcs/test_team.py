@@ -430,6 +430,31 @@ def test_a_vehicle_late_after_another_arrived_is_an_alarm_and_the_team_time_stay
     assert not reports(out, EventKind.ALARM)
 
 
+def test_the_latest_a_vehicle_can_arrive_counts_loiter_turns_only_where_they_fit(
+    team: TeamController,
+) -> None:
+    """How late UAV3 could still arrive, for a move of the team time: without bound while
+    its buffer is ahead (turns spliced in after a waypoint the shortest lead ahead); on its
+    last stretch, with a waypoint that far ahead but under 2 km of path after it (no room
+    for turns: a loiter starts 1 km clear of either end), its arrival at its minimum speed."""
+    vid = "UAV3"
+    m = team.members[vid]
+    airborne(team, vid, m.takeoff_s)
+    t0 = m.takeoff_s + 300.0
+    team.handle(fix(team, vid, 5_000.0, t0, 20.0), t0)
+    assert m.last_decision is not None
+    assert team.latest_arrival_s(m) == math.inf
+    length_m = m.track.length_m
+    s1, t1 = length_m - 2_700.0, t0 + 10.0
+    team.handle(fix(team, vid, s1, t1, 20.0), t1)
+    keep = team._keep_seq(m, max(m.groundspeed_m_s, 10.0) * FlightConfig().min_lead_s)
+    assert keep is not None
+    s_keep = m.mission.item_s_m[keep]
+    assert s_keep is not None and length_m - s_keep < 2_000.0
+    assert m.last_decision is not None
+    assert team.latest_arrival_s(m) == m.last_decision.eta_max_s < math.inf
+
+
 def test_a_team_time_moved_in_the_last_seconds_keeps_a_small_margin(
     team: TeamController,
 ) -> None:
