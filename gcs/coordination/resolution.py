@@ -306,9 +306,12 @@ class Forecasts:
         if row is not None:
             self._fix_s[row] = -np.inf
 
-    def near(self, vehicle: str, separation_m: float, now_s: float) -> list[str]:
+    def near(
+        self, vehicle: str, separation_m: float, now_s: float, *, heights: bool = True
+    ) -> list[str]:
         """The others forecast to come under ``separation_m`` of ``vehicle`` (3-D, their
-        present heights) in the time both forecasts cover, nearest first."""
+        present heights; over the ground alone without ``heights``: for a change of height)
+        in the time both forecasts cover, nearest first."""
         me = self._row.get(vehicle)
         if me is None or vehicle not in self.ahead:
             return []
@@ -335,7 +338,7 @@ class Forecasts:
             dn = theirs[:, :, 1] - ours[:, 1]
             d2 = de * de + dn * dn
             least2[sel] = np.where(np.isnan(d2), np.inf, d2).min(axis=1)
-        dz = self._alt_m[rows] - self._alt_m[me]
+        dz = self._alt_m[rows] - self._alt_m[me] if heights else np.zeros(len(rows))
         least = np.sqrt(least2 + dz * dz)
         close = np.flatnonzero(least < separation_m)
         return [self._ids[rows[i]] for i in close[np.argsort(least[close])]]

@@ -659,15 +659,9 @@ class TeamController(ZoneGuard, TeamTime):
             if x.over or self._resolving_from(x) == m.vehicle_id:
                 continue  # over, or resolving this very pair already
             theirs = forecasts.ahead[other]
+            pair = (m.vehicle_id, other)
             # The vehicles a speed change could bring either of the pair near.
-            neighbours = {
-                vid: [
-                    forecasts.ahead[n]
-                    for n in forecasts.near(vid, NEIGHBOUR_SEPARATIONS * d_s, t)
-                    if n not in (m.vehicle_id, other)
-                ]
-                for vid in (m.vehicle_id, other)
-            }
+            neighbours = _neighbours(forecasts, pair, NEIGHBOUR_SEPARATIONS * d_s, t)
             res = resolve(
                 mine, theirs, now_s=t, separation_m=d_s, look_ahead_s=cfg.resolve_horizon_s,
                 response_s=cfg.resolve_response_s, neighbours=neighbours,
@@ -682,7 +676,12 @@ class TeamController(ZoneGuard, TeamTime):
                 ) if res is None else res  # fmt: skip
                 up = None
                 if not self._keeps(later):
-                    up = self._resolve_vertically(mine, theirs, t, neighbours)
+                    # Those a change of height could bring either near: near over the
+                    # ground, whatever their heights (one 450 m above was 21 m once climbed to).
+                    over = _neighbours(
+                        forecasts, pair, NEIGHBOUR_SEPARATIONS * d_s, t, heights=False
+                    )
+                    up = self._resolve_vertically(mine, theirs, t, over)
                 if up is not None:
                     self.vertical.start(self.members[up.vehicle], up, t, out)
                     self._forecast_again(self.members[up.vehicle], t)
@@ -1512,3 +1511,18 @@ class TeamController(ZoneGuard, TeamTime):
 
     def rebind_world(self, world: World) -> None:
         self.world = world
+
+
+def _neighbours(
+    forecasts: Forecasts, pair: tuple[str, str], within_m: float, t: float, *, heights: bool = True
+) -> dict[str, list[Ahead]]:
+    """For each of ``pair``, the others forecast within ``within_m`` of it
+    (:meth:`Forecasts.near`): what a resolution of the pair must keep clear of."""
+    return {
+        vid: [
+            forecasts.ahead[n]
+            for n in forecasts.near(vid, within_m, t, heights=heights)
+            if n not in pair
+        ]
+        for vid in pair
+    }

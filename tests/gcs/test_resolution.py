@@ -341,3 +341,17 @@ def test_the_forecast_screen_finds_the_pairs_a_pair_by_pair_prediction_finds() -
     assert expected, "the draw puts some pair under the separation"
     assert forecasts.near("ME", 300.0, now) == [v for _, v in sorted(expected)]
     assert forecasts.near("ME", 300.0, now + 10.0) == []  # every other forecast stale
+
+
+def test_the_screen_for_a_change_of_height_finds_a_crossing_high_above() -> None:
+    """Two routes crossing, 450 m apart in height: under the separation nowhere as they fly
+    (the screen with heights finds none), but a climb of 450 m would bring them to the same
+    height where they cross; the screen over the ground alone finds the other."""
+    forecasts = Forecasts(["A", "B"], look_ahead_s=90.0, response_s=5.0)
+    # Both reach (0, 0) at 60 s: A flying north, B east, B 450 m higher.
+    a = _straight("A", (0.0, -1_500.0), 0.0)
+    b = _straight("B", (-1_500.0, 0.0), 90.0, alt_m=950.0)
+    for x in (a, b):
+        forecasts.update(x, 0.0)
+    assert forecasts.near("A", 300.0, 0.0) == []
+    assert forecasts.near("A", 300.0, 0.0, heights=False) == ["B"]
