@@ -86,6 +86,12 @@ class FlightConfig:
     no speed would keep apart over it is resolved by height at once (:mod:`gcs.coordination.
     vertical`), the others by speed once within ``resolve_horizon_s``; 0 resolves nothing by
     height."""
+    vertical_rate_max_m_s: float = 5.0
+    """The fastest an autopilot may climb or sink when asked another height (ArduPlane's
+    TECS_CLMB_MAX and TECS_SINK_MAX, 5 m/s by default): a change of height is judged with the
+    vehicle anywhere between this and the rate it is planned at (the slower of the pair's
+    climb gradients at their airspeeds), so one that climbs faster does not pass through a
+    third's height sooner than judged."""
     vertical_layer_m: float = 0.0
     """A conflict no speed resolves is resolved by one of the pair leaving its height by this
     much, or by two or three times it (:mod:`gcs.coordination.vertical`); 0: the scenario's

@@ -804,7 +804,7 @@ class TeamController(ZoneGuard, TeamTime):
             a, b, now_s=t, separation_m=RESOLVED_MARGIN * d_s, layer_m=layer_m,
             rate_m_s=min(rates), room=rooms,
             look_ahead_s=cfg.vertical_horizon_s, response_s=cfg.resolve_response_s,
-            neighbours=neighbours,
+            neighbours=neighbours, fast_rate_m_s=cfg.vertical_rate_max_m_s,
         )  # fmt: skip
 
     def _screen_horizon_s(self) -> float:

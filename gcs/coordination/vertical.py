@@ -109,12 +109,15 @@ def resolve_vertical(
     release_after_s: float = 10.0,
     max_layers: int = 3,
     neighbours: Mapping[str, Sequence[Ahead]] | None = None,
+    fast_rate_m_s: float | None = None,
 ) -> VerticalResolution | None:
     """The vertical manoeuvre that keeps ``a`` and ``b`` ``separation_m`` apart in 3-D if
     their tracks as they fly bring them closer within ``look_ahead_s`` (None if they do not,
     or if no choice keeps them apart: see the module for the rule). ``neighbours``: by
     vehicle, the others near it; a choice that brings its mover under the separation of one
-    of them, or closer than it comes as it flies, is not taken."""
+    of them, or closer than it comes as it flies, is not taken. ``fast_rate_m_s``: the
+    fastest the mover may climb or sink when asked (its autopilot's limit); each choice is
+    judged with the mover anywhere between its heights at that rate and at ``rate_m_s``."""
     bound = min(a.t_s + a.horizon_s, b.t_s + b.horizon_s)
     end_s = min(bound, now_s + look_ahead_s)
     if end_s <= now_s:
@@ -149,12 +152,14 @@ def resolve_vertical(
             target = mover.alt_m + offset
             if target > r.ceiling_m or target < r.floor_m:
                 continue
-            z = height_profile(
-                mover.alt_m, offset, t, start_s=start, until_s=until, rate_m_s=rate_m_s
-            )
-            d = np.sqrt(flat**2 + (z - other.alt_m) ** 2)
+            band = [
+                height_profile(mover.alt_m, offset, t, start_s=start, until_s=until, rate_m_s=r)
+                for r in (rate_m_s, max(fast_rate_m_s or rate_m_s, rate_m_s))
+            ]
+            lo, hi = np.minimum(*band), np.maximum(*band)
+            d = np.sqrt(flat**2 + _gap_m(lo, hi, other.alt_m) ** 2)
             least = float(np.nanmin(d))
-            if least < separation_m or not _clear_of(around, z, separation_m):
+            if least < separation_m or not _clear_of(around, lo, hi, separation_m):
                 continue
             widens = (mover.alt_m - other.alt_m) * sense > 0.0 or (
                 mover.alt_m == other.alt_m and sense > 0.0
@@ -194,11 +199,18 @@ def _around(
     return out
 
 
-def _clear_of(around: Sequence[tuple[FloatArray, float, float]], z: FloatArray, d_m: float) -> bool:
-    """Whether the mover flown at the heights ``z`` stays ``d_m`` from each other vehicle, or
-    no closer than it comes to it as it flies."""
+def _gap_m(lo: FloatArray, hi: FloatArray, alt_m: float) -> FloatArray:
+    """The height between ``alt_m`` and a vehicle anywhere from ``lo`` to ``hi`` (0 within)."""
+    return np.maximum(0.0, np.maximum(lo - alt_m, alt_m - hi))
+
+
+def _clear_of(
+    around: Sequence[tuple[FloatArray, float, float]], lo: FloatArray, hi: FloatArray, d_m: float
+) -> bool:
+    """Whether the mover, anywhere from the heights ``lo`` to ``hi`` at each time, stays
+    ``d_m`` from each other vehicle, or no closer than it comes to it as it flies."""
     for flat, alt_m, as_flown in around:
-        least = float(np.nanmin(np.sqrt(flat**2 + (z - alt_m) ** 2)))
+        least = float(np.nanmin(np.sqrt(flat**2 + _gap_m(lo, hi, alt_m) ** 2)))
         if least < min(d_m, as_flown):
             return False
     return True

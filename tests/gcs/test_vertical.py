@@ -143,6 +143,35 @@ def test_a_mover_is_not_sent_into_a_third_vehicle() -> None:
     assert float(np.abs(zb - 1_600.0).min()) >= D_S
 
 
+def test_a_climb_is_judged_at_the_fastest_the_autopilot_may_climb_too() -> None:
+    """A and B head-on, meeting 700 s ahead; only B may move, and only up two layers (to
+    1,600 m). Planned at 1 m/s, B would be at 1,100 m when C crosses its line 105 s ahead at
+    1,650 m: 550 m below C. But its autopilot may climb at up to 5 m/s, and would then be at
+    1,500 m there, 150 m from C (the test's own arithmetic): judged at both rates, that climb
+    is not taken."""
+    a = _ahead("A", 0.0, 1.0, 1_000.0, slot_in_s=2_400.0)
+    b = _ahead("B", 35_000.0, -1.0, 1_000.0, slot_in_s=2_400.0)
+    crossing_s, c_alt_m = 105.0, 1_650.0
+    b_east = 35_000.0 - SPEED_M_S * crossing_s
+    s = np.array([0.0, 60_000.0])
+    c = Ahead(
+        "C", NOW_S, 0.0, SPEED_M_S, SPEED_M_S, 1.0, 16.0, 30.0, c_alt_m, s,
+        np.full(2, b_east), -SPEED_M_S * crossing_s + s, 2_400.0,
+    )  # fmt: skip
+    kw = {
+        "now_s": NOW_S, "separation_m": D_S, "layer_m": LAYER_M, "rate_m_s": 1.0,
+        "room": {"B": Room(1_600.0, 1_000.0)}, "look_ahead_s": 720.0,
+        "neighbours": {"B": [c]},
+    }  # fmt: skip
+    planned = resolve_vertical(a, b, **kw)
+    assert planned is not None and (planned.vehicle, planned.alt_m) == ("B", 1_600.0)
+    start = planned.start_s
+    at_planned = 1_000.0 + (NOW_S + crossing_s - start) * 1.0
+    at_fastest = 1_000.0 + (NOW_S + crossing_s - start) * 5.0
+    assert c_alt_m - at_planned >= D_S > c_alt_m - at_fastest
+    assert resolve_vertical(a, b, fast_rate_m_s=5.0, **kw) is None
+
+
 # -- flown by the team controller ----------------------------------------------------------------
 
 CLIMB_M_S = 2.5
