@@ -5,7 +5,7 @@ PY := $(VENV)/bin/python
 STAMP := $(VENV)/.installed
 OUT ?= out
 
-.PHONY: test test-quick browser lint typecheck pytest demo serve bench clean
+.PHONY: test test-quick browser lint typecheck pytest pytest-quick demo serve bench clean
 
 $(PY):
 	$(PYTHON) -m venv $(VENV)
@@ -47,8 +47,11 @@ PYTEST := $(VENV)/bin/pytest -q -n $(TEST_WORKERS) --dist loadgroup
 pytest: $(STAMP)
 	$(PYTEST) --durations=30
 
-# Everything but the whole flights and the other long tests (marked slow).
-test-quick: $(STAMP) browser lint typecheck
+# Everything but the whole flights and the other long tests (marked slow), mypy beside it.
+test-quick: $(STAMP) browser lint
+	$(MAKE) --no-print-directory -j2 typecheck pytest-quick
+
+pytest-quick: $(STAMP)
 	$(PYTEST) -m "not slow"
 
 demo: $(STAMP)
