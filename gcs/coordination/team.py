@@ -408,11 +408,7 @@ class TeamController(ZoneGuard, TeamTime):
 
     def _fix(self, fix: act.Fix, out: list[act.Action]) -> None:
         m = self.members.get(fix.vehicle_id)
-        if m is None or self.start_utc_s is None:
-            return
-        if m.over:
-            if m.phase != "lost":
-                self._watch_after(m, fix, out)
+        if m is None or self.start_utc_s is None or m.phase == "lost":
             return
         t = self._t(fix.utc_s)
         if m.last_fix_s is not None and t <= m.last_fix_s:
@@ -424,6 +420,12 @@ class TeamController(ZoneGuard, TeamTime):
         e, n = self.frame.to_local(fix.lat_deg, fix.lon_deg)
         e, n = float(e), float(n)
         m.east_m, m.north_m, m.alt_amsl_m = e, n, fix.alt_amsl_m
+        if m.over:
+            # Past its slot (circling where its mission ends) or aborted (flying home): no
+            # longer timed, but still in the air, so its fixes still count for the separation
+            # (an alarm when a pair comes under it).
+            self._watch_separation(m, t, fix, out)
+            return
         m.airspeed_m_s, m.heading_deg = fix.airspeed_m_s, fix.heading_deg
         m.groundspeed_m_s = fix.groundspeed_m_s or 0.0
         if not m.track_log or fix.utc_s - m.track_log[-1][0] >= 2.0:
@@ -496,18 +498,6 @@ class TeamController(ZoneGuard, TeamTime):
         self._decide(m, t, s, fix, out)
 
     # -- supervision ----------------------------------------------------------------------------
-
-    def _watch_after(self, m: Member, fix: act.Fix, out: list[act.Action]) -> None:
-        """A vehicle past its slot (circling where its mission ends) or aborted (flying home)
-        is no longer timed but is still in the air: its fixes still count for the separation
-        (an alarm when a pair comes under it)."""
-        t = self._t(fix.utc_s)
-        if m.last_fix_s is not None and t <= m.last_fix_s:
-            return
-        m.last_fix_s = t
-        e, n = self.frame.to_local(fix.lat_deg, fix.lon_deg)
-        m.east_m, m.north_m, m.alt_amsl_m = float(e), float(n), fix.alt_amsl_m
-        self._watch_separation(m, t, fix, out)
 
     def _watch_separation(self, m: Member, t: float, fix: act.Fix, out: list[act.Action]) -> None:
         """An alarm when the vehicle comes closer than the separation to another one flying

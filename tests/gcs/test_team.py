@@ -1025,6 +1025,20 @@ def test_the_flight_ends_at_its_hard_deadline_whatever_the_team_time_became(
 # -- separation in flight -------------------------------------------------------------------------
 
 
+def fix_beside(
+    team: TeamController, vid: str, beside: act.Fix, east_m: float, t_s: float
+) -> act.Fix:
+    """A fix of ``vid`` standing still at ``east_m``, on the north and at the height of the fix
+    ``beside`` (another vehicle's)."""
+    _, north_m = team.frame.to_local(beside.lat_deg, beside.lon_deg)
+    lat, lon = team.frame.to_geodetic(east_m, float(north_m))
+    f = fix(team, vid, 20_000.0, t_s, 25.0)
+    return dataclasses.replace(
+        f, lat_deg=float(lat), lon_deg=float(lon), alt_amsl_m=beside.alt_amsl_m,
+        ve_m_s=0.0, vn_m_s=0.0,
+    )  # fmt: skip
+
+
 def test_two_vehicles_closer_than_the_separation_are_an_alarm_once_per_encounter(
     team: TeamController,
 ) -> None:
@@ -1038,20 +1052,12 @@ def test_two_vehicles_closer_than_the_separation_are_an_alarm_once_per_encounter
     team.handle(f2, t0)
     e2, n2 = (float(x) for x in team.frame.to_local(f2.lat_deg, f2.lon_deg))
 
-    def beside(offset_m: float, t_s: float) -> act.Fix:
-        lat, lon = team.frame.to_geodetic(e2 + offset_m, n2)
-        f = fix(team, "UAV1", 20_000.0, t_s, 25.0)
-        return dataclasses.replace(
-            f, lat_deg=float(lat), lon_deg=float(lon), alt_amsl_m=f2.alt_amsl_m,
-            ve_m_s=0.0, vn_m_s=0.0,
-        )  # fmt: skip
-
     alarms: list[act.Report] = []
     for offset, dt in [(300.0, 0.5), (250.0, 1.0), (5_000.0, 1.5), (300.0, 2.0)]:
         t = t0 + dt
         # UAV2's fix at t0, moved on along its velocity to t: where the watch expects it.
         expected = math.hypot(e2 + offset - (e2 + f2.ve_m_s * dt), n2 - (n2 + f2.vn_m_s * dt))
-        got = reports(team.handle(beside(offset, t), t), EventKind.ALARM)
+        got = reports(team.handle(fix_beside(team, "UAV1", f2, e2 + offset, t), t), EventKind.ALARM)
         alarms += got
         if got:
             assert got[0].value == pytest.approx(expected, abs=0.5)
@@ -1077,29 +1083,23 @@ def test_a_vehicle_past_its_slot_is_still_in_the_air_and_its_separation_still_wa
     team.handle(f2, t0)
     m2.phase, m2.arrival_s = "arrived", t0  # past its slot
     assert m2.over
-    e2, n2 = (float(x) for x in team.frame.to_local(f2.lat_deg, f2.lon_deg))
+    e2, _ = (float(x) for x in team.frame.to_local(f2.lat_deg, f2.lon_deg))
 
-    def at(vid: str, east_m: float, t_s: float) -> act.Fix:
-        lat, lon = team.frame.to_geodetic(east_m, n2)
-        f = fix(team, vid, 20_000.0, t_s, 25.0)
-        return dataclasses.replace(
-            f, lat_deg=float(lat), lon_deg=float(lon), alt_amsl_m=f2.alt_amsl_m,
-            ve_m_s=0.0, vn_m_s=0.0,
-        )  # fmt: skip
-
-    team.handle(at("UAV2", e2, t0 + 0.5), t0 + 0.5)  # circling: still heard
-    out = team.handle(at("UAV1", e2 + 300.0, t0 + 1.0), t0 + 1.0)
+    team.handle(fix_beside(team, "UAV2", f2, e2, t0 + 0.5), t0 + 0.5)  # circling: still heard
+    out = team.handle(fix_beside(team, "UAV1", f2, e2 + 300.0, t0 + 1.0), t0 + 1.0)
     (alarm,) = reports(out, EventKind.ALARM)
     assert alarm.vehicle == "UAV1" and alarm.payload["other"] == "UAV2"
     assert alarm.value == pytest.approx(300.0, abs=0.5) and d_s > 300.0
     assert not reports(out, EventKind.CONFLICT)  # predicted for no one
-    team.handle(at("UAV1", e2 + 5_000.0, t0 + 1.5), t0 + 1.5)
-    out = team.handle(at("UAV2", e2 + 4_800.0, t0 + 2.0), t0 + 2.0)
+    team.handle(fix_beside(team, "UAV1", f2, e2 + 5_000.0, t0 + 1.5), t0 + 1.5)
+    out = team.handle(fix_beside(team, "UAV2", f2, e2 + 4_800.0, t0 + 2.0), t0 + 2.0)
     (alarm,) = reports(out, EventKind.ALARM)
     assert alarm.vehicle == "UAV2" and alarm.value == pytest.approx(200.0, abs=0.5)
     m2.phase = "lost"
-    team.handle(at("UAV1", e2 + 10_000.0, t0 + 2.5), t0 + 2.5)  # apart: the encounter over
-    out = team.handle(at("UAV1", e2 + 4_800.0, t0 + 3.0), t0 + 3.0)
+    team.handle(
+        fix_beside(team, "UAV1", f2, e2 + 10_000.0, t0 + 2.5), t0 + 2.5
+    )  # apart: the encounter over
+    out = team.handle(fix_beside(team, "UAV1", f2, e2 + 4_800.0, t0 + 3.0), t0 + 3.0)
     assert not reports(out, EventKind.ALARM)
 
 
