@@ -244,6 +244,8 @@ class Upload:
     holding: bool = False
     """The vehicle holds outside a zone (GUIDED): it is not flying the mission, so its
     current item says nothing about the splice waypoint and the upload goes ahead."""
+    leave_hold_s: float | None = None
+    """Holding: when its new route has it leave its hold point (mission s)."""
 
 
 @dataclass(frozen=True)

@@ -175,6 +175,9 @@ class Member:
     hold_zone: str | None = None
     """The zone it is told to hold short of (from the hold command to its resumption): not
     timed, not watched for progress meanwhile."""
+    leave_hold_s: float | None = None
+    """When the route installed while it holds has it leave its hold point (mission s): it
+    holds until then, so that it flies the route at the times it was planned for."""
     resolving: Resolution | None = None
     """The speed it flies to keep the separation from another vehicle, until when: not timed
     for its slot meanwhile."""

@@ -302,6 +302,7 @@ class MissionChanges:
         m.next_decision_s = -math.inf
         keep = up.keep_seq
         m.splice_seq = keep
+        m.leave_hold_s = up.leave_hold_s
         s_k = 0.0 if keep is None else (m.mission.item_s_m[keep] or 0.0)
         m.loiter_log = [x for x in m.loiter_log if x["s_m"] < s_k]
         for lo in vs.loiters:
@@ -692,8 +693,18 @@ class MissionChanges:
                     (),
                     t,
                     holding=m.vehicle_id in job.holding or m.hold_zone is not None,
+                    leave_hold_s=self._leaves_hold_s(job, m.vehicle_id),
                 )
             )
+
+    @staticmethod
+    def _leaves_hold_s(job: act.PopupJob, vehicle_id: str) -> float | None:
+        """When a vehicle re-planned from where it holds leaves its hold point on the new
+        route (its anchor's time: the re-plan's lead ahead of when it was decided), else
+        None."""
+        if vehicle_id not in job.holding:
+            return None
+        return job.anchors[vehicle_id].t_s
 
     def _computed(self, r: act.Computed, now: float, out: list[act.Action]) -> None:
         if isinstance(r.job, act.LoiterJob):

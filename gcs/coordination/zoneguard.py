@@ -188,7 +188,7 @@ class ZoneGuard(MissionChanges):
                 self._locate(m, exp, s_now)
             if exp.entry_s_m is None:
                 # Kept while its route keeps out (found again only when the route changes).
-                if exp.state == "holding":
+                if exp.state == "holding" and self._may_leave(m, t):
                     self._resume(m, exp, t, out)
                 continue
             if exp.state == "watching":
@@ -207,6 +207,13 @@ class ZoneGuard(MissionChanges):
                     why=f"{m.vehicle_id} holds short of it with no route around it",
                     from_hold=True,
                 )  # fmt: skip
+
+    @staticmethod
+    def _may_leave(m: Member, t: float) -> bool:
+        """Whether a vehicle holding with a route that keeps out on board may leave its hold
+        point now: not before the route has it leave (it was planned from there at that time;
+        gone sooner, it would be early by the rest of the re-plan's lead)."""
+        return m.leave_hold_s is None or t >= m.leave_hold_s
 
     def _locate(self, m: Member, exp: Exposure, s_now: float) -> None:
         """Where the vehicle's route (from where it is, or from its hold point while it holds)
@@ -317,7 +324,7 @@ class ZoneGuard(MissionChanges):
         out.append(_fallback(m, h.zone_id, "hold", what, now))
         if exp.track is not m.track:
             self._locate(m, exp, exp.hold_s_m)
-        if exp.entry_s_m is None:
+        if exp.entry_s_m is None and self._may_leave(m, now):
             self._resume(m, exp, now, out)
 
     def _resume(self, m: Member, exp: Exposure, t: float, out: list[act.Action]) -> None:
@@ -364,6 +371,7 @@ class ZoneGuard(MissionChanges):
             return
         del exps[up.zone_id]
         m.hold_zone = None
+        m.leave_hold_s = None
         m.rejoin_seq = up.seq
         m.next_decision_s = -math.inf
         m.progress = None

@@ -182,16 +182,30 @@ def test_a_re_plan_that_comes_back_after_the_vehicles_would_enter_holds_them_sho
     # The late result: a holding vehicle gets it whatever its current item says (it is not
     # flying its mission) unless the new route starts behind where it holds (it passed the
     # splice waypoint): that one is re-planned from its hold point. Then each resumes AUTO past
-    # its hold point on a route that keeps out.
+    # its hold point on a route that keeps out, when that route has it leave: a route planned
+    # from the hold point is timed from the re-plan's lead ahead, and it holds until then.
     t += 10.0
     out = answer(team, team.handle(act.Computed(job, job.run()), t), t)
-    for _ in range(3):
+    resumed_at: dict[str, float] = {}
+    while t < t_p + 3000.0 and set(resumed_at) != set(TOUCHED):
         t += 2.0
-        out += answer(team, flight.step(t), t)
+        step = answer(team, flight.step(t), t)
+        resumed_at |= {r.vehicle_id: t for r in of(step, act.Resume)}
+        out += step
     uploads = {u.vehicle_id: u for u in of(out, act.Upload) if u.vehicle_id in TOUCHED}
     assert set(uploads) == set(TOUCHED) and all(u.holding for u in uploads.values())
     resumes = {r.vehicle_id: r for r in of(out, act.Resume)}
     assert set(resumes) == set(TOUCHED)
+    assert any(u.leave_hold_s is not None for u in uploads.values())
+    for vid, u in uploads.items():
+        leave = u.leave_hold_s
+        if leave is None:  # the late route, from a waypoint past where it holds: at once
+            assert resumed_at[vid] <= t_p + 3000.0
+            continue
+        jobs = [a.job for a in of(out, act.Compute) if isinstance(a.job, act.PopupJob)]
+        (again,) = [j for j in jobs if vid in j.holding]
+        assert leave == pytest.approx(again.decided_s + again.lead_s)
+        assert leave <= resumed_at[vid] < leave + 2.0 + 1e-9, (vid, leave, resumed_at[vid])
     said = {r.vehicle for r in reports(out, EventKind.FALLBACK) if r.payload["action"] == "resume"}
     assert said == set(TOUCHED)
     for vid in TOUCHED:
