@@ -317,6 +317,7 @@ class ZoneGuard(MissionChanges):
             return
         exp.state = "holding"
         exp.next_replan_s = now
+        m.level_m_s = None  # GUIDED: the airspeed of the last DO_CHANGE_SPEED is dropped
         what = (
             f"holding at {h.lat_deg:.5f}, {h.lon_deg:.5f} ({exp.hold_clear_m:.0f} m outside "
             f"{h.zone_id}) until a route around it is on board"
@@ -372,6 +373,10 @@ class ZoneGuard(MissionChanges):
         del exps[up.zone_id]
         m.hold_zone = None
         m.leave_hold_s = None
+        # Back in AUTO it flies its cruise airspeed until told another: ArduPlane drops a
+        # DO_CHANGE_SPEED airspeed on every mode change (ArduPlane/mode.cpp Mode::enter,
+        # new_airspeed_cm = -1), and the next decision commands one.
+        m.level_m_s = None
         m.rejoin_seq = up.seq
         m.next_decision_s = -math.inf
         m.progress = None
