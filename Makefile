@@ -78,6 +78,7 @@ bench: $(STAMP)
 	$(PY) bench/bench_framing.py
 	$(PY) bench/bench_geometry.py
 	$(PY) bench/bench_swarm.py --vehicles 100 --speedup 20
+	$(PY) bench/bench_jobs.py
 
 clean:
 	rm -rf $(VENV) $(OUT) .mypy_cache .ruff_cache .pytest_cache .hypothesis

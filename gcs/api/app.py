@@ -22,13 +22,15 @@ from sqlalchemy import text
 from starlette.exceptions import HTTPException as StarletteHTTPException
 
 from gcs.api.auth import TokenTable, admin_token_file
+from gcs.api.bodylimit import BodyLimitMiddleware
 from gcs.api.idempotency import IdempotencyMiddleware
 from gcs.api.metrics import metrics_text
 from gcs.api.routes import flights, resources, tiles
 from gcs.api.routes.common import ERRORS
 from gcs.api.settings import Settings
 from gcs.api.tiles import TileSource
-from gcs.service.engine import Engine, Infeasible, InvalidInput, ServiceError
+from gcs.service.engine import Engine, Infeasible, InvalidInput, Limits, ServiceError, TooBusy
+from gcs.service.scenariotext import ScenarioLimits
 from gcs.store.repository import Store, StoreConflict, StoreError, StoreNotFound
 
 __all__ = ["create_app"]
@@ -55,7 +57,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
             log.warning("no TCGCS_TOKENS: an admin token is in %s", path)
         app.state.tokens = TokenTable(tokens)
         store = Store.open(settings.db_url())
-        engine = Engine(store, settings.data_dir)
+        engine = Engine(store, settings.data_dir, limits=_limits(settings))
         app.state.engine = engine
         for fid in engine.resume_kept():
             log.warning("flight %s was running when the service stopped: flying it on", fid)
@@ -76,6 +78,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
         lifespan=lifespan,
     )
     app.add_middleware(IdempotencyMiddleware)
+    app.add_middleware(BodyLimitMiddleware, max_bytes=settings.max_body_bytes)
     app.state.tiles = tile_source
     _errors(app)
     v1 = APIRouter(prefix="/v1")
@@ -116,6 +119,19 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     return app
 
 
+def _limits(settings: Settings) -> Limits:
+    return Limits(
+        scenario=ScenarioLimits(
+            vehicles=settings.max_vehicles,
+            grid_nodes=settings.max_grid_nodes,
+            hills=settings.max_hills,
+        ),
+        jobs_running=settings.jobs_running,
+        jobs_per_owner=settings.jobs_per_token,
+        job_time_limit_s=settings.job_time_limit_s,
+    )
+
+
 def _errors(app: FastAPI) -> None:
     def problem(status: int, detail: str, **extra: Any) -> JSONResponse:
         return JSONResponse({"detail": detail, **extra}, status_code=status)
@@ -133,6 +149,10 @@ def _errors(app: FastAPI) -> None:
             )
         if isinstance(err, InvalidInput):
             return problem(err.status, str(err), errors=err.errors or None)
+        if isinstance(err, TooBusy):
+            out = problem(err.status, str(err))
+            out.headers["Retry-After"] = str(err.retry_after_s)
+            return out
         return problem(err.status, str(err))
 
     @app.exception_handler(StoreError)

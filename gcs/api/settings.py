@@ -33,6 +33,21 @@ class Settings(BaseSettings):
     """A raster MBTiles file (png, jpg or webp tiles) served at ``/v1/tiles`` for the console's
     map; without one the map shows the scenario's hillshade only."""
 
+    max_body_bytes: int = Field(default=4 * 1024 * 1024, ge=1024)
+    """The largest request body accepted; a larger one is answered 413 before it is read."""
+    max_vehicles: int = Field(default=1000, ge=1)
+    """The most vehicles in a scenario; more is a 422 before any planning."""
+    max_grid_nodes: int = Field(default=1_000_000, ge=9)
+    """The most planning-grid nodes (area over resolution) in a scenario; more is a 422."""
+    max_hills: int = Field(default=1000, ge=0)
+    """The most synthetic-terrain hills in a scenario; more is a 422."""
+    jobs_running: int = Field(default=2, ge=1)
+    """Planning jobs run at once, each in a process of its own; the others queue."""
+    jobs_per_token: int = Field(default=8, ge=1)
+    """Jobs one token may have queued or running; past it, 429 with Retry-After."""
+    job_time_limit_s: float = Field(default=900.0, gt=0.0)
+    """A planning job running longer (wall s) is stopped and failed."""
+
     @field_validator("tokens")
     @classmethod
     def _scopes_known(cls, tokens: dict[str, list[str]]) -> dict[str, list[str]]:

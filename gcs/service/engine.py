@@ -24,10 +24,6 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Literal
 
-import numpy as np
-import yaml
-from pydantic import ValidationError
-
 from gcs.coordination.bus import EventBus
 from gcs.coordination.config import FlightConfig
 from gcs.coordination.events import FlightEvent
@@ -38,15 +34,27 @@ from gcs.errors import GcsError
 from gcs.mavlink.signing import SigningConfig
 from gcs.rehearsal.rehearse import RehearsalOptions, flight_record, stub_args
 from gcs.rehearsal.report import write_report
+from gcs.service import planjobs
 from gcs.service.fleet import Fleet, FleetVehicle, VehicleBusy
 from gcs.service.mapview import flight_map, terrain_png
+from gcs.service.processjobs import JobCancelled, JobFailed, JobTimedOut, ProcessJobs
+from gcs.service.scenariotext import (
+    Conflict,
+    Infeasible,
+    InvalidInput,
+    NotFound,
+    PreconditionFailed,
+    ScenarioLimits,
+    ServiceError,
+    TooBusy,
+    check_limits,
+    parse_scenario_text,
+)
 from gcs.service.stubs import StubProcess, follow_lockstep, stop_pid
 from gcs.store.repository import FlightKeeper, Store, StoreNotFound
-from planner.errors import InfeasibleError, PlannerError
 from planner.missionfile import to_qgc_plan, to_wpl
-from planner.plan import World, build_world, plan
-from planner.retime import build_schedule, check_feasible
-from planner.scenario import Scenario, Threat, field_path
+from planner.plan import World
+from planner.scenario import Scenario, Threat
 from planner.schedule import Schedule
 from planner.schedulefile import path_mission
 
@@ -55,92 +63,18 @@ __all__ = [
     "Engine",
     "Infeasible",
     "InvalidInput",
+    "Limits",
     "NotFound",
     "PreconditionFailed",
     "ServiceError",
+    "TooBusy",
+    "parse_scenario_text",
 ]
 
 log = logging.getLogger(__name__)
 
-JobState = Literal["queued", "running", "succeeded", "failed"]
-
-
-class ServiceError(GcsError):
-    status = 400
-
-
-class NotFound(ServiceError):
-    status = 404
-
-
-class Conflict(ServiceError):
-    status = 409
-
-
-class Infeasible(Conflict):
-    """A time no vehicle set can make: names the earliest (or latest) feasible time and the
-    vehicle that forces it."""
-
-    def __init__(
-        self,
-        message: str,
-        earliest_s: float | None,
-        vehicle: str | None,
-        latest_s: float | None = None,
-    ) -> None:
-        super().__init__(message)
-        self.earliest_s = earliest_s
-        self.latest_s = latest_s
-        self.vehicle = vehicle
-
-
-class PreconditionFailed(ServiceError):
-    status = 412
-
-
-class InvalidInput(ServiceError):
-    """A body that does not validate: the field path and what is wrong with it."""
-
-    status = 422
-
-    def __init__(self, message: str, errors: Sequence[Mapping[str, Any]] = ()) -> None:
-        super().__init__(message)
-        self.errors = list(errors)
-
-
-def parse_scenario_text(body: str, media_type: str) -> Scenario:
-    """A scenario from YAML or JSON text.
-
-    Raises
-    ------
-    InvalidInput
-        Not YAML/JSON (with line and column), or a field that does not validate (its path).
-    """
-    try:
-        data = json.loads(body) if "json" in media_type else yaml.safe_load(body)
-    except json.JSONDecodeError as err:
-        where = f"line {err.lineno} column {err.colno}"
-        raise InvalidInput(f"not valid JSON: {err.msg} at {where}") from None
-    except yaml.YAMLError as err:
-        mark = getattr(err, "problem_mark", None)
-        where = "" if mark is None else f" at line {mark.line + 1} column {mark.column + 1}"
-        problem = getattr(err, "problem", None) or type(err).__name__
-        raise InvalidInput(f"not valid YAML: {problem}{where}") from None
-    try:
-        return Scenario.model_validate(data)
-    except ValidationError as err:
-        errors = [
-            {
-                "loc": [str(x) for x in field_path(e["loc"], data)],
-                "msg": e["msg"],
-                "type": e["type"],
-            }
-            for e in err.errors(include_url=False, include_context=False, include_input=False)
-        ]
-        first = errors[0]
-        raise InvalidInput(
-            f"scenario: {'.'.join(first['loc']) or '(top level)'}: {first['msg']}", errors
-        ) from None
+JobState = Literal["queued", "running", "succeeded", "failed", "cancelled"]
+JOB_ENDED: frozenset[JobState] = frozenset({"succeeded", "failed", "cancelled"})
 
 
 LOCKSTEP_FILE = "pace"
@@ -148,17 +82,40 @@ LOCKSTEP_FILE = "pace"
 files (``sitl_stub --lockstep``): a service restarted on the flight follows it again."""
 
 
+@dataclass(frozen=True)
+class Limits:
+    """What one client may ask of the service (settings ``TCGCS_*``)."""
+
+    scenario: ScenarioLimits = field(default_factory=ScenarioLimits)
+    jobs_running: int = 2
+    """Planning jobs run at once (each in a process of its own); the others queue."""
+    jobs_per_owner: int = 8
+    """Jobs one token may have queued or running; past it, 429."""
+    job_time_limit_s: float = 900.0
+    """A job running longer (wall s) is stopped and failed."""
+    retry_after_s: int = 10
+    """What a 429 tells the client to wait, s."""
+    parse_time_limit_s: float = 120.0
+    """Reading one scenario's text (at most the body limit) takes no longer, wall s."""
+
+
 @dataclass
 class Job:
-    """Long work (a schedule): polled until it has succeeded or failed."""
+    """Long work (a schedule): polled until it has succeeded, failed or been cancelled."""
 
     id: str
     kind: str
     state: JobState = "queued"
     progress: float = 0.0
+    stage: str = "queued"
     result: dict[str, Any] | None = None
     error: dict[str, Any] | None = None
     created_utc_s: float = field(default_factory=time.time)
+    started_utc_s: float | None = None
+    finished_utc_s: float | None = None
+    owner: str | None = None
+    """Who asked for it (a digest of the token: the quota's key), never shown."""
+    task: asyncio.Task[None] | None = None
 
     def view(self) -> dict[str, Any]:
         return {
@@ -166,9 +123,12 @@ class Job:
             "kind": self.kind,
             "state": self.state,
             "progress": self.progress,
+            "stage": self.stage,
             "result": self.result,
             "error": self.error,
             "created_utc_s": self.created_utc_s,
+            "started_utc_s": self.started_utc_s,
+            "finished_utc_s": self.finished_utc_s,
         }
 
 
@@ -242,10 +202,21 @@ class FlightHandle:
 class Engine:
     """The fleet, the store, jobs and flights of one service process."""
 
-    def __init__(self, store: Store, data_dir: Path, *, config: FlightConfig | None = None):
+    def __init__(
+        self,
+        store: Store,
+        data_dir: Path,
+        *,
+        config: FlightConfig | None = None,
+        limits: Limits | None = None,
+    ):
         self.store = store
         self.data_dir = data_dir
         self.config = config or FlightConfig()
+        self.limits = limits or Limits()
+        self.work = ProcessJobs(self.limits.jobs_running, preload=planjobs.PRELOAD)
+        self._scenarios: dict[str, Scenario] = {}
+        """Scenarios parsed since the start, by id (a scenario is immutable)."""
         self.fleet = Fleet()
         self.jobs: dict[str, Job] = {}
         self.schedules: dict[str, PlannedSchedule] = {}
@@ -276,6 +247,12 @@ class Engine:
             await self._stop_simulator(handle)
         for task in list(self._tasks):
             task.cancel()
+        jobs = [j.task for j in self.jobs.values() if j.task is not None and not j.task.done()]
+        for job_task in jobs:
+            job_task.cancel()
+        if jobs:
+            await asyncio.wait(jobs)
+        self.work.close()
         await self.fleet.close()
         for stub in self._stubs:
             await stub.stop()
@@ -354,20 +331,50 @@ class Engine:
 
     # -- scenarios ------------------------------------------------------------------------------
 
-    def add_scenario(self, body: str, media_type: str) -> dict[str, Any]:
-        scenario = parse_scenario_text(body, media_type)
+    async def add_scenario(self, body: str, media_type: str) -> dict[str, Any]:
+        """Keep a scenario once it parses and is within the service's limits (parsed in a
+        job process: a large body never holds the event loop)."""
+        scenario = await self._parse(body, media_type)
+        check_limits(scenario, self.limits.scenario)
         sid = self.store.save_scenario(body, name=scenario.name, media_type=media_type)
-        return self.scenario_view(sid)
+        self._scenarios[sid] = scenario
+        return self._scenario_view(sid, scenario)
 
-    def scenario(self, scenario_id: str) -> Scenario:
+    async def _parse(self, body: str, media_type: str) -> Scenario:
+        key = f"parse-{uuid.uuid4().hex}"
+        try:
+            parsed = await self.work.run(
+                key,
+                planjobs.parse,
+                body,
+                media_type,
+                time_limit_s=self.limits.parse_time_limit_s,
+            )
+        except (JobFailed, JobTimedOut, JobCancelled) as err:
+            raise InvalidInput(f"scenario: not read ({err})") from None
+        if parsed[0] == "invalid":
+            raise InvalidInput(parsed[1], parsed[2])
+        scenario: Scenario = parsed[1]
+        return scenario
+
+    async def scenario(self, scenario_id: str) -> Scenario:
+        """A kept scenario (parsed once per process, off the event loop)."""
+        found = self._scenarios.get(scenario_id)
+        if found is not None:
+            return found
         try:
             row = self.store.scenario(scenario_id)
         except StoreNotFound:
             raise NotFound(f"no scenario {scenario_id!r}") from None
-        return parse_scenario_text(row.body, row.media_type)
+        scenario = await self._parse(row.body, row.media_type)
+        self._scenarios[scenario_id] = scenario
+        return scenario
 
-    def scenario_view(self, scenario_id: str) -> dict[str, Any]:
-        s = self.scenario(scenario_id)
+    async def scenario_view(self, scenario_id: str) -> dict[str, Any]:
+        return self._scenario_view(scenario_id, await self.scenario(scenario_id))
+
+    @staticmethod
+    def _scenario_view(scenario_id: str, s: Scenario) -> dict[str, Any]:
         return {
             "id": scenario_id,
             "name": s.name,
@@ -378,60 +385,115 @@ class Engine:
 
     # -- schedules (jobs) -----------------------------------------------------------------------
 
-    def submit_schedule(
+    async def submit_schedule(
         self,
         scenario_id: str,
         *,
         required_arrival_s: float | None = None,
         seed: int = 0,
         dry_run: bool = False,
+        owner: str | None = None,
     ) -> Job:
-        scenario = self.scenario(scenario_id)
+        """Queue a schedule job (planned in a process of its own).
+
+        Raises
+        ------
+        TooBusy
+            ``owner`` has as many jobs queued or running as its quota allows.
+        """
+        mine = [j for j in self.jobs.values() if j.owner == owner and j.state not in JOB_ENDED]
+        if owner is not None and len(mine) >= self.limits.jobs_per_owner:
+            raise TooBusy(
+                f"this token has {len(mine)} jobs queued or running, its quota: wait for one "
+                "to end, or cancel one (DELETE /v1/jobs/{id})",
+                self.limits.retry_after_s,
+            )
+        scenario = await self.scenario(scenario_id)
+        check_limits(scenario, self.limits.scenario)
         if required_arrival_s is not None:
             scenario = _with_arrival(scenario, required_arrival_s)
-        job = Job(uuid.uuid4().hex, "dry_run" if dry_run else "schedule")
+        job = Job(uuid.uuid4().hex, "dry_run" if dry_run else "schedule", owner=owner)
         self.jobs[job.id] = job
-        self._spawn(self._run_schedule(job, scenario_id, scenario, seed, dry_run))
+        job.task = self._spawn(self._run_schedule(job, scenario_id, scenario, seed, dry_run))
         return job
 
     async def _run_schedule(
         self, job: Job, scenario_id: str, scenario: Scenario, seed: int, dry_run: bool
     ) -> None:
-        job.state = "running"
-        job.progress = 0.1
+        def started() -> None:
+            job.state, job.stage = "running", "starting"
+            job.started_utc_s = time.time()
+
+        def progress(fraction: float, stage: str) -> None:
+            job.progress, job.stage = round(fraction, 3), stage
+
         t0 = time.perf_counter()
         try:
-            schedule, world = await asyncio.to_thread(_plan, scenario, seed, self.config)
-        except Infeasible as err:
-            job.state = "failed"
-            job.error = {
-                "status": 409,
-                "detail": str(err),
-                "earliest_feasible_s": err.earliest_s,
-                "vehicle": err.vehicle,
-            }
-            return
-        except (PlannerError, GcsError, ValueError) as err:
-            job.state, job.error = "failed", {"status": 422, "detail": str(err)}
-            return
-        except Exception as err:
-            log.exception("schedule job failed")
-            job.state, job.error = "failed", {"status": 500, "detail": type(err).__name__}
-            return
-        wall = time.perf_counter() - t0
-        entry = PlannedSchedule(
-            uuid.uuid4().hex, scenario_id, scenario, schedule, world, seed, wall
-        )
-        if not dry_run:
-            self.schedules[entry.id] = entry
-        job.result = entry.view() if not dry_run else {**entry.view(), "id": None}
-        job.progress = 1.0
-        job.state = "succeeded"
+            planned = await self.work.run(
+                job.id,
+                planjobs.plan_schedule,
+                scenario,
+                seed,
+                self.config.method,
+                time_limit_s=self.limits.job_time_limit_s,
+                on_start=started,
+                on_progress=progress,
+            )
+        except (JobCancelled, asyncio.CancelledError):
+            job.state, job.stage = "cancelled", "cancelled"
+            job.error = {"status": 409, "detail": "cancelled"}
+        except JobTimedOut as err:
+            job.state, job.error = "failed", {"status": 422, "detail": f"stopped: {err}"}
+        except JobFailed as err:
+            log.error("schedule job %s failed: %s", job.id, err)
+            job.state, job.error = "failed", {"status": 500, "detail": str(err)}
+        else:
+            if planned[0] == "infeasible":
+                job.state = "failed"
+                job.error = {
+                    "status": 409,
+                    "detail": planned[1],
+                    "earliest_feasible_s": planned[2],
+                    "vehicle": planned[3],
+                }
+            elif planned[0] == "invalid":
+                job.state, job.error = "failed", {"status": 422, "detail": planned[1]}
+            else:
+                _, schedule, world = planned
+                entry = PlannedSchedule(
+                    uuid.uuid4().hex,
+                    scenario_id,
+                    scenario,
+                    schedule,
+                    world,
+                    seed,
+                    time.perf_counter() - t0,
+                )
+                if not dry_run:
+                    self.schedules[entry.id] = entry
+                job.result = entry.view() if not dry_run else {**entry.view(), "id": None}
+                job.progress, job.stage, job.state = 1.0, "done", "succeeded"
+        finally:
+            job.finished_utc_s = time.time()
+            if job.state not in JOB_ENDED:  # the service stopping under it
+                job.state, job.error = "cancelled", {"status": 409, "detail": "cancelled"}
 
     def job(self, job_id: str) -> Job:
         job = self.jobs.get(job_id)
         if job is None:
             raise NotFound(f"no job {job_id!r}")
+        return job
+
+    async def cancel_job(self, job_id: str) -> Job:
+        """Cancel a queued or running job: its process is killed (its memory given back)
+        before this returns. An ended job is left as it ended."""
+        job = self.job(job_id)
+        if job.state in JOB_ENDED:
+            return job
+        self.work.cancel(job.id)
+        if job.task is not None:
+            job.task.cancel()  # a queued one stops waiting for its turn
+            await asyncio.wait([job.task])
         return job
 
     def planned(self, schedule_id: str) -> PlannedSchedule:
@@ -857,10 +919,11 @@ class Engine:
         doc["scenario_id"] = handle.schedule.scenario_id
         return doc
 
-    def terrain_png(self, scenario_id: str) -> bytes:
+    async def terrain_png(self, scenario_id: str) -> bytes:
         png = self._terrain.get(scenario_id)
         if png is None:
-            png = terrain_png(self.scenario(scenario_id))
+            scenario = await self.scenario(scenario_id)
+            png = await asyncio.to_thread(terrain_png, scenario)
             self._terrain[scenario_id] = png
         return png
 
@@ -906,15 +969,3 @@ def _with_arrival(scenario: Scenario, required_arrival_s: float) -> Scenario:
             "required_arrival_s: needs a team arrival kind (simultaneous, spaced, waves)"
         )
     return out
-
-
-def _plan(scenario: Scenario, seed: int, config: FlightConfig) -> tuple[Schedule, World]:
-    """Plan and schedule (a worker thread); an infeasible request names the earliest time."""
-    world = build_world(scenario)
-    try:
-        p = plan(scenario, method=config.method, rng=np.random.default_rng(seed), world=world)
-        schedule = build_schedule(scenario, p, world=world)
-        check_feasible(schedule)
-    except InfeasibleError as err:
-        raise Infeasible(f"infeasible: {err}", err.earliest_s, err.vehicle) from None
-    return schedule, world

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import asyncio
 from typing import Any, Literal
 
 from fastapi import APIRouter, Depends, Request, Response
@@ -67,7 +66,7 @@ async def add_scenario(request: Request) -> dict[str, Any]:
         raise InvalidInput("scenario: not UTF-8 text") from None
     media = request.headers.get("content-type", "application/yaml").split(";")[0].strip()
     kind = "application/json" if "json" in media else "application/yaml"
-    return engine_of(request).add_scenario(text, kind)
+    return await engine_of(request).add_scenario(text, kind)
 
 
 @router.get("/scenarios/schema", dependencies=observe, tags=["scenarios"])
@@ -78,7 +77,7 @@ async def scenario_schema() -> dict[str, Any]:
 
 @router.get("/scenarios/{scenario_id}", dependencies=observe, tags=["scenarios"])
 async def scenario(scenario_id: str, request: Request) -> dict[str, Any]:
-    return engine_of(request).scenario_view(scenario_id)
+    return await engine_of(request).scenario_view(scenario_id)
 
 
 @router.get(
@@ -90,8 +89,7 @@ async def scenario(scenario_id: str, request: Request) -> dict[str, Any]:
 )
 async def terrain(scenario_id: str, request: Request) -> Response:
     """A hillshade of the scenario's terrain over its area, north up (the map's base layer)."""
-    engine = engine_of(request)
-    png = await asyncio.to_thread(engine.terrain_png, scenario_id)
+    png = await engine_of(request).terrain_png(scenario_id)
     return Response(png, media_type="image/png", headers={"Cache-Control": "max-age=3600"})
 
 
@@ -101,11 +99,12 @@ async def terrain(scenario_id: str, request: Request) -> Response:
 async def schedule(body: ScheduleIn, request: Request, response: Response) -> dict[str, Any]:
     """Plan and schedule as a job (poll ``/v1/jobs/{id}``); an infeasible time fails the job
     with status 409, the earliest feasible time and the vehicle that forces it."""
-    job = engine_of(request).submit_schedule(
+    job = await engine_of(request).submit_schedule(
         body.scenario_id,
         required_arrival_s=body.required_arrival_s,
         seed=body.seed,
         dry_run=body.dry_run,
+        owner=getattr(request.state, "token_id", None),
     )
     response.headers["Location"] = f"/v1/jobs/{job.id}"
     return job.view()
@@ -113,7 +112,16 @@ async def schedule(body: ScheduleIn, request: Request, response: Response) -> di
 
 @router.get("/jobs/{job_id}", dependencies=observe, tags=["schedules"])
 async def job(job_id: str, request: Request) -> dict[str, Any]:
+    """A job's state, progress (0 to 1, with the stage it is at) and, once it has ended, its
+    result or error."""
     return engine_of(request).job(job_id).view()
+
+
+@router.delete("/jobs/{job_id}", dependencies=[Depends(require("plan"))], tags=["schedules"])
+async def cancel_job(job_id: str, request: Request) -> dict[str, Any]:
+    """Cancel a queued or running job: its process is killed, and its memory given back,
+    before the answer (state ``cancelled``). An ended job is answered as it ended."""
+    return (await engine_of(request).cancel_job(job_id)).view()
 
 
 @router.get("/schedules/{schedule_id}", dependencies=observe, tags=["schedules"])
