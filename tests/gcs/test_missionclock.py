@@ -200,6 +200,10 @@ def test_bad_duplicate_reordered_and_reset_samples() -> None:
 
 
 async def test_sleep_until_and_sleep_at_200x_in_real_time() -> None:
+    """On time.monotonic and asyncio.sleep: a sleep never ends before the UTC asked for. Each
+    SYSTEM_TIME is stamped with the monotonic time it was sent at (a link without delay), so
+    the clock's estimate is the vehicle's UTC however late a busy machine runs the tasks; how
+    long past the target a sleep returns is the scheduler's, bounded only as a hang."""
     clock = MissionClock()  # time.monotonic
     rate = 200.0
     t0 = time.monotonic()
@@ -210,26 +214,35 @@ async def test_sleep_until_and_sleep_at_200x_in_real_time() -> None:
     async def vehicle() -> None:  # SYSTEM_TIME at 1 Hz of simulated time
         j = 0
         while True:
-            clock.observe(1, UTC0 + j, float(j), time.monotonic())
+            clock.observe(1, UTC0 + j, float(j), t0 + j / rate)
             j += 1
             await asyncio.sleep(max(0.0, t0 + j / rate - time.monotonic()))
 
     task = asyncio.create_task(vehicle())
     try:
-        while clock.rate == 1.0:
-            await asyncio.sleep(0.001)
-        target = utc_now() + 20.0  # 0.1 s of wall
+        async with asyncio.timeout(30.0):  # a hang guard only
+            while clock.rate == 1.0:
+                await asyncio.sleep(0.001)
+        assert clock.rate == pytest.approx(rate)
+        before = utc_now()
+        estimate = clock.now_utc_s()
+        after = utc_now()
+        assert before - 1e-3 <= estimate <= after + 1e-3  # the vehicle's UTC, read between
         w0 = time.monotonic()
-        await clock.sleep_until(target)
+        target = utc_now() + 20.0  # 0.1 s of wall
+        async with asyncio.timeout(30.0):
+            await clock.sleep_until(target)
         waited = time.monotonic() - w0
         assert clock.now_utc_s() >= target
-        assert utc_now() == pytest.approx(target, abs=2.0)  # 10 ms of wall
-        assert 0.05 < waited < 0.5
+        assert utc_now() >= target - 1e-3  # not early
+        assert waited > 0.1 - 1e-3
         w0 = time.monotonic()
         start = clock.now_utc_s()
-        await clock.sleep(10.0)
+        async with asyncio.timeout(30.0):
+            await clock.sleep(10.0)
         assert clock.now_utc_s() >= start + 10.0
-        assert time.monotonic() - w0 < 0.3
+        assert utc_now() >= start + 10.0 - 1e-3
+        assert time.monotonic() - w0 > 0.05 - 1e-3
         await clock.sleep(0.0)
         await clock.sleep(-3.0)
         with pytest.raises(ValueError, match="not a number"):
