@@ -113,11 +113,16 @@ async def team() -> AsyncIterator[SimTeam]:
         yield t
 
 
+async def least_rtt(c: Client, n: int = 3) -> float:
+    """The quickest of ``n`` command round trips (a busy machine may slow any one of them)."""
+    return min([await command_rtt(c) for _ in range(n)])
+
+
 async def test_latency_set_at_run_time_delays_both_directions(team: SimTeam) -> None:
     link = team.vehicles[0].link
     c = await Client.connect(team.ports[0])
     try:
-        clean = await command_rtt(c)
+        clean = await least_rtt(c)
         link.faults(latency_ms=120.0)
         assert not link.transparent
         delayed = await command_rtt(c)
@@ -129,7 +134,7 @@ async def test_latency_set_at_run_time_delays_both_directions(team: SimTeam) -> 
         assert stored_matches(team, items)
         link.faults(latency_ms=0.0)
         assert link.transparent
-        assert await command_rtt(c) < delayed
+        assert await least_rtt(c) < delayed
     finally:
         await c.close()
 
