@@ -35,6 +35,7 @@ from gcs.mavlink.signing import SigningConfig
 from gcs.rehearsal.rehearse import RehearsalOptions, flight_record, stub_args
 from gcs.rehearsal.report import write_report
 from gcs.service import planjobs
+from gcs.service.ended import EndedFlight, EndedFlights, keep_final
 from gcs.service.fleet import Fleet, FleetVehicle, VehicleBusy
 from gcs.service.mapview import flight_map, terrain_png
 from gcs.service.processjobs import JobCancelled, JobFailed, JobTimedOut, ProcessJobs
@@ -73,6 +74,8 @@ __all__ = [
 
 log = logging.getLogger(__name__)
 
+ENDED_STATES = tuple(s.value for s in ENDED)
+"""The store's states of a flight that has ended."""
 JobState = Literal["queued", "running", "succeeded", "failed", "cancelled"]
 JOB_ENDED: frozenset[JobState] = frozenset({"succeeded", "failed", "cancelled"})
 
@@ -197,6 +200,8 @@ class FlightHandle:
     report_dir: Path | None = None
     wall0: float = field(default_factory=time.perf_counter)
     snapshot_cache: tuple[float, dict[str, Any]] | None = None
+    final: tuple[dict[str, Any], dict[str, Any]] | None = None
+    """Once it has ended and its record is written: its last snapshot and map, as kept."""
 
 
 class Engine:
@@ -215,6 +220,8 @@ class Engine:
         self.config = config or FlightConfig()
         self.limits = limits or Limits()
         self.work = ProcessJobs(self.limits.jobs_running, preload=planjobs.PRELOAD)
+        self.ended = EndedFlights(data_dir / "flights")
+        """Flights that ended before this process started (read from their folders)."""
         self._scenarios: dict[str, Scenario] = {}
         """Scenarios parsed since the start, by id (a scenario is immutable)."""
         self.fleet = Fleet()
@@ -223,6 +230,7 @@ class Engine:
         self.flights: dict[str, FlightHandle] = {}
         self.vehicle_ids: dict[str, str] = {}
         """Vehicle id (the API's) -> connection string."""
+        self._named = 0
         self._tasks: set[asyncio.Task[Any]] = set()
         self._terrain: dict[str, bytes] = {}
         self._stubs: list[StubProcess] = []
@@ -287,9 +295,18 @@ class Engine:
             raise InvalidInput(f"connection: {err}") from None
         except (GcsError, TimeoutError, OSError) as err:
             raise ServiceError(f"no vehicle answered at {connection}: {err}") from None
-        vid = f"v{len(self.vehicle_ids) + 1}"
-        self.vehicle_ids[vid] = held.connection
-        return self.vehicle_view(vid)
+        return self.vehicle_view(self._name(held.connection))
+
+    def _name(self, connection: str) -> str:
+        """The API's id of the vehicle at ``connection`` (a new one the first time: ids are
+        never given twice, even once a vehicle has gone)."""
+        for vid, conn in self.vehicle_ids.items():
+            if conn == connection:
+                return vid
+        self._named += 1
+        vid = f"v{self._named}"
+        self.vehicle_ids[vid] = connection
+        return vid
 
     def _held(self, vehicle_id: str) -> FleetVehicle:
         conn = self.vehicle_ids.get(vehicle_id)
@@ -459,17 +476,28 @@ class Engine:
             elif planned[0] == "invalid":
                 job.state, job.error = "failed", {"status": 422, "detail": planned[1]}
             else:
-                _, schedule, world = planned
+                blob = planned[1]
+                assert isinstance(blob, bytes)
+                kept, schedule, world = await asyncio.to_thread(planjobs.kept_schedule, blob)
                 entry = PlannedSchedule(
                     uuid.uuid4().hex,
                     scenario_id,
-                    scenario,
+                    kept,
                     schedule,
                     world,
                     seed,
                     time.perf_counter() - t0,
                 )
                 if not dry_run:
+                    await asyncio.to_thread(
+                        self.store.save_schedule,
+                        entry.id,
+                        scenario_id,
+                        seed=seed,
+                        plan_wall_s=entry.plan_wall_s,
+                        view=entry.view(),
+                        blob=blob,
+                    )
                     self.schedules[entry.id] = entry
                 job.result = entry.view() if not dry_run else {**entry.view(), "id": None}
                 job.progress, job.stage, job.state = 1.0, "done", "succeeded"
@@ -496,14 +524,25 @@ class Engine:
             await asyncio.wait([job.task])
         return job
 
-    def planned(self, schedule_id: str) -> PlannedSchedule:
+    async def planned(self, schedule_id: str) -> PlannedSchedule:
+        """A planned schedule: from the store once per process (kept when it was planned, so
+        a restarted service has every one it had)."""
         entry = self.schedules.get(schedule_id)
-        if entry is None:
-            raise NotFound(f"no schedule {schedule_id!r}")
+        if entry is not None:
+            return entry
+        try:
+            row, blob = await asyncio.to_thread(self.store.schedule, schedule_id)
+        except StoreNotFound:
+            raise NotFound(f"no schedule {schedule_id!r}") from None
+        scenario, schedule, world = await asyncio.to_thread(planjobs.kept_schedule, blob)
+        entry = PlannedSchedule(
+            row.id, row.scenario_id, scenario, schedule, world, row.seed, row.plan_wall_s
+        )
+        self.schedules[entry.id] = entry
         return entry
 
-    def mission_file(self, schedule_id: str, vehicle: str, fmt: str) -> str:
-        entry = self.planned(schedule_id)
+    async def mission_file(self, schedule_id: str, vehicle: str, fmt: str) -> str:
+        entry = await self.planned(schedule_id)
         if vehicle not in {v.vehicle_id for v in entry.schedule.vehicles}:
             raise NotFound(f"no vehicle {vehicle!r} in schedule {schedule_id}")
         vs = entry.schedule.vehicle(vehicle)
@@ -533,7 +572,7 @@ class Engine:
         InvalidInput
             A scenario vehicle without a vehicle, or one named that the scenario lacks.
         """
-        entry = self.planned(schedule_id)
+        entry = await self.planned(schedule_id)
         ids = [v.id for v in entry.scenario.vehicles]
         fid = uuid.uuid4().hex
         clock = MissionClock()
@@ -589,8 +628,7 @@ class Engine:
             pacer=pacer,
         )
         for h in held:
-            if h.connection not in self.vehicle_ids.values():
-                self.vehicle_ids[f"v{len(self.vehicle_ids) + 1}"] = h.connection
+            self._name(h.connection)
         runner.bind({vid: h.vehicle for vid, h in handle.vehicles.items()})
         self.store.create_flight(entry.scenario_id, conns, flight_id=fid)
         for vid, h in handle.vehicles.items():
@@ -654,8 +692,7 @@ class Engine:
             held = await self.fleet.claim([handle.connections[i] for i in ids], handle.id, sysids)
             handle.vehicles = dict(zip(ids, held, strict=True))
             for h in held:
-                if h.connection not in self.vehicle_ids.values():
-                    self.vehicle_ids[f"v{len(self.vehicle_ids) + 1}"] = h.connection
+                self._name(h.connection)
             runner.bind({vid: h.vehicle for vid, h in handle.vehicles.items()})
             await self._wait_clock(handle)
             await runner.reconcile()
@@ -696,10 +733,44 @@ class Engine:
         )
 
     def flight(self, flight_id: str) -> FlightHandle:
+        """A flight of this process (running, or ended since it started)."""
         handle = self.flights.get(flight_id)
         if handle is None:
             raise NotFound(f"no flight {flight_id!r}")
         return handle
+
+    def known(self, flight_id: str) -> FlightHandle | EndedFlight:
+        """A flight of this process, or one that ended before it started."""
+        handle = self.flights.get(flight_id)
+        if handle is not None:
+            return handle
+        ended = self.ended.get(flight_id)
+        if ended is None:
+            raise NotFound(f"no flight {flight_id!r}")
+        return ended
+
+    async def record(self, flight_id: str) -> dict[str, Any]:
+        """The flight record (``tcgcs-flight/1``) once the flight is over."""
+        found = self.known(flight_id)
+        if isinstance(found, EndedFlight):
+            try:
+                doc: dict[str, Any] = json.loads(
+                    await asyncio.to_thread(found.record_path.read_text)
+                )
+            except (OSError, ValueError):
+                raise NotFound(f"flight {flight_id} left no record") from None
+            return doc
+        if found.record is None:
+            raise NotFound(f"flight {flight_id} has no record yet (it is {found.runner.state})")
+        return found.record
+
+    def report_dir(self, flight_id: str) -> Path:
+        """The folder of the flight's report."""
+        found = self.known(flight_id)
+        folder = found.report_dir
+        if folder is None or not folder.is_dir():
+            raise NotFound(f"flight {flight_id} has no report yet")
+        return folder
 
     async def _wait_clock(self, handle: FlightHandle) -> None:
         clock = handle.runner.clock
@@ -774,8 +845,8 @@ class Engine:
             # The simulator stopped first: its truth log is then whole (closed) when the
             # record reads it, however far behind the writing a busy machine has left it.
             await self._stop_simulator(handle)
+        flight_dir = self.data_dir / "flights" / handle.id
         try:
-            flight_dir = self.data_dir / "flights" / handle.id
             conns = None if handle.stub is not None else list(handle.connections.values())
             opts = self._options(handle.schedule, handle.rehearsal, flight_dir, conns)
             if runner.start_utc_s is not None:
@@ -796,11 +867,27 @@ class Engine:
                 handle.report_dir = report
         except Exception:
             log.exception("flight %s: record or report failed", handle.id)
+        try:
+            # Its last snapshot and map, kept: from now on the flight is answered with them,
+            # by this process and by any after it.
+            snap = self._snapshot(handle)
+            snap["record_ready"] = handle.record is not None
+            final = snap, self.flight_map(handle.id)
+            await asyncio.to_thread(keep_final, self.data_dir / "flights" / handle.id, *final)
+            handle.final = final
+        except Exception:
+            log.exception("flight %s: its last snapshot was not kept", handle.id)
         await self._stop_writers(handle)
         self.fleet.release(handle.id)
         if handle.pacer is not None:
             handle.pacer.cancel()
+        simulated = handle.stub is not None or (flight_dir / "stub.pid").exists()
         await self._stop_simulator(handle)
+        if simulated:
+            # Its simulator vehicles went with their simulator: no longer the service's.
+            gone = set(handle.connections.values())
+            await self.fleet.drop(sorted(gone))
+            self.vehicle_ids = {v: c for v, c in self.vehicle_ids.items() if c not in gone}
 
     async def _stop_simulator(self, handle: FlightHandle) -> None:
         """The flight's bundled simulator: ours, or one an earlier process started for it
@@ -847,8 +934,11 @@ class Engine:
             raise NotFound(str(err.args[0])) from None
 
     def team_time(self, flight_id: str) -> dict[str, Any]:
-        handle = self.flight(flight_id)
-        team = handle.runner.team
+        found = self.known(flight_id)
+        if isinstance(found, EndedFlight):
+            snap = found.snapshot
+            return {"team_time_s": snap["team_time_s"], "version": snap["team_time_version"]}
+        team = found.runner.team
         assert team is not None
         return {"team_time_s": team.team_ref_s, "version": team.version}
 
@@ -890,7 +980,12 @@ class Engine:
     def snapshot(self, flight_id: str, *, max_age_s: float = 0.0) -> dict[str, Any]:
         """The flight's snapshot; with ``max_age_s``, one taken that recently may be given
         again (many stream clients share one per flight)."""
-        handle = self.flight(flight_id)
+        found = self.known(flight_id)
+        if isinstance(found, EndedFlight):
+            return found.snapshot
+        handle = found
+        if handle.final is not None:
+            return handle.final[0]
         now = time.monotonic()
         if max_age_s > 0.0 and handle.snapshot_cache is not None:
             taken, snap = handle.snapshot_cache
@@ -906,17 +1001,23 @@ class Engine:
         snap["flight_id"] = flight_id
         snap["schedule_id"] = handle.schedule.id
         snap["uploads"] = _uploads(handle)
-        snap["record_ready"] = handle.record is not None
+        snap["record_ready"] = handle.final is not None and handle.record is not None
         return snap
 
     def flight_map(self, flight_id: str) -> dict[str, Any]:
         """What the map draws (:func:`gcs.service.mapview.flight_map`), with the flight's
         scenario id (its terrain image)."""
-        handle = self.flight(flight_id)
-        team = handle.runner.team
+        found = self.known(flight_id)
+        if isinstance(found, EndedFlight):
+            if found.map is None:
+                raise NotFound(f"flight {flight_id} left no map")
+            return found.map
+        if found.final is not None:
+            return found.final[1]
+        team = found.runner.team
         assert team is not None
-        doc = flight_map(team, handle.runner.now_s())
-        doc["scenario_id"] = handle.schedule.scenario_id
+        doc = flight_map(team, found.runner.now_s())
+        doc["scenario_id"] = found.schedule.scenario_id
         return doc
 
     async def terrain_png(self, scenario_id: str) -> bytes:
@@ -928,13 +1029,20 @@ class Engine:
         return png
 
     def flight_views(self) -> list[dict[str, Any]]:
-        return [
+        """Every flight: this process's, then those that ended before it started."""
+        out: list[dict[str, Any]] = [
             {"id": fid, "state": h.runner.state.value, "schedule_id": h.schedule.id}
             for fid, h in self.flights.items()
         ]
+        for fid in self.store.flights_in(ENDED_STATES):
+            ended = None if fid in self.flights else self.ended.get(fid)
+            if ended is not None:
+                schedule_id = ended.snapshot.get("schedule_id")
+                out.append({"id": fid, "state": ended.state, "schedule_id": schedule_id})
+        return out
 
     def events(self, flight_id: str, after_seq: int, limit: int) -> list[FlightEvent]:
-        self.flight(flight_id)
+        self.known(flight_id)
         return self.store.events(flight_id, after_seq=after_seq, limit=limit)
 
 

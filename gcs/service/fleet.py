@@ -124,6 +124,14 @@ class Fleet:
             if held.flight_id == flight_id:
                 held.flight_id = None
 
+    async def drop(self, connections: Sequence[str]) -> None:
+        """Close the links to these vehicles and forget them (a flight's bundled simulator
+        vehicles, once it has ended: their simulator is stopped)."""
+        for conn in connections:
+            held = self._vehicles.pop(conn, None)
+            if held is not None:
+                await held.link.close()
+
     def held(self, connection: str) -> FleetVehicle | None:
         """The vehicle at ``connection`` if its link is open."""
         return self._vehicles.get(connection)

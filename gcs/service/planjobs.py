@@ -5,6 +5,7 @@ process boundary whole."""
 
 from __future__ import annotations
 
+import pickle
 from collections.abc import Mapping
 from typing import Any
 
@@ -18,14 +19,23 @@ from planner.retime import build_schedule, check_feasible
 from planner.scenario import Scenario
 from planner.schedule import Schedule
 
-__all__ = ["PRELOAD", "Parsed", "Planned", "parse", "plan_schedule"]
+__all__ = [
+    "PRELOAD",
+    "Parsed",
+    "Planned",
+    "keep_schedule",
+    "kept_schedule",
+    "parse",
+    "plan_schedule",
+]
 
 PRELOAD = ("gcs.service.planjobs",)
 """Imported once by the job processes' fork server (every job starts with them loaded)."""
 
-Planned = tuple[str, Schedule, World] | tuple[str, str, float | None, str | None] | tuple[str, str]
-"""``("ok", schedule, world)``, ``("infeasible", message, earliest_s, vehicle)`` or
-``("invalid", message)``."""
+Planned = tuple[str, bytes] | tuple[str, str, float | None, str | None] | tuple[str, str]
+"""``("ok", kept)`` (:func:`keep_schedule`'s bytes), ``("infeasible", message, earliest_s,
+vehicle)`` or ``("invalid", message)``."""
+SCHEDULE_FORMAT = "tcgcs-schedule/1"
 Parsed = tuple[str, Scenario] | tuple[str, str, list[Mapping[str, Any]]]
 """``("ok", scenario)`` or ``("invalid", message, errors)``."""
 
@@ -54,4 +64,20 @@ def plan_schedule(progress: Progress, scenario: Scenario, seed: int, method: Met
         return "infeasible", f"infeasible: {err}", err.earliest_s, err.vehicle
     except (PlannerError, ValueError) as err:
         return "invalid", str(err)
-    return "ok", schedule, world
+    progress(0.99, "keeping")
+    return "ok", keep_schedule(scenario, schedule, world)
+
+
+def keep_schedule(scenario: Scenario, schedule: Schedule, world: World) -> bytes:
+    """A planned schedule as the store keeps it (pickled, as a flight's checkpoint is): the
+    scenario it was planned for (with its team time), the schedule and the world."""
+    doc = {"format": SCHEDULE_FORMAT, "scenario": scenario, "schedule": schedule, "world": world}
+    return pickle.dumps(doc, protocol=pickle.HIGHEST_PROTOCOL)
+
+
+def kept_schedule(blob: bytes) -> tuple[Scenario, Schedule, World]:
+    """:func:`keep_schedule` read back."""
+    doc = pickle.loads(blob)
+    if doc.get("format") != SCHEDULE_FORMAT:
+        raise ValueError(f"a kept schedule of format {doc.get('format')!r}")
+    return doc["scenario"], doc["schedule"], doc["world"]

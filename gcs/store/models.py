@@ -84,3 +84,32 @@ class UploadRow(Base):
     utc_s: Mapped[float | None] = mapped_column(Float, nullable=True)
     what: Mapped[str] = mapped_column(String(200))
     items: Mapped[list[dict[str, Any]]] = mapped_column(JSON)
+
+
+class ScheduleRow(Base):
+    """A planned schedule: its summary, and the schedule and world themselves (pickled, as
+    a flight's checkpoint is)."""
+
+    __tablename__ = "schedules"
+
+    id: Mapped[str] = mapped_column(String(64), primary_key=True)
+    scenario_id: Mapped[str] = mapped_column(ForeignKey("scenarios.id"))
+    seed: Mapped[int] = mapped_column(Integer)
+    plan_wall_s: Mapped[float] = mapped_column(Float)
+    view: Mapped[dict[str, Any]] = mapped_column(JSON)
+    blob: Mapped[bytes] = mapped_column(LargeBinary, deferred=True)
+    created_utc_s: Mapped[float] = mapped_column(Float)
+
+
+class IdempotencyRow(Base):
+    """The first answer to a request sent with an ``Idempotency-Key``: ``key`` is the
+    token's digest with the key, ``digest`` the request's meaning."""
+
+    __tablename__ = "idempotency_keys"
+
+    key: Mapped[str] = mapped_column(String(64), primary_key=True)
+    digest: Mapped[str] = mapped_column(String(64))
+    status: Mapped[int] = mapped_column(Integer)
+    body: Mapped[bytes] = mapped_column(LargeBinary)
+    headers: Mapped[list[list[str]]] = mapped_column(JSON)
+    created_utc_s: Mapped[float] = mapped_column(Float, index=True)

@@ -27,7 +27,15 @@ from gcs.coordination.bus import EventBus, Subscription
 from gcs.coordination.events import EventKind, FlightEvent
 from gcs.coordination.member import VehicleState
 from gcs.errors import GcsError
-from gcs.store.models import EventRow, FlightRow, FlightVehicleRow, ScenarioRow, UploadRow
+from gcs.store.models import (
+    EventRow,
+    FlightRow,
+    FlightVehicleRow,
+    IdempotencyRow,
+    ScenarioRow,
+    ScheduleRow,
+    UploadRow,
+)
 from planner.mission import MissionItem
 
 __all__ = [
@@ -82,7 +90,7 @@ def _item_json(it: MissionItem) -> dict[str, Any]:
     return dataclasses.asdict(it)
 
 
-_Row = TypeVar("_Row", ScenarioRow, FlightRow, FlightVehicleRow)
+_Row = TypeVar("_Row", ScenarioRow, FlightRow, FlightVehicleRow, ScheduleRow)
 
 
 def _get(session: Session, model: type[_Row], key: Any, what: str, *, lock: bool = False) -> _Row:
@@ -156,6 +164,87 @@ class Store:
             row = _get(session, ScenarioRow, scenario_id, f"scenario {scenario_id!r}")
             session.expunge(row)
             return row
+
+    # -- schedules ----------------------------------------------------------------------------
+
+    def save_schedule(
+        self,
+        schedule_id: str,
+        scenario_id: str,
+        *,
+        seed: int,
+        plan_wall_s: float,
+        view: Mapping[str, Any],
+        blob: bytes,
+    ) -> None:
+        """Keep a planned schedule: its summary and the pickled schedule and world."""
+        with Session(self.engine) as session, session.begin():
+            session.add(
+                ScheduleRow(
+                    id=schedule_id,
+                    scenario_id=scenario_id,
+                    seed=seed,
+                    plan_wall_s=plan_wall_s,
+                    view=dict(view),
+                    blob=blob,
+                    created_utc_s=time.time(),
+                )
+            )
+
+    def schedule(self, schedule_id: str) -> tuple[ScheduleRow, bytes]:
+        """A kept schedule's row and its pickled schedule and world."""
+        with Session(self.engine) as session:
+            row = _get(session, ScheduleRow, schedule_id, f"schedule {schedule_id!r}")
+            blob = row.blob
+            session.expunge(row)
+            return row, blob
+
+    # -- idempotency keys ---------------------------------------------------------------------
+
+    def kept_answer(self, key: str) -> IdempotencyRow | None:
+        """The first answer given under ``key``, if any."""
+        with Session(self.engine) as session:
+            row = session.get(IdempotencyRow, key)
+            if row is not None:
+                session.expunge(row)
+            return row
+
+    def keep_answer(
+        self,
+        key: str,
+        digest: str,
+        status: int,
+        body: bytes,
+        headers: Sequence[tuple[str, str]],
+        *,
+        max_keys: int,
+    ) -> None:
+        """Keep the first answer under ``key`` (a second one under the same key, given at
+        the same moment by another process, is dropped), the oldest keys past ``max_keys``
+        forgotten."""
+        with Session(self.engine) as session, session.begin():
+            if session.get(IdempotencyRow, key) is not None:
+                return
+            session.add(
+                IdempotencyRow(
+                    key=key,
+                    digest=digest,
+                    status=status,
+                    body=body,
+                    headers=[list(h) for h in headers],
+                    created_utc_s=time.time(),
+                )
+            )
+        with Session(self.engine) as session, session.begin():
+            stale = session.scalars(
+                select(IdempotencyRow.key)
+                .order_by(IdempotencyRow.created_utc_s.desc())
+                .offset(max_keys)
+            ).all()
+            for old in stale:
+                row = session.get(IdempotencyRow, old)
+                if row is not None:
+                    session.delete(row)
 
     # -- flights ------------------------------------------------------------------------------
 

@@ -18,7 +18,7 @@ class _Engine:
         runner = SimpleNamespace(bus=bus, state=FlightState.RUNNING)
         self.handle = SimpleNamespace(runner=runner, record=None)
 
-    def flight(self, flight_id: str) -> Any:
+    def known(self, flight_id: str) -> Any:
         return self.handle
 
     def snapshot(self, flight_id: str, *, max_age_s: float = 0.0) -> dict[str, Any]:

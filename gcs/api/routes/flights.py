@@ -17,6 +17,7 @@ from gcs.api.routes.common import ERRORS, engine_of
 from gcs.api.schemas import AbortIn, FlightIn, LaunchIn, TeamTimeIn, TeamTimeOut, ThreatIn
 from gcs.coordination.events import FlightEvent
 from gcs.coordination.runner import ENDED
+from gcs.service.ended import EndedFlight
 from gcs.service.engine import Engine, InvalidInput, NotFound, PreconditionFailed, Rehearsal
 
 router = APIRouter(responses=ERRORS, tags=["flights"])
@@ -154,19 +155,13 @@ async def events(
 @router.get("/flights/{flight_id}/record", dependencies=observe)
 async def record(flight_id: str, request: Request) -> dict[str, Any]:
     """The flight record (``tcgcs-flight/1``) once the flight is over."""
-    handle = engine_of(request).flight(flight_id)
-    if handle.record is None:
-        raise NotFound(f"flight {flight_id} has no record yet (it is {handle.runner.state})")
-    return handle.record
+    return await engine_of(request).record(flight_id)
 
 
 @router.get("/flights/{flight_id}/report/{name}", dependencies=observe)
 async def report_file(flight_id: str, name: str, request: Request) -> FileResponse:
     """A file of the flight's report (index.html, arrivals.md, paths.png, ...)."""
-    handle = engine_of(request).flight(flight_id)
-    if handle.report_dir is None:
-        raise NotFound(f"flight {flight_id} has no report yet")
-    path = handle.report_dir / name
+    path = engine_of(request).report_dir(flight_id) / name
     if "/" in name or name.startswith(".") or not path.is_file():
         raise NotFound(f"no report file {name!r}")
     return FileResponse(path)
@@ -179,7 +174,16 @@ async def stream(engine: Engine, flight_id: str, after_seq: int) -> AsyncIterato
     """A snapshot, then every event after ``after_seq`` in order, with a telemetry batch at
     least every :data:`TELEMETRY_WALL_S`; ends after the flight has (or when this client falls
     so far behind that an event would be lost: reconnect with the last ``seq`` seen)."""
-    handle = engine.flight(flight_id)
+    found = engine.known(flight_id)
+    if isinstance(found, EndedFlight):
+        # Over before this process started: its snapshot, the events after ``after_seq``
+        # from the store, the end.
+        yield {"type": "snapshot", "data": found.snapshot}
+        for e in engine.events(flight_id, after_seq, 100_000):
+            yield {"type": "event", "data": event_json(e)}
+        yield {"type": "end", "data": {"state": found.state}}
+        return
+    handle = found
     bus = handle.runner.bus
     if after_seq < bus.first_kept_seq - 1:
         backlog = engine.events(flight_id, after_seq, 100_000)
@@ -255,7 +259,7 @@ async def stream_sse(
     if "text/event-stream" not in request.headers.get("accept", ""):
         raise InvalidInput("stream: ask with Accept: text/event-stream, or open a WebSocket")
     engine = engine_of(request)
-    engine.flight(flight_id)
+    engine.known(flight_id)
     if last_event_id is not None and last_event_id.isdigit():
         after_seq = max(after_seq, int(last_event_id))
 
@@ -287,7 +291,9 @@ async def stream_ws(websocket: WebSocket, flight_id: str, after_seq: int = 0) ->
         await websocket.close(code=4403, reason="this token lacks the 'observe' scope")
         return
     engine: Engine = websocket.app.state.engine
-    if flight_id not in engine.flights:
+    try:
+        engine.known(flight_id)
+    except NotFound:
         await websocket.close(code=4404, reason=f"no flight {flight_id!r}")
         return
     try:

@@ -126,7 +126,7 @@ async def cancel_job(job_id: str, request: Request) -> dict[str, Any]:
 
 @router.get("/schedules/{schedule_id}", dependencies=observe, tags=["schedules"])
 async def schedule_view(schedule_id: str, request: Request) -> dict[str, Any]:
-    return engine_of(request).planned(schedule_id).view()
+    return (await engine_of(request).planned(schedule_id)).view()
 
 
 @router.get(
@@ -148,6 +148,6 @@ async def mission_file(
     schedule_id: str, vehicle: str, fmt: Literal["plan", "waypoints"], request: Request
 ) -> Response:
     """A vehicle's mission as a QGroundControl ``.plan`` or a ``.waypoints`` (WPL 110) file."""
-    text = engine_of(request).mission_file(schedule_id, vehicle, fmt)
+    text = await engine_of(request).mission_file(schedule_id, vehicle, fmt)
     media = "application/json" if fmt == "plan" else "text/plain"
     return Response(text, media_type=media)
