@@ -36,7 +36,7 @@ from collections.abc import Awaitable, Callable, Sequence
 from dataclasses import replace
 from pathlib import Path
 from types import MappingProxyType
-from typing import TYPE_CHECKING, Final, TextIO
+from typing import TYPE_CHECKING, Any, Final, TextIO
 
 from gcs.errors import GcsError
 from gcs.mavlink import commands
@@ -694,8 +694,26 @@ async def serve_cmd(args: argparse.Namespace) -> str:
     app = create_app(settings)  # a bad tile file is an error before anything is served
     print(f"gcs: serving on http://{settings.host}:{settings.port}/v1 (docs at /v1/docs)")
     config = uvicorn.Config(app, host=settings.host, port=settings.port, log_level="warning")
-    await uvicorn.Server(config).serve()
+    server = uvicorn.Server(config)
+    stop = asyncio.get_running_loop()
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        # A stop asked for (Ctrl-C, or SIGTERM from a service manager) is a graceful one, and
+        # a normal end: exit 0 (uvicorn would raise the signal again once stopped, and SIGTERM
+        # would then kill the process, status 143). A second signal stops at once.
+        stop.add_signal_handler(sig, _stop_server, server)
+    server.capture_signals = contextlib.nullcontext  # type: ignore[method-assign,assignment]
+    try:
+        await server.serve()
+    finally:
+        for sig in (signal.SIGINT, signal.SIGTERM):
+            stop.remove_signal_handler(sig)
     return "service stopped"
+
+
+def _stop_server(server: Any) -> None:
+    if server.should_exit:
+        server.force_exit = True
+    server.should_exit = True
 
 
 async def demo_cmd(args: argparse.Namespace) -> str:

@@ -14,15 +14,16 @@ from contextlib import asynccontextmanager
 from pathlib import Path
 from typing import Any
 
-from fastapi import APIRouter, FastAPI, Request
+from fastapi import APIRouter, Depends, FastAPI, Request
 from fastapi.exceptions import RequestValidationError
 from fastapi.responses import JSONResponse, RedirectResponse, Response
 from fastapi.staticfiles import StaticFiles
 from sqlalchemy import text
 from starlette.exceptions import HTTPException as StarletteHTTPException
 
-from gcs.api.auth import TokenTable, admin_token_file
+from gcs.api.auth import TokenTable, admin_token_file, require
 from gcs.api.bodylimit import BodyLimitMiddleware
+from gcs.api.headers import SecurityHeadersMiddleware
 from gcs.api.idempotency import IdempotencyMiddleware
 from gcs.api.metrics import metrics_text
 from gcs.api.routes import flights, resources, tiles
@@ -79,6 +80,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     )
     app.add_middleware(IdempotencyMiddleware)
     app.add_middleware(BodyLimitMiddleware, max_bytes=settings.max_body_bytes)
+    app.add_middleware(SecurityHeadersMiddleware)
     app.state.tiles = tile_source
     _errors(app)
     v1 = APIRouter(prefix="/v1")
@@ -110,10 +112,15 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     async def root() -> RedirectResponse:
         return RedirectResponse("/ui/")
 
-    @app.get("/metrics", tags=["ops"], response_class=Response)
+    @app.get(
+        "/metrics",
+        tags=["ops"],
+        response_class=Response,
+        dependencies=[Depends(require("observe"))],
+    )
     async def metrics(request: Request) -> Response:
         """Prometheus text: links, messages, malformed frames, commands, uploads, arrival
-        errors, event-bus drops, flights."""
+        errors, event-bus drops, flights (an ``observe`` token: it names vehicles' links)."""
         return Response(metrics_text(request.app.state.engine), media_type="text/plain")
 
     return app

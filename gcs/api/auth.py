@@ -13,7 +13,7 @@ from pathlib import Path
 from fastapi import Depends, HTTPException, Request
 from fastapi.security import HTTPAuthorizationCredentials, HTTPBearer
 
-__all__ = ["TokenTable", "admin_token_file", "require"]
+__all__ = ["TokenTable", "admin_token_file", "grants", "require"]
 
 _bearer = HTTPBearer(auto_error=False, description="a token of the service (TCGCS_TOKENS)")
 _credentials = Depends(_bearer)
@@ -49,8 +49,16 @@ def admin_token_file(data_dir: Path) -> tuple[str, Path]:
     return token, path
 
 
+def grants(scopes: frozenset[str], scope: str) -> bool:
+    """Whether a token holding ``scopes`` may do what ``scope`` allows: ``admin`` is every
+    scope, and ``plan`` and ``operate`` include ``observe`` (who plans or flies reads)."""
+    if scope in scopes or "admin" in scopes:
+        return True
+    return scope == "observe" and bool(scopes & {"plan", "operate"})
+
+
 def require(scope: str) -> Callable[..., None]:
-    """A route dependency: a bearer token holding ``scope`` (or ``admin``)."""
+    """A route dependency: a bearer token granting ``scope`` (:func:`grants`)."""
 
     def check(
         request: Request, credentials: HTTPAuthorizationCredentials | None = _credentials
@@ -63,7 +71,7 @@ def require(scope: str) -> Callable[..., None]:
         scopes = table.scopes(credentials.credentials)
         if scopes is None:
             raise HTTPException(401, "unknown token", headers={"WWW-Authenticate": "Bearer"})
-        if scope not in scopes and "admin" not in scopes:
+        if not grants(scopes, scope):
             raise HTTPException(403, f"this token lacks the {scope!r} scope")
         # Who asks, for quotas: a digest, so that the token itself is kept nowhere.
         digest = hashlib.sha256(credentials.credentials.encode()).hexdigest()[:16]

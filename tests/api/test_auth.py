@@ -275,3 +275,46 @@ async def test_token_prefix_refused(client: httpx.AsyncClient) -> None:
             "/v1/schedules", json={}, headers={"Authorization": f"Bearer {wrong}"}
         )
         _unauthorized(r)
+
+
+# -- scopes nest, /metrics, security headers ---------------------------------------------------
+
+
+@pytest.mark.parametrize("endpoint", READS, ids=str)
+async def test_plan_and_operate_tokens_read_too(
+    client: httpx.AsyncClient, endpoint: Endpoint
+) -> None:
+    for scope in ("plan", "operate"):
+        r = await client.get(endpoint.path, headers=auth(scope))
+        assert r.status_code not in (401, 403), (scope, endpoint, r.status_code, r.text)
+
+
+async def test_metrics_need_a_token(client: httpx.AsyncClient) -> None:
+    _unauthorized(await client.get("/metrics"))
+    for scope in ("observe", "plan", "operate", "admin"):
+        r = await client.get("/metrics", headers=auth(scope))
+        assert r.status_code == 200 and "tcgcs_flights" in r.text, (scope, r.status_code)
+
+
+def _secured(r: httpx.Response) -> None:
+    h = r.headers
+    assert h.get("x-frame-options") == "DENY", (r.request.url, h)
+    assert h.get("x-content-type-options") == "nosniff", (r.request.url, h)
+    assert h.get("referrer-policy") == "no-referrer", (r.request.url, h)
+    policy = h.get("content-security-policy", "")
+    assert "frame-ancestors 'none'" in policy and "default-src 'self'" in policy, policy
+    if r.request.url.path != "/v1/docs":
+        assert "http" not in policy and "unsafe" not in policy, policy
+
+
+async def test_every_response_carries_the_security_headers(client: httpx.AsyncClient) -> None:
+    """Every route, answered or refused, the console's files, a 404 and a 413 alike."""
+    for endpoint in [e for e in ENDPOINTS if e.method != "WS"]:
+        for headers in ({}, auth("admin")):
+            r = await client.request(endpoint.method, endpoint.path, json={}, headers=headers)
+            _secured(r)
+    for path in ("/", "/ui/", "/ui/js/main.js", "/ui/console.css", "/nowhere", "/v1/docs"):
+        _secured(await client.get(path))
+    big = await client.post("/v1/scenarios", content=b"x" * (5 * 2**20), headers=auth("plan"))
+    assert big.status_code == 413
+    _secured(big)

@@ -116,6 +116,11 @@ async def console(service: Service, chromium: Browser) -> AsyncIterator[Console]
     page.on("request", lambda r: c.requests.append(r.url))
     page.on("websocket", lambda ws: c.requests.append(ws.url))
     page.on("pageerror", lambda e: c.errors.append(str(e)))
+    # Anything the service's Content-Security-Policy refused the page (said on its console).
+    page.on(
+        "console",
+        lambda m: c.errors.append(m.text) if "Content Security Policy" in m.text else None,
+    )
     try:
         yield c
     finally:

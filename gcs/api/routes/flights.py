@@ -12,7 +12,7 @@ from fastapi import APIRouter, Depends, Header, Query, Request, Response, WebSoc
 from fastapi.responses import FileResponse, StreamingResponse
 from starlette.websockets import WebSocketDisconnect
 
-from gcs.api.auth import require
+from gcs.api.auth import grants, require
 from gcs.api.routes.common import ERRORS, engine_of
 from gcs.api.schemas import AbortIn, FlightIn, LaunchIn, TeamTimeIn, TeamTimeOut, ThreatIn
 from gcs.coordination.events import FlightEvent
@@ -287,7 +287,7 @@ async def stream_ws(websocket: WebSocket, flight_id: str, after_seq: int = 0) ->
     if scopes is None:
         await websocket.close(code=4401, reason="a bearer token is required")
         return
-    if not scopes & {"observe", "admin"}:
+    if not grants(scopes, "observe"):
         await websocket.close(code=4403, reason="this token lacks the 'observe' scope")
         return
     engine: Engine = websocket.app.state.engine
