@@ -82,6 +82,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     app.add_middleware(BodyLimitMiddleware, max_bytes=settings.max_body_bytes)
     app.add_middleware(SecurityHeadersMiddleware)
     app.state.tiles = tile_source
+    app.state.allowed_origins = tuple(settings.allowed_origins)
     _errors(app)
     v1 = APIRouter(prefix="/v1")
     v1.include_router(resources.router)

@@ -33,6 +33,9 @@ class Settings(BaseSettings):
     """A raster MBTiles file (png, jpg or webp tiles) served at ``/v1/tiles`` for the console's
     map; without one the map shows the scenario's hillshade only."""
 
+    allowed_origins: list[str] = Field(default_factory=list)
+    """Origins (``https://ops.example``) besides the service's own whose pages may open a
+    flight's stream (JSON in the environment)."""
     max_body_bytes: int = Field(default=4 * 1024 * 1024, ge=1024)
     """The largest request body accepted; a larger one is answered 413 before it is read."""
     max_vehicles: int = Field(default=1000, ge=1)

@@ -2,8 +2,9 @@
 so one added later is checked too): every mutating route refuses a request without a token or
 with an unknown one (401, ``WWW-Authenticate: Bearer``) and one with an observe-only token
 (403); every read under /v1 but health, ready and the docs refuses one without a token; the
-WebSocket stream is closed with 4401. Tokens never appear in a response or a log line, the
-admin token made when none is configured is kept mode 0600, and tokens are compared whole."""
+WebSocket stream is closed with 4401 (a token in its URL too), 4403 for another origin.
+Tokens never appear in a response or a log line, the admin token made when none is configured
+is kept mode 0600, and tokens are compared whole."""
 
 from __future__ import annotations
 
@@ -126,8 +127,7 @@ async def test_open_routes_need_none(client: httpx.AsyncClient) -> None:
         assert r.status_code == 200, (path, r.status_code, r.text)
 
 
-@pytest.fixture
-async def server_url(app: FastAPI) -> AsyncIterator[str]:
+async def _served(app: FastAPI) -> AsyncIterator[str]:
     """The app served by uvicorn (as ``python -m gcs serve`` does) on a free loopback port,
     in this process: a WebSocket's close code is what a client receives only through a server
     (a close before the handshake is answered becomes an HTTP 403 there)."""
@@ -145,8 +145,20 @@ async def server_url(app: FastAPI) -> AsyncIterator[str]:
         await task
 
 
-async def _close_code(url: str, headers: dict[str, str] | None = None) -> int | None:
-    async with websockets.connect(url, additional_headers=headers) as ws:
+@pytest.fixture
+async def server_url(app: FastAPI) -> AsyncIterator[str]:
+    async for url in _served(app):
+        yield url
+
+
+async def _close_code(
+    url: str, headers: dict[str, str] | None = None, subprotocols: list[str] | None = None
+) -> int | None:
+    async with websockets.connect(
+        url,
+        additional_headers=headers,
+        subprotocols=subprotocols,  # type: ignore[arg-type]
+    ) as ws:
         with pytest.raises(websockets.ConnectionClosed):
             async with asyncio.timeout(10):
                 await ws.recv()
@@ -154,15 +166,33 @@ async def _close_code(url: str, headers: dict[str, str] | None = None) -> int | 
 
 
 @pytest.mark.parametrize("endpoint", SOCKETS, ids=str)
-async def test_socket_needs_a_token(server_url: str, endpoint: Endpoint) -> None:
+async def test_socket_needs_a_token_outside_the_url(server_url: str, endpoint: Endpoint) -> None:
     url = server_url + endpoint.path
     assert await _close_code(url) == 4401
-    assert await _close_code(url + "?token=not-a-token") == 4401
     assert await _close_code(url, {"Authorization": "Bearer not-a-token"}) == 4401
-    assert await _close_code(url + f"?token={TOKENS['admin'][:-1]}") == 4401
-    # A known token gets past: the flight is then the one that is missing.
-    assert await _close_code(url + f"?token={TOKENS['observe']}") == 4404
+    assert await _close_code(url, subprotocols=["tcgcs.v1", "bearer.not-a-token"]) == 4401
+    bad = f"bearer.{TOKENS['admin'][:-1]}"
+    assert await _close_code(url, subprotocols=["tcgcs.v1", bad]) == 4401
+    # A token in the URL is refused, a good one too (a URL is logged).
+    assert await _close_code(url + f"?token={TOKENS['observe']}") == 4401
+    # A known token gets past, as a header or as a browser's subprotocol: the flight is then
+    # the one that is missing.
     assert await _close_code(url, auth("observe")) == 4404
+    good = ["tcgcs.v1", f"bearer.{TOKENS['operate']}"]
+    assert await _close_code(url, subprotocols=good) == 4404
+    # A page of another origin may not open it; the service's own may.
+    host = server_url.removeprefix("ws://")
+    assert await _close_code(url, auth("observe") | {"Origin": "http://evil.test"}) == 4403
+    assert await _close_code(url, auth("observe") | {"Origin": f"http://{host}"}) == 4404
+
+
+async def test_an_allowed_origin_may_open_the_stream(tmp_path: Path) -> None:
+    settings = settings_for(tmp_path / "data", f"sqlite:///{tmp_path / 'db'}")
+    app = create_app(settings.model_copy(update={"allowed_origins": ["https://ops.test"]}))
+    async for url in _served(app):
+        stream = url + "/v1/flights/nope/stream"
+        assert await _close_code(stream, auth() | {"Origin": "https://ops.test"}) == 4404
+        assert await _close_code(stream, auth() | {"Origin": "https://other.test"}) == 4403
 
 
 # -- tokens kept secret -----------------------------------------------------------------------

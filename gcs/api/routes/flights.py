@@ -272,20 +272,55 @@ async def stream_sse(
     return StreamingResponse(body(), media_type="text/event-stream")
 
 
+WS_PROTOCOL = "tcgcs.v1"
+"""The WebSocket subprotocol of the stream; a browser offers its token beside it as
+``bearer.<token>`` (it cannot set headers on a WebSocket)."""
+_BEARER = "bearer."
+
+
+def _ws_credentials(websocket: WebSocket) -> tuple[str | None, str | None]:
+    """``(token, refusal)``: the bearer token from ``Authorization`` or the offered
+    subprotocols, or why the handshake is refused."""
+    if "token" in websocket.query_params:
+        # (a close reason holds 123 bytes)
+        return None, "token in the URL refused: send Authorization: Bearer, or bearer.<token>"
+    scheme, _, token = websocket.headers.get("authorization", "").partition(" ")
+    if scheme.lower() == "bearer" and token:
+        return token.strip(), None
+    for offered in websocket.scope.get("subprotocols", []):
+        if offered.startswith(_BEARER):
+            return offered[len(_BEARER) :], None
+    return None, "a bearer token is required"
+
+
+def _origin_allowed(websocket: WebSocket) -> bool:
+    """A browser's page may open the stream from the service's own origin, or from one the
+    settings allow; a client that sends no ``Origin`` is no browser page."""
+    origin = websocket.headers.get("origin")
+    if origin is None:
+        return True
+    allowed: tuple[str, ...] = getattr(websocket.app.state, "allowed_origins", ())
+    host = websocket.headers.get("host", "")
+    return origin in allowed or origin.split("://", 1)[-1] == host
+
+
 @router.websocket("/flights/{flight_id}/stream")
 async def stream_ws(websocket: WebSocket, flight_id: str, after_seq: int = 0) -> None:
     """The stream over a WebSocket: JSON messages ``{"type", "data"}``. The token comes as
-    ``Authorization: Bearer`` or ``?token=`` (browsers cannot set headers on a WebSocket)."""
-    token = websocket.query_params.get("token")
-    auth = websocket.headers.get("authorization", "")
-    if auth.lower().startswith("bearer "):
-        token = auth[7:]
+    ``Authorization: Bearer``, or from a browser as the subprotocol ``bearer.<token>`` offered
+    beside ``tcgcs.v1``; never in the URL. A page from an origin other than the service's own
+    (or one the settings allow) is refused."""
+    token, refusal = _ws_credentials(websocket)
     scopes = None if token is None else websocket.app.state.tokens.scopes(token)
+    offered = websocket.scope.get("subprotocols", [])
     # Accepted before it is closed: a close before the handshake is answered is an HTTP 403
     # (ASGI), and the client would never see the close code.
-    await websocket.accept()
+    await websocket.accept(subprotocol=WS_PROTOCOL if WS_PROTOCOL in offered else None)
+    if not _origin_allowed(websocket):
+        await websocket.close(code=4403, reason="this origin may not open the stream")
+        return
     if scopes is None:
-        await websocket.close(code=4401, reason="a bearer token is required")
+        await websocket.close(code=4401, reason=refusal or "unknown token")
         return
     if not grants(scopes, "observe"):
         await websocket.close(code=4403, reason="this token lacks the 'observe' scope")

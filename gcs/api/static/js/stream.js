@@ -1,4 +1,5 @@
-// The flight's stream over a WebSocket (`?token=`: a browser cannot set headers on one).
+// The flight's stream over a WebSocket. A browser cannot set headers on one: the token goes as
+// the subprotocol `bearer.<token>` offered beside `tcgcs.v1` (never in the URL, which is logged).
 // When it drops the console says so and reconnects with `after_seq` = the last event's seq it
 // saw: the service sends every event after it, so none is lost and none is shown twice.
 
@@ -28,7 +29,7 @@ export class FlightStream {
 
   url() {
     const proto = location.protocol === "https:" ? "wss:" : "ws:";
-    const q = new URLSearchParams({ after_seq: String(this.lastSeq), token: this.token });
+    const q = new URLSearchParams({ after_seq: String(this.lastSeq) });
     return `${proto}//${location.host}/v1/flights/${encodeURIComponent(this.flightId)}/stream?${q}`;
   }
 
@@ -55,7 +56,7 @@ export class FlightStream {
   _connect() {
     let ws;
     try {
-      ws = new WebSocket(this.url());
+      ws = new WebSocket(this.url(), ["tcgcs.v1", `bearer.${this.token}`]);
     } catch (err) {
       this._lost(`the stream could not be opened (${err.message})`);
       return;
