@@ -187,6 +187,8 @@ def _errors(app: FastAPI) -> None:
 
     @app.exception_handler(StarletteHTTPException)
     async def http_error(request: Request, err: StarletteHTTPException) -> JSONResponse:
+        if err.status_code == 400 and isinstance(err.__cause__, RecursionError):
+            return problem(422, "body: nested too deeply to read")
         return JSONResponse(
             {"detail": str(err.detail)}, status_code=err.status_code, headers=err.headers
         )

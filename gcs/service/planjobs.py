@@ -47,6 +47,8 @@ def parse(progress: Progress, body: str, media_type: str) -> Parsed:
         return "ok", parse_scenario_text(body, media_type)
     except InvalidInput as err:
         return "invalid", str(err), err.errors
+    except RecursionError:
+        return "invalid", "scenario: nested too deeply to read", []
 
 
 def plan_schedule(progress: Progress, scenario: Scenario, seed: int, method: Method) -> Planned:

@@ -451,3 +451,32 @@ async def test_stale_if_match_is_412(client: httpx.AsyncClient, app: FastAPI) ->
         f"/v1/flights/{fid}/abort", json={"vehicle": "UAV9"}, headers=auth("operate")
     )
     assert "UAV9" in problem(r, 404)["detail"]
+
+
+# -- bodies nested too deeply --------------------------------------------------------------------
+
+
+@pytest.mark.parametrize(
+    ("path", "headers", "said"),
+    [
+        ("/v1/scenarios", YAML, "scenario: nested too deeply to read"),
+        ("/v1/scenarios", JSON, "scenario: nested too deeply to read"),
+        ("/v1/schedules", JSON, "body: nested too deeply to read"),
+        ("/v1/flights", {**auth("operate"), "Content-Type": "application/json"}, "body: nested"),
+    ],
+    ids=["scenario-yaml", "scenario-json", "schedule", "flight"],
+)
+async def test_a_body_nested_too_deeply_is_422(
+    client: httpx.AsyncClient,
+    caplog: pytest.LogCaptureFixture,
+    path: str,
+    headers: dict[str, str],
+    said: str,
+) -> None:
+    """A list in a list ... 50,000 deep (a parser's recursion runs out): one 422, no 500, and
+    nothing in the log."""
+    deep = "[" * 50_000 + "]" * 50_000
+    r = await client.post(path, content=deep, headers=headers)
+    assert problem(r, 422)["detail"].startswith(said)
+    assert not [rec for rec in caplog.records if rec.levelname in ("ERROR", "CRITICAL")]
+    assert (await client.get("/v1/health")).status_code == 200
