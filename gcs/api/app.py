@@ -16,7 +16,7 @@ from typing import Any
 
 from fastapi import APIRouter, Depends, FastAPI, Request
 from fastapi.exceptions import RequestValidationError
-from fastapi.responses import JSONResponse, RedirectResponse, Response
+from fastapi.responses import HTMLResponse, JSONResponse, RedirectResponse, Response
 from fastapi.staticfiles import StaticFiles
 from sqlalchemy import text
 from starlette.exceptions import HTTPException as StarletteHTTPException
@@ -40,6 +40,23 @@ log = logging.getLogger(__name__)
 
 STATIC = Path(__file__).with_name("static")
 """The operator console (HTML, JS, CSS): no CDN, nothing fetched from outside the service."""
+
+
+DOCS_PAGE = """<!doctype html>
+<html lang="en">
+<head>
+<meta charset="utf-8">
+<title>tcgcs API</title>
+<link rel="icon" href="/ui/favicon.svg">
+<link rel="stylesheet" href="/ui/docs/swagger-ui.css">
+</head>
+<body>
+<div id="swagger-ui"></div>
+<script src="/ui/docs/swagger-ui-bundle.js"></script>
+<script src="/ui/docs/init.js"></script>
+</body>
+</html>
+"""
 
 
 def create_app(settings: Settings | None = None) -> FastAPI:
@@ -74,7 +91,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
         summary="Time-coordinated ground control for teams of fixed-wing UAVs",
         version="1",
         openapi_url="/v1/openapi.json",
-        docs_url="/v1/docs",
+        docs_url=None,  # served below from the packaged Swagger UI (no CDN)
         redoc_url=None,
         lifespan=lifespan,
     )
@@ -104,6 +121,11 @@ def create_app(settings: Settings | None = None) -> FastAPI:
         except Exception as err:
             return JSONResponse({"detail": f"database: {type(err).__name__}"}, 503)
         return JSONResponse({"status": "ready", "flights": len(request.app.state.engine.flights)})
+
+    @v1.get("/docs", include_in_schema=False)
+    async def docs() -> HTMLResponse:
+        """The API's docs page: Swagger UI from the service's own files."""
+        return HTMLResponse(DOCS_PAGE)
 
     app.include_router(v1)
 

@@ -5,25 +5,17 @@
   page may frame it.
 - ``X-Frame-Options: DENY``, ``X-Content-Type-Options: nosniff``, ``Referrer-Policy:
   no-referrer``.
-
-The API docs page (``/v1/docs``, FastAPI's Swagger UI) loads its script and style from a CDN
-and starts with an inline script: its policy allows those, and nothing else.
 """
 
 from __future__ import annotations
 
 from starlette.types import ASGIApp, Message, Receive, Scope, Send
 
-__all__ = ["DOCS_POLICY", "POLICY", "SecurityHeadersMiddleware"]
+__all__ = ["POLICY", "SecurityHeadersMiddleware"]
 
 POLICY = (
     "default-src 'self'; img-src 'self' blob: data:; object-src 'none'; base-uri 'none'; "
     "form-action 'self'; frame-ancestors 'none'"
-)
-DOCS_POLICY = (
-    "default-src 'self'; script-src 'self' 'unsafe-inline' https://cdn.jsdelivr.net; "
-    "style-src 'self' https://cdn.jsdelivr.net; img-src 'self' data: https://fastapi.tiangolo.com; "
-    "object-src 'none'; base-uri 'none'; frame-ancestors 'none'"
 )
 _COMMON = [
     (b"x-frame-options", b"DENY"),
@@ -35,16 +27,14 @@ _COMMON = [
 class SecurityHeadersMiddleware:
     """An ASGI middleware: the headers above on every HTTP response."""
 
-    def __init__(self, app: ASGIApp, docs_path: str = "/v1/docs") -> None:
+    def __init__(self, app: ASGIApp) -> None:
         self.app = app
-        self.docs_path = docs_path
 
     async def __call__(self, scope: Scope, receive: Receive, send: Send) -> None:
         if scope["type"] != "http":
             await self.app(scope, receive, send)
             return
-        policy = DOCS_POLICY if scope.get("path") == self.docs_path else POLICY
-        extra = [(b"content-security-policy", policy.encode()), *_COMMON]
+        extra = [(b"content-security-policy", POLICY.encode()), *_COMMON]
         names = {name for name, _ in extra}
 
         async def sending(message: Message) -> None:
