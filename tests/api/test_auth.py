@@ -39,6 +39,7 @@ OPEN = {"/v1/health", "/v1/ready", "/v1/openapi.json", "/v1/docs"}
 class Endpoint:
     method: str  # "WS" for a WebSocket route
     path: str  # the route's path with every parameter filled in
+    scope: str | None = None  # the scope its ``require`` dependency names
 
     def __str__(self) -> str:
         return f"{self.method} {self.path}"
@@ -57,6 +58,17 @@ def _filled(path: str) -> str:
     return re.sub(r"{(\w+)(:\w+)?}", lambda m: "plan" if m[1] == "fmt" else f"no-{m[1]}", path)
 
 
+def _required(route: Any) -> str | None:
+    """The scope a route's ``require(scope)`` dependency names (its function is
+    ``require_<scope>``), else None."""
+    dependant = getattr(route, "dependant", None)
+    for dep in [] if dependant is None else dependant.dependencies:
+        name = getattr(dep.call, "__name__", "")
+        if name.startswith("require_"):
+            return str(name.removeprefix("require_"))
+    return None
+
+
 def endpoints() -> list[Endpoint]:
     """Every HTTP method and WebSocket route of the app (HEAD and OPTIONS left out)."""
     app = create_app(settings_for(Path("unused"), "sqlite://"))
@@ -68,9 +80,10 @@ def endpoints() -> list[Endpoint]:
         if isinstance(route, fastapi.routing.APIWebSocketRoute | WebSocketRoute):
             found.add(Endpoint("WS", _filled(path)))
             continue
+        scope = _required(route)
         for method in ctx.methods or ():
             if method not in ("HEAD", "OPTIONS"):
-                found.add(Endpoint(method, _filled(path)))
+                found.add(Endpoint(method, _filled(path), scope))
     return sorted(found, key=str)
 
 
@@ -111,6 +124,13 @@ async def test_write_needs_a_token_with_its_scope(
     r = await send(auth("observe"))
     assert r.status_code == 403, (endpoint, r.status_code, r.text)
     assert "scope" in r.json()["detail"]
+    # The other working scope is refused too; its own scope, and admin, get past.
+    assert endpoint.scope in ("plan", "operate"), endpoint
+    other = "operate" if endpoint.scope == "plan" else "plan"
+    assert (await send(auth(other))).status_code == 403, endpoint
+    for scope in (endpoint.scope, "admin"):
+        r = await send(auth(scope))
+        assert r.status_code not in (401, 403), (endpoint, scope, r.status_code, r.text)
 
 
 @pytest.mark.parametrize("endpoint", READS, ids=str)
