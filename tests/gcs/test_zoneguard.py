@@ -191,6 +191,10 @@ def test_a_re_plan_that_comes_back_after_the_vehicles_would_enter_holds_them_sho
         t += 2.0
         step = answer(team, flight.step(t), t)
         resumed_at |= {r.vehicle_id: t for r in of(step, act.Resume)}
+        for r in of(step, act.Resume):
+            # Back in AUTO the airspeed its mission or a command set is gone (ArduPlane's
+            # Mode::enter, ArduPlane/mode.cpp: new_airspeed_cm = -1): not taken as flown.
+            assert team.members[r.vehicle_id].level_m_s is None, r.vehicle_id
         out += step
     uploads = {u.vehicle_id: u for u in of(out, act.Upload) if u.vehicle_id in TOUCHED}
     assert set(uploads) == set(TOUCHED) and all(u.holding for u in uploads.values())
