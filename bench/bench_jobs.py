@@ -32,7 +32,7 @@ sys.path.insert(0, str(ROOT))  # the generated teams live with the tests
 
 from bench.bench_service import ok, service  # noqa: E402
 from bench.procstat import rss_mib  # noqa: E402
-from tests.procs import gone  # noqa: E402
+from tests.procs import goes  # noqa: E402
 from tests.teams import ring_team  # noqa: E402
 
 
@@ -53,6 +53,13 @@ def _job_pid(service_pid: int) -> int | None:
         if leads and (newest is None or start > newest[0]):
             newest = (start, pgid)
     return None if newest is None else newest[1]
+
+
+def _group(pid: int) -> int | None:
+    try:
+        return int(Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[2])
+    except (OSError, ValueError, IndexError):
+        return None
 
 
 def _descends(pid: int, ancestor: int) -> bool:
@@ -94,8 +101,13 @@ def main() -> int:
             cancels.append(time.perf_counter() - t0)
             if ended["state"] != "cancelled":
                 raise SystemExit(f"job {k}: {ended['state']} after the cancel")
-            if child is not None and not gone(child):
-                raise SystemExit(f"job {k}: its process {child} outlived the cancel")
+            if child is not None and not goes(child):
+                left = [
+                    f"{d.name}: {(d / 'cmdline').read_bytes().replace(bytes(1), b' ')[:120]!r}"
+                    for d in Path("/proc").iterdir()
+                    if d.name.isdigit() and _group(int(d.name)) == child
+                ]
+                raise SystemExit(f"job {k}: its process group {child} outlived the cancel: {left}")
             print(f"job {k + 1}: cancelled in {cancels[-1] * 1000:.0f} ms", flush=True)
         time.sleep(1.0)
         rss1 = rss_mib(pid) or 0.0

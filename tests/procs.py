@@ -2,9 +2,10 @@
 
 from __future__ import annotations
 
+import time
 from pathlib import Path
 
-__all__ = ["gone"]
+__all__ = ["goes", "gone"]
 
 
 def gone(pid: int) -> bool:
@@ -19,4 +20,16 @@ def gone(pid: int) -> bool:
             continue
         if (int(d.name) == pid or int(pgid) == pid) and state != "Z":
             return False
+    return True
+
+
+def goes(pid: int, within_s: float = 10.0) -> bool:
+    """Whether ``pid`` and its group are :func:`gone` within ``within_s`` (wall): a process
+    sent SIGKILL takes a moment to exit (its memory given back first), the more so on a busy
+    machine; the bound only tells that from one that lives on."""
+    deadline = time.monotonic() + within_s
+    while not gone(pid):
+        if time.monotonic() > deadline:
+            return False
+        time.sleep(0.01)
     return True

@@ -117,6 +117,9 @@ class ProcessJobs:
                 _kill(proc)
                 if proc.pid is not None:
                     await loop.run_in_executor(self._readers, proc.join)
+                    # Again, once it is gone: a worker it was forking as the first kill came
+                    # was not yet in its group then, and would live on.
+                    _kill_group(proc.pid)
                 parent.close()
                 self._cancelled.discard(key)
 
@@ -163,10 +166,14 @@ def _kill(proc: multiprocessing.process.BaseProcess) -> None:
     """Kill a job's process group (the job leads its own: see :func:`_child`)."""
     if proc.pid is None:
         return
-    with contextlib.suppress(ProcessLookupError, PermissionError):
-        os.killpg(proc.pid, signal.SIGKILL)
+    _kill_group(proc.pid)
     with contextlib.suppress(ProcessLookupError):
         proc.kill()
+
+
+def _kill_group(pgid: int) -> None:
+    with contextlib.suppress(ProcessLookupError, PermissionError):
+        os.killpg(pgid, signal.SIGKILL)
 
 
 def _child(conn: Connection, fn: Callable[..., Any], args: tuple[Any, ...]) -> None:
