@@ -140,6 +140,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
         tags=["ops"],
         response_class=Response,
         dependencies=[Depends(require("observe"))],
+        responses=ERRORS,
     )
     async def metrics(request: Request) -> Response:
         """Prometheus text: links, messages, malformed frames, commands, uploads, arrival
