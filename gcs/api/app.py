@@ -156,6 +156,7 @@ def _limits(settings: Settings) -> Limits:
             vehicles=settings.max_vehicles,
             grid_nodes=settings.max_grid_nodes,
             hills=settings.max_hills,
+            srtm_dir=settings.srtm_dir,
         ),
         jobs_running=settings.jobs_running,
         jobs_per_owner=settings.jobs_per_token,

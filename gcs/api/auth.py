@@ -13,7 +13,7 @@ from pathlib import Path
 from fastapi import Depends, HTTPException, Request
 from fastapi.security import HTTPAuthorizationCredentials, HTTPBearer
 
-__all__ = ["TokenTable", "admin_token_file", "grants", "require"]
+__all__ = ["TokenTable", "admin_token_file", "grants", "require", "token_digest"]
 
 _bearer = HTTPBearer(auto_error=False, description="a token of the service (TCGCS_TOKENS)")
 _credentials = Depends(_bearer)
@@ -34,6 +34,12 @@ class TokenTable:
             if hmac.compare_digest(known, given):
                 found = scopes
         return found
+
+
+def token_digest(token: str) -> str:
+    """What stands for a token wherever one must be told apart from another (quotas, kept
+    answers): its SHA-256 in hex, so that the token itself is kept nowhere."""
+    return hashlib.sha256(token.strip().encode()).hexdigest()
 
 
 def admin_token_file(data_dir: Path) -> tuple[str, Path]:
@@ -73,9 +79,7 @@ def require(scope: str) -> Callable[..., None]:
             raise HTTPException(401, "unknown token", headers={"WWW-Authenticate": "Bearer"})
         if not grants(scopes, scope):
             raise HTTPException(403, f"this token lacks the {scope!r} scope")
-        # Who asks, for quotas: a digest, so that the token itself is kept nowhere.
-        digest = hashlib.sha256(credentials.credentials.encode()).hexdigest()[:16]
-        request.state.token_id = digest
+        request.state.token_id = token_digest(credentials.credentials)  # who asks, for quotas
 
     check.__name__ = f"require_{scope}"
     return check

@@ -22,7 +22,7 @@ from starlette.middleware.base import BaseHTTPMiddleware, RequestResponseEndpoin
 from starlette.requests import Request
 from starlette.responses import Response
 
-from gcs.api.auth import TokenTable
+from gcs.api.auth import TokenTable, token_digest
 from gcs.store.repository import Store
 
 __all__ = ["MAX_KEYS", "IdempotencyMiddleware"]
@@ -90,7 +90,7 @@ def _known_token(request: Request) -> str | None:
         return None
     if table.scopes(token.strip()) is None:
         return None
-    return hashlib.sha256(token.strip().encode()).hexdigest()
+    return token_digest(token)
 
 
 def _meaning(method: str, path: str, body: bytes) -> str:

@@ -44,6 +44,9 @@ class Settings(BaseSettings):
     """The most planning-grid nodes (area over resolution) in a scenario; more is a 422."""
     max_hills: int = Field(default=1000, ge=0)
     """The most synthetic-terrain hills in a scenario; more is a 422."""
+    srtm_dir: Path | None = None
+    """The folder of SRTM ``.hgt`` tiles (folders of them) scenarios may name as their
+    terrain, relative to it; without it a scenario with SRTM terrain is a 422."""
     jobs_running: int = Field(default=2, ge=1)
     """Planning jobs run at once, each in a process of its own; the others queue."""
     jobs_per_token: int = Field(default=8, ge=1)

@@ -49,13 +49,14 @@ from gcs.service.scenariotext import (
     ServiceError,
     TooBusy,
     check_limits,
+    confine_terrain,
     parse_scenario_text,
 )
 from gcs.service.stubs import StubProcess, follow_lockstep, stop_pid
 from gcs.store.repository import FlightKeeper, Store, StoreNotFound
 from planner.missionfile import to_qgc_plan, to_wpl
 from planner.plan import World
-from planner.scenario import Scenario, Threat
+from planner.scenario import Scenario, SrtmTerrainSpec, Threat
 from planner.schedule import Schedule
 from planner.schedulefile import path_mission
 
@@ -372,7 +373,7 @@ class Engine:
         if parsed[0] == "invalid":
             raise InvalidInput(parsed[1], parsed[2])
         scenario: Scenario = parsed[1]
-        return scenario
+        return confine_terrain(scenario, self.limits.scenario.srtm_dir)
 
     async def scenario(self, scenario_id: str) -> Scenario:
         """A kept scenario (parsed once per process, off the event loop)."""
@@ -719,7 +720,12 @@ class Engine:
         scenario_file = flight_dir / "scenario.yaml"
         if not scenario_file.exists():
             flight_dir.mkdir(parents=True, exist_ok=True)
-            scenario_file.write_text(self.store.scenario(entry.scenario_id).body, encoding="utf-8")
+            body = self.store.scenario(entry.scenario_id).body
+            if isinstance(entry.scenario.terrain, SrtmTerrainSpec):
+                # The simulator's terrain from the folder the planner read (the client's
+                # folder name is relative to the service's SRTM folder, not to this file).
+                body = json.dumps(entry.scenario.model_dump(mode="json", exclude_unset=True))
+            scenario_file.write_text(body, encoding="utf-8")
         r = rehearsal or Rehearsal()
         wind = None if r.wind_m_s is None else (r.wind_m_s, r.wind_from_deg)
         return RehearsalOptions(

@@ -3,7 +3,9 @@
 Errors are :class:`ServiceError` subclasses that name what is wrong; the API maps them to
 status codes by their ``status``. A scenario is checked against the service's limits
 (:class:`ScenarioLimits`: vehicles, grid nodes, hills) before any planning, so that one that
-would take the machine's memory or minutes of work is a 422 at once.
+would take the machine's memory or minutes of work is a 422 at once. Its SRTM terrain is read
+only from the folder the service keeps for it (:func:`confine_terrain`): a client names a
+folder under it, never a path on the service's disk.
 """
 
 from __future__ import annotations
@@ -11,13 +13,14 @@ from __future__ import annotations
 import json
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
+from pathlib import Path, PurePosixPath
 from typing import Any
 
 import yaml
 from pydantic import ValidationError
 
 from gcs.errors import GcsError
-from planner.scenario import Scenario, SyntheticTerrainSpec, field_path
+from planner.scenario import Scenario, SrtmTerrainSpec, SyntheticTerrainSpec, field_path
 
 __all__ = [
     "Conflict",
@@ -29,6 +32,7 @@ __all__ = [
     "ServiceError",
     "TooBusy",
     "check_limits",
+    "confine_terrain",
     "parse_scenario_text",
 ]
 
@@ -128,6 +132,9 @@ class ScenarioLimits:
     vehicles: int = 1000
     grid_nodes: int = 1_000_000
     hills: int = 1000
+    srtm_dir: Path | None = None
+    """The folder SRTM terrain is read from (``TCGCS_SRTM_DIR``): a scenario's
+    ``terrain.directory`` is a folder under it. None: SRTM terrain is refused."""
 
 
 def check_limits(scenario: Scenario, limits: ScenarioLimits) -> None:
@@ -149,3 +156,31 @@ def check_limits(scenario: Scenario, limits: ScenarioLimits) -> None:
         raise InvalidInput(
             f"scenario: terrain.hills: {t.hills} hills, over this service's limit of {limits.hills}"
         )
+
+
+def confine_terrain(scenario: Scenario, srtm_dir: Path | None) -> Scenario:
+    """``scenario`` with its SRTM ``terrain.directory`` (a relative folder, ``.`` for the
+    folder itself) made the absolute folder under ``srtm_dir`` it names; other terrain as it
+    is. Raise :class:`InvalidInput` naming the field when the service keeps no SRTM folder, or
+    the directory is absolute, climbs out of it (``..``, a link) or is not a folder there."""
+    t = scenario.terrain
+    if not isinstance(t, SrtmTerrainSpec):
+        return scenario
+    field = "scenario: terrain.directory"
+    if srtm_dir is None:
+        raise InvalidInput(
+            f"{field}: this service reads no SRTM terrain (TCGCS_SRTM_DIR is not set)"
+        )
+    name = PurePosixPath(t.directory)
+    if name.is_absolute() or ".." in name.parts or "\\" in t.directory:
+        raise InvalidInput(
+            f"{field}: {t.directory!r} must be a folder under the service's SRTM folder, "
+            "relative to it (no absolute path, no '..')"
+        )
+    root = srtm_dir.resolve()
+    folder = (root / name).resolve()
+    if not folder.is_relative_to(root) or not folder.is_dir():
+        raise InvalidInput(f"{field}: {t.directory!r} is not a folder of the service's SRTM folder")
+    return scenario.model_copy(
+        update={"terrain": SrtmTerrainSpec(kind="srtm", directory=str(folder))}
+    )
