@@ -260,10 +260,17 @@ class FlightRunner:
             if vehicle is None:
                 continue
             st = vehicle.state
+            now_s = vehicle.link.clock()  # what it stamps receptions with
+            age = st.heartbeat_age_s(now_s)
+            mode, armed = st.mode_now(now_s)
             v["link"] = {
                 "system_id": vehicle.system_id,
-                "mode": st.mode,
-                "armed": st.armed,
+                "healthy": st.link_ok(now_s),
+                "heartbeat_age_s": None if age is None else round(max(age, 0.0), 3),
+                "mode": mode,
+                "armed": armed,
+                "last_mode": st.mode,
+                "last_armed": st.armed,
                 "battery_pct": st.battery_remaining_pct,
                 "rtt_s": vehicle.link.counters.rtt_s,
             }

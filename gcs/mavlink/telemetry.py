@@ -34,6 +34,8 @@ from gcs.mavlink.modes import mode_name
 
 REBOOT_BACKSTEP_S: Final = 10.0
 DEFAULT_HISTORY_LEN: Final = 256
+LINK_TIMEOUT_S: Final = 3.0
+"""A link with no HEARTBEAT for longer is down (three missed at MAVLink's 1 Hz)."""
 DEFAULT_STATUSTEXT_LEN: Final = 16
 STATUSTEXT_CHUNK_LEN: Final = 50
 
@@ -150,10 +152,20 @@ class VehicleState:
         t = self.last_heartbeat_rx_s
         return None if t is None else now_s - t
 
-    def link_ok(self, now_s: float, timeout_s: float = 3.0) -> bool:
+    def link_ok(self, now_s: float, timeout_s: float = LINK_TIMEOUT_S) -> bool:
         """A HEARTBEAT came within ``timeout_s``."""
         age = self.heartbeat_age_s(now_s)
         return age is not None and age <= timeout_s
+
+    def mode_now(
+        self, now_s: float, timeout_s: float = LINK_TIMEOUT_S
+    ) -> tuple[str | None, bool | None]:
+        """``(mode, armed)`` as the vehicle says them while its link is up (:meth:`link_ok`);
+        ``(None, None)`` once it is down: what it does now is unknown, and its last word is
+        :attr:`mode` and :attr:`armed`."""
+        if not self.link_ok(now_s, timeout_s):
+            return None, None
+        return self.mode, self.armed
 
     def message_age_s(self, msg_type: str, now_s: float) -> float | None:
         t = self.rx_times.get(msg_type)

@@ -317,27 +317,32 @@ class Engine:
         return held
 
     def vehicle_view(self, vehicle_id: str) -> dict[str, Any]:
+        """A vehicle held by the service: its link, and its mode and armed state while the
+        link is up (null once it is down, its last word kept as ``last_mode`` and
+        ``last_armed``)."""
         held = self._held(vehicle_id)
         st = held.vehicle.state
         c = held.link.counters
-        age = None
-        if st.last_heartbeat_rx_s is not None:
-            age = max(0.0, time.monotonic() - st.last_heartbeat_rx_s)
+        now_s = held.link.clock()  # what it stamps receptions with
+        age = st.heartbeat_age_s(now_s)
+        mode, armed = st.mode_now(now_s)
         return {
             "id": vehicle_id,
             "connection": held.connection,
             "system_id": held.vehicle.system_id,
             "flight_id": held.flight_id,
             "link": {
-                "heartbeat_age_s": None if age is None else round(age, 3),
-                "healthy": age is not None and age < 3.0,
+                "heartbeat_age_s": None if age is None else round(max(age, 0.0), 3),
+                "healthy": st.link_ok(now_s),
                 "received": c.received,
                 "sent": c.sent,
                 "malformed": c.malformed + c.crc_errors,
                 "rtt_s": c.rtt_s,
             },
-            "mode": st.mode,
-            "armed": st.armed,
+            "mode": mode,
+            "armed": armed,
+            "last_mode": st.mode,
+            "last_armed": st.armed,
             "lat_deg": st.lat_deg,
             "lon_deg": st.lon_deg,
             "alt_amsl_m": st.alt_amsl_m,

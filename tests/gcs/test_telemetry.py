@@ -178,6 +178,15 @@ def test_link_health_from_heartbeat_age() -> None:
     assert s.link_ok(104.0, timeout_s=5.0)
 
 
+def test_mode_and_armed_are_unknown_once_the_link_is_down_and_kept_as_its_last_word() -> None:
+    s = feed(TelemetryReducer(1), heartbeat(custom=11, base=CUSTOM | ARMED), rx=100.0)
+    assert s.mode_now(103.0) == ("RTL", True)
+    assert s.mode_now(103.1) == (None, None)  # three heartbeats missed: not known now
+    assert (s.mode, s.armed) == ("RTL", True)  # what it last said
+    assert s.mode_now(104.0, timeout_s=5.0) == ("RTL", True)
+    assert TelemetryReducer(1).state.mode_now(0.0) == (None, None)
+
+
 def test_global_position_int_units() -> None:
     s = feed(
         TelemetryReducer(1),
