@@ -30,7 +30,8 @@ from gcs.api.routes import flights, resources, tiles
 from gcs.api.routes.common import ERRORS
 from gcs.api.settings import Settings
 from gcs.api.tiles import TileSource
-from gcs.service.engine import Engine, Infeasible, InvalidInput, Limits, ServiceError, TooBusy
+from gcs.service.engine import Engine, Infeasible, InvalidInput, ServiceError, TooBusy
+from gcs.service.planning import Limits
 from gcs.service.scenariotext import ScenarioLimits
 from gcs.store.repository import Store, StoreConflict, StoreError, StoreNotFound
 

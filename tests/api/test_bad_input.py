@@ -330,17 +330,17 @@ async def test_retried_schedule_is_one_job(client: httpx.AsyncClient, app: FastA
     assert (again.status_code, again.content) == (first.status_code, first.content)
     assert again.headers["location"] == first.headers["location"]
     assert again.headers.get("idempotent-replayed") == "true"
-    assert list(engine.jobs) == [first.json()["id"]]
+    assert list(engine.planning.jobs) == [first.json()["id"]]
     # The same key for another request is refused, and does nothing either.
     other = await client.post("/v1/schedules", json={**body, "seed": 7}, headers=headers)
     assert "Idempotency-Key" in problem(other, 422)["detail"]
-    assert list(engine.jobs) == [first.json()["id"]]
+    assert list(engine.planning.jobs) == [first.json()["id"]]
     # Another key is another request.
     fresh = await client.post(
         "/v1/schedules", json=body, headers={**JSON, "Idempotency-Key": "schedule-twice"}
     )
     assert fresh.status_code == 202 and fresh.json()["id"] != first.json()["id"]
-    assert len(engine.jobs) == 2
+    assert len(engine.planning.jobs) == 2
 
 
 async def test_retries_at_once_are_one_job(client: httpx.AsyncClient, app: FastAPI) -> None:
@@ -351,7 +351,7 @@ async def test_retries_at_once_are_one_job(client: httpx.AsyncClient, app: FastA
         *(client.post("/v1/schedules", json=body, headers=headers) for _ in range(5))
     )
     assert {(r.status_code, r.content) for r in answers} == {(202, answers[0].content)}
-    assert len(app.state.engine.jobs) == 1
+    assert len(app.state.engine.planning.jobs) == 1
 
 
 async def test_retried_scenario_and_refusal_replayed(

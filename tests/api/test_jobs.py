@@ -174,7 +174,7 @@ async def test_a_running_thousand_vehicle_job_is_cancelled_with_its_process_gone
         job = r.json()
         running_job = await _until(client, job["id"], "running")
         assert running_job["stage"] != "queued"
-        work = app.state.engine.work
+        work = app.state.engine.planning.work
         pid = work.running_pid(job["id"])
         assert pid is not None and pid != os.getpid() and not gone(pid)
         r = await client.delete(f"/v1/jobs/{job['id']}", headers=auth("plan"))

@@ -163,7 +163,7 @@ def test_known_resources_conform(served: FastAPI) -> None:
     """The operations that read a resource, on resources that exist (fuzzing only reaches their
     404s): each answer is documented too."""
     scenario_id, schedule_id = _planned(served)
-    job_id = next(iter(served.state.engine.jobs))
+    job_id = next(iter(served.state.engine.planning.jobs))
     cases: list[tuple[str, dict[str, str]]] = [
         ("GET /v1/scenarios/{scenario_id}", {"scenario_id": scenario_id}),
         ("GET /v1/scenarios/{scenario_id}/terrain.png", {"scenario_id": scenario_id}),

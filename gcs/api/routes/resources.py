@@ -66,7 +66,7 @@ async def add_scenario(request: Request) -> dict[str, Any]:
         raise InvalidInput("scenario: not UTF-8 text") from None
     media = request.headers.get("content-type", "application/yaml").split(";")[0].strip()
     kind = "application/json" if "json" in media else "application/yaml"
-    return await engine_of(request).add_scenario(text, kind)
+    return await engine_of(request).planning.add_scenario(text, kind)
 
 
 @router.get("/scenarios/schema", dependencies=observe, tags=["scenarios"])
@@ -77,7 +77,7 @@ async def scenario_schema() -> dict[str, Any]:
 
 @router.get("/scenarios/{scenario_id}", dependencies=observe, tags=["scenarios"])
 async def scenario(scenario_id: str, request: Request) -> dict[str, Any]:
-    return await engine_of(request).scenario_view(scenario_id)
+    return await engine_of(request).planning.scenario_view(scenario_id)
 
 
 @router.get(
@@ -89,7 +89,7 @@ async def scenario(scenario_id: str, request: Request) -> dict[str, Any]:
 )
 async def terrain(scenario_id: str, request: Request) -> Response:
     """A hillshade of the scenario's terrain over its area, north up (the map's base layer)."""
-    png = await engine_of(request).terrain_png(scenario_id)
+    png = await engine_of(request).planning.terrain_png(scenario_id)
     return Response(png, media_type="image/png", headers={"Cache-Control": "max-age=3600"})
 
 
@@ -99,7 +99,7 @@ async def terrain(scenario_id: str, request: Request) -> Response:
 async def schedule(body: ScheduleIn, request: Request, response: Response) -> dict[str, Any]:
     """Plan and schedule as a job (poll ``/v1/jobs/{id}``); an infeasible time fails the job
     with status 409, the earliest feasible time and the vehicle that forces it."""
-    job = await engine_of(request).submit_schedule(
+    job = await engine_of(request).planning.submit_schedule(
         body.scenario_id,
         required_arrival_s=body.required_arrival_s,
         seed=body.seed,
@@ -114,19 +114,19 @@ async def schedule(body: ScheduleIn, request: Request, response: Response) -> di
 async def job(job_id: str, request: Request) -> dict[str, Any]:
     """A job's state, progress (0 to 1, with the stage it is at) and, once it has ended, its
     result or error."""
-    return engine_of(request).job(job_id).view()
+    return engine_of(request).planning.job(job_id).view()
 
 
 @router.delete("/jobs/{job_id}", dependencies=[Depends(require("plan"))], tags=["schedules"])
 async def cancel_job(job_id: str, request: Request) -> dict[str, Any]:
     """Cancel a queued or running job: its process is killed, and its memory given back,
     before the answer (state ``cancelled``). An ended job is answered as it ended."""
-    return (await engine_of(request).cancel_job(job_id)).view()
+    return (await engine_of(request).planning.cancel_job(job_id)).view()
 
 
 @router.get("/schedules/{schedule_id}", dependencies=observe, tags=["schedules"])
 async def schedule_view(schedule_id: str, request: Request) -> dict[str, Any]:
-    return (await engine_of(request).planned(schedule_id)).view()
+    return (await engine_of(request).planning.planned(schedule_id)).view()
 
 
 @router.get(
@@ -148,6 +148,6 @@ async def mission_file(
     schedule_id: str, vehicle: str, fmt: Literal["plan", "waypoints"], request: Request
 ) -> Response:
     """A vehicle's mission as a QGroundControl ``.plan`` or a ``.waypoints`` (WPL 110) file."""
-    text = await engine_of(request).mission_file(schedule_id, vehicle, fmt)
+    text = await engine_of(request).planning.mission_file(schedule_id, vehicle, fmt)
     media = "application/json" if fmt == "plan" else "text/plain"
     return Response(text, media_type=media)
