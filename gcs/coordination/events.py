@@ -9,6 +9,7 @@ store, the stream, the progress printer and the flight record read the same reco
 from __future__ import annotations
 
 import enum
+import math
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from typing import Any
@@ -101,3 +102,23 @@ class FlightEvent:
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "kind", EventKind(self.kind))
+
+    def to_json(self, start_utc_s: float | None = None) -> dict[str, Any]:
+        """The event as the stream, the API and the flight record give it: times rounded to
+        the millisecond; a UTC not known when it happened (NaN: before the clock was synced)
+        is the mission start plus ``t_s`` when ``start_utc_s`` is given, else null; the
+        payload without an upload's items (kept in the store)."""
+        utc: float | None = self.utc_s
+        if utc is None or math.isnan(utc):
+            utc = None if start_utc_s is None else start_utc_s + self.t_s
+        return {
+            "seq": self.seq,
+            "kind": self.kind.value,
+            "t_s": round(self.t_s, 3),
+            "utc_s": None if utc is None else round(utc, 3),
+            "vehicle": self.vehicle,
+            "strategy": self.strategy,
+            "value": self.value,
+            "reason": self.reason,
+            "payload": {k: v for k, v in self.payload.items() if k != "items"},
+        }

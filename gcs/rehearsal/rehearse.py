@@ -42,6 +42,7 @@ from gcs.coordination.separationlog import separation_events
 from gcs.errors import GcsError
 from gcs.mavlink.link import Link
 from gcs.mavlink.vehicle import Vehicle
+from gcs.rehearsal.flightrecord import FLIGHT_FORMAT
 from gcs.rehearsal.truth import TruthSample, closest_approach, min_separation, read_truth
 from gcs.service.fleet import Fleet
 from gcs.service.stubs import StubProcess, follow_lockstep
@@ -51,7 +52,6 @@ from planner.scenario import Scenario
 from planner.schedulefile import schedule_json
 from planner.terrain import build_terrain
 
-FLIGHT_FORMAT = "tcgcs-flight/1"
 TRUTH_ARRIVAL_WINDOW_S = 30.0
 """The simulator's goal passage is looked for from this long before the one telemetry saw."""
 
@@ -539,22 +539,6 @@ def _send_blackouts(
         stub.control(f"blackout {ids.index(b.vehicle_id)} {sim_s:.3f} {b.duration_s:g}")
 
 
-def _ev_json(ev: FlightEvent, start_utc_s: float) -> dict[str, Any]:
-    utc = start_utc_s + ev.t_s if math.isnan(ev.utc_s) else ev.utc_s
-    return {
-        "seq": ev.seq,
-        "utc_s": round(utc, 3),
-        "t_s": round(ev.t_s, 3),
-        "vehicle": ev.vehicle,
-        "kind": str(ev.kind),
-        "strategy": ev.strategy,
-        "value": ev.value,
-        "reason": ev.reason,
-        # What the event says in numbers (an upload's items are in the store, not here).
-        "payload": {k: v for k, v in ev.payload.items() if k != "items"},
-    }
-
-
 def flight_record(
     coord: FlightRunner,
     opts: RehearsalOptions,
@@ -706,8 +690,8 @@ def flight_record(
         "seed": opts.seed,
         "arrival_source": _team_source(vehicles),
         "vehicles": vehicles,
-        "events": [_ev_json(ev, start) for ev in coord.events],
-        "adjustments": [_ev_json(ev, start) for ev in coord.adjustments],
+        "events": [ev.to_json(start) for ev in coord.events],
+        "adjustments": [ev.to_json(start) for ev in coord.adjustments],
         "threats_appeared": [
             {"id": t["id"], "utc_s": round(t["utc_s"], 3)} for t in coord.threats_appeared
         ],

@@ -15,7 +15,6 @@ from starlette.websockets import WebSocketDisconnect
 from gcs.api.auth import grants, require
 from gcs.api.routes.common import ERRORS, engine_of
 from gcs.api.schemas import AbortIn, FlightIn, LaunchIn, TeamTimeIn, TeamTimeOut, ThreatIn
-from gcs.coordination.events import FlightEvent
 from gcs.coordination.runner import ENDED
 from gcs.service.ended import EndedFlight
 from gcs.service.engine import Engine, InvalidInput, NotFound, PreconditionFailed, Rehearsal
@@ -26,20 +25,6 @@ operate = [Depends(require("operate"))]
 
 TELEMETRY_WALL_S = 0.5
 """The stream sends every vehicle's position, ETA and error at least this often (wall s)."""
-
-
-def event_json(e: FlightEvent) -> dict[str, Any]:
-    return {
-        "seq": e.seq,
-        "kind": e.kind.value,
-        "t_s": round(e.t_s, 3),
-        "utc_s": None if e.utc_s != e.utc_s else round(e.utc_s, 3),
-        "vehicle": e.vehicle,
-        "strategy": e.strategy,
-        "value": e.value,
-        "reason": e.reason,
-        "payload": {k: v for k, v in e.payload.items() if k != "items"},
-    }
 
 
 @router.post("/flights", status_code=201, dependencies=operate)
@@ -148,7 +133,7 @@ async def events(
 ) -> dict[str, Any]:
     """The flight's events after ``after_seq``, in order (page on with ``next_after_seq``)."""
     page = engine_of(request).events(flight_id, after_seq, limit)
-    out = [event_json(e) for e in page]
+    out = [e.to_json() for e in page]
     return {"events": out, "next_after_seq": out[-1]["seq"] if out else after_seq}
 
 
@@ -180,7 +165,7 @@ async def stream(engine: Engine, flight_id: str, after_seq: int) -> AsyncIterato
         # from the store, the end.
         yield {"type": "snapshot", "data": found.snapshot}
         for e in engine.events(flight_id, after_seq, 100_000):
-            yield {"type": "event", "data": event_json(e)}
+            yield {"type": "event", "data": e.to_json()}
         yield {"type": "end", "data": {"state": found.state}}
         return
     handle = found
@@ -193,7 +178,7 @@ async def stream(engine: Engine, flight_id: str, after_seq: int) -> AsyncIterato
     last = after_seq
     for e in backlog:
         last = e.seq
-        yield {"type": "event", "data": event_json(e)}
+        yield {"type": "event", "data": e.to_json()}
     sub = bus.subscribe(maxsize=10_000, after_seq=last)
     loop = asyncio.get_running_loop()
     next_telemetry = loop.time()
@@ -206,7 +191,7 @@ async def stream(engine: Engine, flight_id: str, after_seq: int) -> AsyncIterato
                 return
             if got is not None and got.seq > last:
                 last = got.seq
-                yield {"type": "event", "data": event_json(got)}
+                yield {"type": "event", "data": got.to_json()}
             if got is None and sub.closed:
                 return
             if loop.time() < next_telemetry:
@@ -220,7 +205,7 @@ async def stream(engine: Engine, flight_id: str, after_seq: int) -> AsyncIterato
                 while (rest := sub.get_nowait()) is not None:
                     if rest.seq > last:
                         last = rest.seq
-                        yield {"type": "event", "data": event_json(rest)}
+                        yield {"type": "event", "data": rest.to_json()}
                 yield {"type": "end", "data": {"state": handle.runner.state.value}}
                 return
     finally:
