@@ -45,6 +45,7 @@ from gcs.mavlink.mission_protocol import Transfer
 from gcs.mavlink.signing import SigningConfig, key_from_passphrase
 from gcs.mavlink.status import status_line
 from gcs.mavlink.vehicle import Vehicle
+from gcs.service.stubs import DEFAULT_SPEEDUP
 from planner.errors import PlannerError
 from planner.mission import MissionItem
 from planner.missionfile import read_mission_file, write_mission_file
@@ -340,7 +341,7 @@ def parser() -> argparse.ArgumentParser:
 
     rh = sub.add_parser("rehearse", help="fly a scenario's mission to its arrival time")
     rh.add_argument("scenario", help="scenario file (.yaml or .json)")
-    rh.add_argument("--speedup", type=float, default=200.0, help="stub time / wall time")
+    rh.add_argument("--speedup", type=float, default=DEFAULT_SPEEDUP, help="stub time / wall time")
     rh.add_argument("--wind", help="SPEED_M_S,FROM_DEG mean wind for the stub")
     rh.add_argument(
         "--free-run",
@@ -480,7 +481,7 @@ def parser() -> argparse.ArgumentParser:
     dm.add_argument("--url", help="a running service (default: start one on loopback)")
     dm.add_argument("--token", help="its bearer token (with --url)")
     dm.add_argument("--report", default="out/demo-report", help="report directory")
-    dm.add_argument("--speedup", type=float, default=200.0)
+    dm.add_argument("--speedup", type=float, default=DEFAULT_SPEEDUP)
     dm.add_argument("--quiet", action="store_true")
     dm.set_defaults(fn=demo_cmd)
     return ap

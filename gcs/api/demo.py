@@ -23,6 +23,7 @@ import httpx
 
 from gcs.api.process import running_service
 from gcs.errors import GcsError
+from gcs.service.stubs import DEFAULT_SPEEDUP
 
 __all__ = ["DemoOptions", "run_demo", "sse_messages"]
 
@@ -34,7 +35,7 @@ class DemoOptions:
     scenario: Path = PAPER
     url: str | None = None
     token: str | None = None
-    speedup: float = 200.0
+    speedup: float = DEFAULT_SPEEDUP
     wind: tuple[float, float] | None = (5.0, 270.0)
     loss: float = 0.1
     seed: int = 1

@@ -7,6 +7,7 @@ from typing import Any, Literal
 
 from pydantic import BaseModel, ConfigDict, Field
 
+from gcs.service.stubs import DEFAULT_SPEEDUP
 from planner.scenario import Threat
 
 __all__ = [
@@ -61,7 +62,7 @@ class ScheduleIn(_Body):
 class RehearsalIn(_Body):
     """Bundled simulator vehicles for the flight, started when it is created."""
 
-    speedup: float = Field(default=200.0, gt=0.0, le=1000.0)
+    speedup: float = Field(default=DEFAULT_SPEEDUP, gt=0.0, le=1000.0)
     wind_m_s: float | None = Field(default=None, ge=0.0, le=40.0)
     wind_from_deg: float = Field(default=0.0, ge=0.0, lt=360.0)
     loss: float = Field(default=0.0, ge=0.0, lt=1.0)

@@ -451,6 +451,11 @@ class MissionClock:
         """Estimated UTC seconds per monotonic second (1.0 until two observations)."""
         return self._rate
 
+    def start_lead_s(self) -> float:
+        """How far ahead of now (UTC s) a mission starts when no start is given: 10 s, or two
+        wall seconds' worth at this clock's rate when that is more (a simulator at 200x)."""
+        return max(10.0, 2.0 * self._rate)
+
     @property
     def synced(self) -> bool:
         """At least one SYSTEM_TIME with UTC has been accepted."""

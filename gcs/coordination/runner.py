@@ -800,7 +800,7 @@ class FlightRunner:
             await self.upload_all()
         if not self.resumed:
             if start_utc_s is None:
-                start_utc_s = self.clock.now_utc_s() + max(5.0, 2.0 * self.clock.rate)
+                start_utc_s = self.clock.now_utc_s() + self.clock.start_lead_s()
             self._dispatch(team.start(start_utc_s))
         self._set_state(FlightState.RUNNING)
         self._feed(self._planning_lead())

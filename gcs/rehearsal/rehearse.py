@@ -45,7 +45,7 @@ from gcs.mavlink.vehicle import Vehicle
 from gcs.rehearsal.flightrecord import FLIGHT_FORMAT
 from gcs.rehearsal.truth import TruthSample, closest_approach, min_separation, read_truth
 from gcs.service.fleet import Fleet
-from gcs.service.stubs import StubProcess, follow_lockstep
+from gcs.service.stubs import DEFAULT_SPEEDUP, StubProcess, follow_lockstep
 from gcs.store.repository import FlightKeeper, Store
 from planner.deconflict import separation
 from planner.scenario import Scenario
@@ -88,7 +88,7 @@ class Abort:
 class RehearsalOptions:
     scenario_path: Path
     scenario: Scenario
-    speedup: float = 200.0
+    speedup: float = DEFAULT_SPEEDUP
     wind: tuple[float, float] | None = None
     loss: float = 0.0
     seed: int = 0
@@ -375,7 +375,7 @@ async def _rehearse(
                 mission_start = coord.start_utc_s
             else:
                 await coord.upload_all()
-                mission_start = clock.now_utc_s() + max(10.0, 1.0 * clock.rate)
+                mission_start = clock.now_utc_s() + clock.start_lead_s()
                 kept.state("running", start_utc_s=mission_start, team_time_s=coord.team_ref_s)
             assert mission_start is not None
             if stub is not None and opts.blackouts:

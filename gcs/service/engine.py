@@ -49,7 +49,7 @@ from gcs.service.scenariotext import (
     TooBusy,
     parse_scenario_text,
 )
-from gcs.service.stubs import StubProcess, follow_lockstep, stop_pid
+from gcs.service.stubs import DEFAULT_SPEEDUP, StubProcess, follow_lockstep, stop_pid
 from gcs.store.repository import FlightKeeper, Store
 from planner.scenario import SrtmTerrainSpec, Threat
 
@@ -81,7 +81,7 @@ files (``sitl_stub --lockstep``): a service restarted on the flight follows it a
 class Rehearsal:
     """Bundled simulator vehicles for a flight: speed-up, wind, loss, seed."""
 
-    speedup: float = 200.0
+    speedup: float = DEFAULT_SPEEDUP
     wind_m_s: float | None = None
     wind_from_deg: float = 0.0
     loss: float = 0.0
@@ -526,7 +526,7 @@ class Engine:
             raise Conflict(f"flight {flight_id} is {runner.state.value}: it cannot be launched")
         clock = runner.clock
         if start_utc_s is None:
-            wait = max(10.0, clock.rate) if delay_s is None else delay_s
+            wait = clock.start_lead_s() if delay_s is None else delay_s
             start_utc_s = clock.now_utc_s() + wait
         elif not math.isfinite(start_utc_s) or start_utc_s < clock.now_utc_s():
             raise InvalidInput(f"start_utc_s: {start_utc_s!r} is not a UTC in the future")

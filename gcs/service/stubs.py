@@ -25,8 +25,17 @@ from gcs.coordination.missionclock import MissionClock
 from gcs.errors import GcsError
 from sitl_stub.lockstep import Lockstep
 
-__all__ = ["IDLE_EXIT_S", "StubProcess", "follow_lockstep", "free_tcp_base"]
+__all__ = [
+    "DEFAULT_SPEEDUP",
+    "IDLE_EXIT_S",
+    "StubProcess",
+    "follow_lockstep",
+    "free_tcp_base",
+]
 
+DEFAULT_SPEEDUP = 200.0
+"""Simulated seconds per wall second of bundled simulator vehicles unless told otherwise
+(``rehearse --speedup``, a flight's ``rehearsal.speedup``, the demo)."""
 IDLE_EXIT_S = 120.0
 """A bundled simulator with no client for this long (wall s) stops: its ground station died
 and did not come back (a service restarted within it reaches the vehicles again)."""
