@@ -132,13 +132,13 @@ class RehearsalOptions:
     or uploaded again that is already so."""
 
 
-def stub_homes(coord: FlightRunner) -> list[str]:
-    assert coord.schedule is not None
-    scenario = coord.scenario
+def stub_homes(runner: FlightRunner) -> list[str]:
+    assert runner.schedule is not None
+    scenario = runner.scenario
     frame = scenario.frame()
     terrain = build_terrain(scenario)
     out = []
-    for vs in coord.schedule.vehicles:
+    for vs in runner.schedule.vehicles:
         start = vs.path.start
         ground = float(terrain.elevation_m(np.array([start.east_m]), np.array([start.north_m]))[0])
         lat, lon = frame.to_geodetic(start.east_m, start.north_m)
@@ -153,7 +153,7 @@ def stub_homes(coord: FlightRunner) -> list[str]:
 
 
 def stub_args(
-    opts: RehearsalOptions, coord: FlightRunner, truth: Path, start_utc_s: float
+    opts: RehearsalOptions, runner: FlightRunner, truth: Path, start_utc_s: float
 ) -> list[str]:
     scenario = opts.scenario
     cmd = [
@@ -177,7 +177,7 @@ def stub_args(
     ]
     for hill in opts.hills:
         cmd += ["--hill", f"{hill.lat_deg!r},{hill.lon_deg!r},{hill.radius_m!r},{hill.height_m!r}"]
-    for home in stub_homes(coord):
+    for home in stub_homes(runner):
         cmd += ["--home", home]
     for v in scenario.vehicles:
         cmd += ["--airspeed", f"{v.speed_min_m_s:g},{v.cruise_m_s:g},{v.speed_max_m_s:g}"]
@@ -195,8 +195,8 @@ def stub_args(
 class Progress:
     """One status line per vehicle every so often while the mission runs."""
 
-    def __init__(self, coord: FlightRunner, quiet: bool) -> None:
-        self.coord = coord
+    def __init__(self, runner: FlightRunner, quiet: bool) -> None:
+        self.runner = runner
         self.quiet = quiet
 
     def event(self, ev: FlightEvent) -> None:
@@ -213,11 +213,11 @@ class Progress:
     async def run(self, every_wall_s: float = 5.0) -> None:
         while True:
             await asyncio.sleep(every_wall_s)
-            if self.quiet or self.coord.start_utc_s is None:
+            if self.quiet or self.runner.start_utc_s is None:
                 continue
-            t = self.coord.now_s()
+            t = self.runner.now_s()
             parts = []
-            for m in self.coord.members.values():
+            for m in self.runner.members.values():
                 parts.append(_member_line(m))
             print(f"{t:9.1f} s  | " + " | ".join(parts), flush=True)
 
@@ -230,7 +230,7 @@ def _member_line(m: Member) -> str:
     return f"{m.vehicle_id} {m.phase}{s}{lvl}{eta}"
 
 
-async def _watch_threats(coord: FlightRunner, path: Path) -> None:
+async def _watch_threats(runner: FlightRunner, path: Path) -> None:
     """Threats appended to a file (one JSON threat per line) appear when read."""
     from pydantic import TypeAdapter, ValidationError
 
@@ -250,7 +250,7 @@ async def _watch_threats(coord: FlightRunner, path: Path) -> None:
                 break
             line = data[offset:nl].strip()
             offset = nl + 1
-            if not line or coord.start_utc_s is None:
+            if not line or runner.start_utc_s is None:
                 continue
             try:
                 threat = adapter.validate_json(line)
@@ -263,7 +263,7 @@ async def _watch_threats(coord: FlightRunner, path: Path) -> None:
                 )
                 continue
             try:
-                coord.add_threat(threat)
+                runner.add_threat(threat)
             except ValueError as err:
                 print(f"rehearse: {path}: {err}; ignored", file=sys.stderr)
 
@@ -276,18 +276,18 @@ async def rehearse(opts: RehearsalOptions) -> dict[str, Any]:
     try:
         if opts.resume is not None:
             flight_id = opts.resume
-            coord, conns = _resumed(opts, store, clock)
+            runner, conns = _resumed(opts, store, clock)
             opts = dataclasses.replace(opts, connect=conns)
         else:
             flight_id = uuid.uuid4().hex
-            coord = FlightRunner(
+            runner = FlightRunner(
                 opts.scenario,
                 clock,
                 config=opts.config,
                 required_arrival_s=opts.required_arrival_s,
                 bus=opts.bus,
             )
-        record = await _rehearse(opts, coord, flight_id, store, wall0)
+        record = await _rehearse(opts, runner, flight_id, store, wall0)
     finally:
         if store is not None:
             store.close()
@@ -298,15 +298,15 @@ async def rehearse(opts: RehearsalOptions) -> dict[str, Any]:
 
 
 async def _rehearse(
-    opts: RehearsalOptions, coord: FlightRunner, flight_id: str, store: Store | None, wall0: float
+    opts: RehearsalOptions, runner: FlightRunner, flight_id: str, store: Store | None, wall0: float
 ) -> dict[str, Any]:
-    clock = coord.clock
-    progress = Progress(coord, opts.quiet)
-    printed = coord.bus.subscribe(maxsize=100_000)
+    clock = runner.clock
+    progress = Progress(runner, opts.quiet)
+    printed = runner.bus.subscribe(maxsize=100_000)
     printer = asyncio.create_task(progress.follow(printed))
-    if not coord.resumed:
+    if not runner.resumed:
         try:
-            await coord.prepare()
+            await runner.prepare()
         except BaseException:
             printed.close()
             await printer
@@ -314,7 +314,7 @@ async def _rehearse(
         if not opts.quiet:
             print(
                 f"rehearse: planned {len(opts.scenario.vehicles)} vehicles in "
-                f"{coord.plan_wall_s:.1f} s; team arrival {coord.fmt_ref()}",
+                f"{runner.plan_wall_s:.1f} s; team arrival {runner.fmt_ref()}",
                 flush=True,
             )
     truth_path: Path | None = None
@@ -334,11 +334,11 @@ async def _rehearse(
             sysids: list[int | None] = [None] * len(conns)
             truth_path = opts.truth
             if opts.lockstep_file is not None:
-                pacer = follow_lockstep(opts.lockstep_file, clock, coord.unwatched)
+                pacer = follow_lockstep(opts.lockstep_file, clock, runner.unwatched)
         else:
             truth_path = opts.truth or Path(tmp.name) / "truth.jsonl"
             stub_start = time.time()
-            args = stub_args(opts, coord, truth_path, stub_start)
+            args = stub_args(opts, runner, truth_path, stub_start)
             pace_path = Path(tmp.name) / "pace"
             if opts.lockstep:
                 args += ["--lockstep", str(pace_path)]
@@ -346,7 +346,7 @@ async def _rehearse(
                 len(opts.scenario.vehicles), args, control=bool(opts.blackouts)
             )
             if opts.lockstep:
-                pacer = follow_lockstep(pace_path, clock, coord.unwatched)
+                pacer = follow_lockstep(pace_path, clock, runner.unwatched)
             conns = stub.connections
             sysids = [i + 1 for i in range(len(conns))]
         async with contextlib.AsyncExitStack() as stack:
@@ -362,34 +362,34 @@ async def _rehearse(
                     link = await stack.enter_async_context(Link.open(conn))
                     peer = await link.wait_vehicle(sysid, timeout_s=15.0)
                     vehicles[v.id] = Vehicle(link, peer.system_id, peer.component_id)
-            coord.bind(vehicles)
+            runner.bind(vehicles)
             kept = _Kept.start(
-                opts, coord, dict(zip(vehicles, conns, strict=True)), flight_id, store
+                opts, runner, dict(zip(vehicles, conns, strict=True)), flight_id, store
             )
-            stack.push_async_callback(kept.finish, coord)
+            stack.push_async_callback(kept.finish, runner)
             async with asyncio.timeout(15.0):
                 while not clock.synced:
                     await asyncio.sleep(0.02)
-            if coord.resumed:
-                await coord.reconcile()
-                mission_start = coord.start_utc_s
+            if runner.resumed:
+                await runner.reconcile()
+                mission_start = runner.start_utc_s
             else:
-                await coord.upload_all()
+                await runner.upload_all()
                 mission_start = clock.now_utc_s() + clock.start_lead_s()
-                kept.state("running", start_utc_s=mission_start, team_time_s=coord.team_ref_s)
+                kept.state("running", start_utc_s=mission_start, team_time_s=runner.team_ref_s)
             assert mission_start is not None
             if stub is not None and opts.blackouts:
                 _send_blackouts(stub, opts, stub_start, mission_start)
             tasks = [asyncio.create_task(progress.run())]
-            tasks += [asyncio.create_task(_abort_at(coord, a, mission_start)) for a in opts.aborts]
+            tasks += [asyncio.create_task(_abort_at(runner, a, mission_start)) for a in opts.aborts]
             if opts.threats_from is not None:
-                tasks.append(asyncio.create_task(_watch_threats(coord, opts.threats_from)))
+                tasks.append(asyncio.create_task(_watch_threats(runner, opts.threats_from)))
             try:
-                await coord.run(mission_start)
+                await runner.run(mission_start)
             finally:
                 for task in tasks:
                     task.cancel()
-                await coord.close()
+                await runner.close()
         if pacer is not None:
             pacer.cancel()
             pacer = None
@@ -398,8 +398,8 @@ async def _rehearse(
             await stub.stop()
             stub = None
         elif truth_path is not None:
-            truth = await _await_truth(truth_path, coord)
-        record = flight_record(coord, opts, truth_path, time.perf_counter() - wall0, truth)
+            truth = await _await_truth(truth_path, runner)
+        record = flight_record(runner, opts, truth_path, time.perf_counter() - wall0, truth)
         record["flight_id"] = flight_id
     finally:
         printed.close()  # the printer drains what is queued, then ends
@@ -425,14 +425,14 @@ class _Kept:
     def start(
         cls,
         opts: RehearsalOptions,
-        coord: FlightRunner,
+        runner: FlightRunner,
         conns: Mapping[str, str],
         flight_id: str,
         store: Store | None,
     ) -> _Kept:
         if store is None:
             return cls()
-        if not coord.resumed:
+        if not runner.resumed:
             suffix = opts.scenario_path.suffix.lower()
             scenario_id = store.save_scenario(
                 opts.scenario_path.read_text(encoding="utf-8"),
@@ -440,14 +440,17 @@ class _Kept:
                 media_type="application/json" if suffix == ".json" else "application/yaml",
             )
             store.create_flight(scenario_id, conns, flight_id=flight_id)
-            if coord.schedule is not None and coord.world is not None:
-                sep = separation(coord.schedule.vehicles, coord.scenario.separation_m)
+            if runner.schedule is not None and runner.world is not None:
+                sep = separation(runner.schedule.vehicles, runner.scenario.separation_m)
                 doc = schedule_json(
-                    coord.schedule, sep, coord.world.terrain, scenario_file=str(opts.scenario_path)
+                    runner.schedule,
+                    sep,
+                    runner.world.terrain,
+                    scenario_file=str(opts.scenario_path),
                 )
                 store.update_flight(flight_id, resume={"schedule": doc})
-        keeper = FlightKeeper(store, flight_id, coord.bus)
-        coord.on_checkpoint = keeper.checkpoints.offer
+        keeper = FlightKeeper(store, flight_id, runner.bus)
+        runner.on_checkpoint = keeper.checkpoints.offer
         if not opts.quiet:
             print(f"rehearse: flight {flight_id} kept in {store.engine.url!r}", flush=True)
         return cls(store, flight_id, keeper)
@@ -456,9 +459,9 @@ class _Kept:
         if self.store is not None and self.flight_id is not None:
             self.store.update_flight(self.flight_id, state=state, **fields)
 
-    async def finish(self, coord: FlightRunner) -> None:
+    async def finish(self, runner: FlightRunner) -> None:
         """The last events and checkpoint written (the final state is the last event's)."""
-        coord.on_checkpoint = None
+        runner.on_checkpoint = None
         if self.keeper is not None:
             await self.keeper.close()
 
@@ -495,29 +498,29 @@ def _resumed(
         )
     events = store.events(fid)
     bus = opts.bus or EventBus(first_seq=(events[-1].seq if events else 0) + 1)
-    coord = FlightRunner.resume(blob, clock, bus=bus, events=events)
+    runner = FlightRunner.resume(blob, clock, bus=bus, events=events)
     conns = list(opts.connect)
     if not conns:
-        conns = [str(row.vehicles[v.id][1]) for v in coord.scenario.vehicles]
-    return coord, conns
+        conns = [str(row.vehicles[v.id][1]) for v in runner.scenario.vehicles]
+    return runner, conns
 
 
-async def _abort_at(coord: FlightRunner, abort: Abort, start_utc_s: float) -> None:
-    await coord.clock.sleep_until(start_utc_s + abort.at_s)
-    await coord.abort(abort.vehicle_id, mode=abort.mode)
+async def _abort_at(runner: FlightRunner, abort: Abort, start_utc_s: float) -> None:
+    await runner.clock.sleep_until(start_utc_s + abort.at_s)
+    await runner.abort(abort.vehicle_id, mode=abort.mode)
 
 
 async def _await_truth(
-    path: Path, coord: FlightRunner, timeout_s: float = 5.0
+    path: Path, runner: FlightRunner, timeout_s: float = 5.0
 ) -> dict[int, list[TruthSample]] | None:
     """Wait until a running simulator's truth log has reached past every arrival (it is
     flushed about once a wall second); that log as read then, or None when it did not."""
     need = max(
-        (m.arrival_s for m in coord.members.values() if m.arrival_s is not None), default=None
+        (m.arrival_s for m in runner.members.values() if m.arrival_s is not None), default=None
     )
-    if need is None or coord.start_utc_s is None:
+    if need is None or runner.start_utc_s is None:
         return None
-    need += coord.start_utc_s
+    need += runner.start_utc_s
     loop = asyncio.get_running_loop()
     until = loop.time() + timeout_s
     while loop.time() < until:
@@ -540,7 +543,7 @@ def _send_blackouts(
 
 
 def flight_record(
-    coord: FlightRunner,
+    runner: FlightRunner,
     opts: RehearsalOptions,
     truth_path: Path | None,
     wall_s: float,
@@ -548,9 +551,9 @@ def flight_record(
 ) -> dict[str, Any]:
     """The flight as data: arrivals (true when the simulator is ours), separations, events.
     ``truth``: the truth log already read from ``truth_path``, if it was."""
-    assert coord.start_utc_s is not None
-    start = coord.start_utc_s
-    frame = coord.scenario.frame()
+    assert runner.start_utc_s is not None
+    start = runner.start_utc_s
+    frame = runner.scenario.frame()
     if truth is None:
         truth = {}
         if truth_path is not None and truth_path.exists():
@@ -558,8 +561,8 @@ def flight_record(
     vehicles: list[dict[str, Any]] = []
     until: dict[int, float] = {}
     tracks: dict[int, list[TruthSample]] = {}
-    for m in coord.members.values():
-        sysid = coord.vehicles[m.vehicle_id].system_id
+    for m in runner.members.values():
+        sysid = runner.vehicles[m.vehicle_id].system_id
         target_utc = start + m.target_s
         telemetry_arrival = None if m.arrival_s is None else start + m.arrival_s
         launched = None if m.launched_s is None else start + m.launched_s
@@ -575,7 +578,7 @@ def flight_record(
             if telemetry_arrival is not None and launched is not None:
                 after = max(launched, telemetry_arrival - TRUTH_ARRIVAL_WINDOW_S)
             ca = closest_approach(
-                samples, float(glat), float(glon), coord.config.arrival_radius_m, after_utc_s=after
+                samples, float(glat), float(glon), runner.config.arrival_radius_m, after_utc_s=after
             )
             arrival = None if ca is None else ca[0]
             every = samples[:: max(1, int(round(2.0 / _period(samples))))]
@@ -655,30 +658,30 @@ def flight_record(
             }
         )
     sep = min_separation(tracks, until_utc_s=until)
-    ids = {v.system_id: vid for vid, v in coord.vehicles.items()}
+    ids = {v.system_id: vid for vid, v in runner.vehicles.items()}
     by_vehicle = {ids[k]: v for k, v in tracks.items() if k in ids}
-    zones = zone_clearances(coord, by_vehicle)
-    ref = coord.team_ref_s
-    planned_ref = None if coord.team is None else coord.team.planned_ref_s
+    zones = zone_clearances(runner, by_vehicle)
+    ref = runner.team_ref_s
+    planned_ref = None if runner.team is None else runner.team.planned_ref_s
     return {
         "format": FLIGHT_FORMAT,
         "scenario_file": str(opts.scenario_path),
-        "state": coord.state.value,
-        "state_reason": coord.state_reason,
+        "state": runner.state.value,
+        "state_reason": runner.state_reason,
         "start_utc_s": round(start, 3),
         "required_arrival_utc_s": None if ref is None else round(start + ref, 3),
         "required_arrival_s": None if ref is None else round(ref, 3),
         "planned_arrival_s": None if planned_ref is None else round(planned_ref, 3),
-        "separation_m": coord.scenario.separation_m,
+        "separation_m": runner.scenario.separation_m,
         "min_separation_m": None if sep is None else round(sep[0], 1),
         "min_separation_pair": None if sep is None else [ids.get(sep[1]), ids.get(sep[2])],
         "min_separation_utc_s": None if sep is None else round(sep[3], 3),
-        "separation_events": separation_events(coord.events, by_vehicle, start),
+        "separation_events": separation_events(runner.events, by_vehicle, start),
         "zone_clearances": zones,
         "zone_entries": [z for z in zones if z["inside_samples"] > 0],
         "alarms": [
             {"vehicle": ev.vehicle, "t_s": round(ev.t_s, 3), "reason": ev.reason}
-            for ev in coord.events
+            for ev in runner.events
             if ev.kind is EventKind.ALARM
         ],
         "wall_s": round(wall_s, 2),
@@ -690,32 +693,32 @@ def flight_record(
         "seed": opts.seed,
         "arrival_source": _team_source(vehicles),
         "vehicles": vehicles,
-        "events": [ev.to_json(start) for ev in coord.events],
-        "adjustments": [ev.to_json(start) for ev in coord.adjustments],
+        "events": [ev.to_json(start) for ev in runner.events],
+        "adjustments": [ev.to_json(start) for ev in runner.adjustments],
         "threats_appeared": [
-            {"id": t["id"], "utc_s": round(t["utc_s"], 3)} for t in coord.threats_appeared
+            {"id": t["id"], "utc_s": round(t["utc_s"], 3)} for t in runner.threats_appeared
         ],
         # The world as flown, for the report: the scenario (with any requested arrival) and
         # the threats the operator added in flight.
-        "scenario": coord.scenario.model_dump(mode="json", exclude_none=True),
+        "scenario": runner.scenario.model_dump(mode="json", exclude_none=True),
         "operator_threats": [
-            t.model_dump(mode="json", exclude_none=True) for t in coord.operator_threats
+            t.model_dump(mode="json", exclude_none=True) for t in runner.operator_threats
         ],
         # What an operator's screen showed last (the runner's snapshot at the end).
-        "snapshot": coord.snapshot(),
+        "snapshot": runner.snapshot(),
     }
 
 
 def zone_clearances(
-    coord: FlightRunner, tracks: Mapping[str, Sequence[TruthSample]]
+    runner: FlightRunner, tracks: Mapping[str, Sequence[TruthSample]]
 ) -> list[dict[str, Any]]:
     """Per vehicle and forbidden zone (the operator's included), from the flown track alone
     (the simulator's truth when it is ours): the closest it came to the zone below its
     ceiling once the zone was there (m, negative inside), and how many samples were inside."""
-    assert coord.start_utc_s is not None and coord.team is not None
-    frame = coord.scenario.frame()
+    assert runner.start_utc_s is not None and runner.team is not None
+    frame = runner.scenario.frame()
     out: list[dict[str, Any]] = []
-    zones = [z for z in coord.team.zones() if z.forbidden]
+    zones = [z for z in runner.team.zones() if z.forbidden]
     for vid, samples in tracks.items():
         if not samples:
             continue
@@ -726,7 +729,7 @@ def zone_clearances(
         )
         for zone in zones:
             appears = zone.appears_at_s
-            since = -math.inf if appears is None else coord.start_utc_s + appears
+            since = -math.inf if appears is None else runner.start_utc_s + appears
             keep = (utc >= since) & (alt < zone.ceiling_m)
             if not keep.any():
                 continue

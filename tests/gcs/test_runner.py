@@ -135,9 +135,9 @@ def test_splice_refuses_an_item_that_is_not_a_route_waypoint(
 
 
 async def test_infeasible_request_is_refused_before_launch_naming_time_and_vehicle() -> None:
-    coord = FlightRunner(load_scenario(PAPER), MissionClock(), required_arrival_s=5000.0)
+    runner = FlightRunner(load_scenario(PAPER), MissionClock(), required_arrival_s=5000.0)
     with pytest.raises(InfeasibleRequest) as err:
-        await coord.prepare()
+        await runner.prepare()
     text = str(err.value)
     assert "refused before launch" in text and "requested arrival 5000.0 s is too early" in text
     # UAV2's path at its top speed, 30 m/s equivalent airspeed: true airspeed at 435-1600 m.
@@ -146,7 +146,7 @@ async def test_infeasible_request_is_refused_before_launch_naming_time_and_vehic
     earliest_s, km = float(found[1]), float(found[2])
     assert km * 1000.0 / (30.0 * eas2tas(1600.0)) <= earliest_s
     assert earliest_s <= km * 1000.0 / (30.0 * eas2tas(435.0))
-    assert not coord.members  # nothing was compiled or uploaded
+    assert not runner.members  # nothing was compiled or uploaded
 
 
 @pytest.mark.parametrize(
@@ -308,12 +308,12 @@ def test_on_a_pace_clock_a_command_waits_one_to_two_seconds_of_flight_whatever_t
     launch's command was lost. The timeout stays within 1-2 s of flight; the retries cover
     0.4 s of wall time, so a busy machine does not give a command up."""
     clock = MissionClock()
-    coord = FlightRunner(load_scenario(PAPER), clock)
+    runner = FlightRunner(load_scenario(PAPER), clock)
     clock.follow(lambda: 0.0)
     clock._rate = 200.0  # what the simulator's SYSTEM_TIME shows at 200x
     counters = SimpleNamespace(rtt_s=rtt_wall_s)
     vehicle = SimpleNamespace(link=SimpleNamespace(counters=counters))
-    options = coord._command(vehicle)  # type: ignore[arg-type]
+    options = runner._command(vehicle)  # type: ignore[arg-type]
     flight_s = options["timeout_s"] * 200.0
     assert 1.0 - 1e-9 <= flight_s <= 2.0 + 1e-9
     assert options["timeout_s"] * (options["retries"] + 1) >= 0.4
