@@ -31,19 +31,41 @@ _LAYERS: tuple[tuple[float, float, float, float], ...] = (
 )
 
 
+# Per layer, what the density formula needs: base altitude (m'), temperature (K), density,
+# lapse (K/m'), and the exponent: -g / (T R) for an isothermal layer (times h - base_h),
+# else -(g / (lapse R) + 1) (of T / base_t). Worked out once, as the formula below would.
+_LAYER_CONSTANTS: tuple[tuple[float, float, float, float, float], ...] = tuple(
+    (
+        base_h,
+        base_t,
+        base_rho,
+        lapse,
+        -GRAVITY_M_S2 / (base_t * R_SPECIFIC_1976)
+        if lapse == 0.0
+        else -(GRAVITY_M_S2 / (lapse * R_SPECIFIC_1976) + 1.0),
+    )
+    for base_h, base_t, base_rho, lapse in _LAYERS
+)
+_FIRST_LAYER = _LAYER_CONSTANTS[0]
+_HIGHER_LAYERS = _LAYER_CONSTANTS[1:]
+
+
 def air_density_kg_m3(alt_amsl_m: float) -> float:
-    """Air density (kg/m^3) at a geometric altitude AMSL (AP_Baro get_air_density_for_alt_amsl)."""
+    """Air density (kg/m^3) at a geometric altitude AMSL (AP_Baro get_air_density_for_alt_amsl).
+
+    Isothermal layer: ``rho_b exp(-g / (T_b R) (h - h_b))``; else ``rho_b (T / T_b)^-(g / (L R)
+    + 1)`` with ``T = T_b + L (h - h_b)`` (h geopotential; layer base b, lapse L).
+    """
     h = EARTH_RADIUS_1976_M * alt_amsl_m / (EARTH_RADIUS_1976_M + alt_amsl_m)
-    base_h, base_t, base_rho, lapse = _LAYERS[0]
-    for layer in _LAYERS[1:]:
+    base_h, base_t, base_rho, lapse, exponent = _FIRST_LAYER
+    for layer in _HIGHER_LAYERS:
         if h < layer[0]:
             break
-        base_h, base_t, base_rho, lapse = layer
+        base_h, base_t, base_rho, lapse, exponent = layer
     if lapse == 0.0:
-        return base_rho * math.exp(-GRAVITY_M_S2 / (base_t * R_SPECIFIC_1976) * (h - base_h))
+        return base_rho * math.exp(exponent * (h - base_h))
     temp = base_t + lapse * (h - base_h)
-    fac = GRAVITY_M_S2 / (lapse * R_SPECIFIC_1976)
-    return float(base_rho * (temp / base_t) ** -(fac + 1.0))
+    return float(base_rho * (temp / base_t) ** exponent)
 
 
 def density_ratio(alt_amsl_m: float) -> float:
@@ -53,4 +75,5 @@ def density_ratio(alt_amsl_m: float) -> float:
 
 def eas2tas(alt_amsl_m: float) -> float:
     """True / equivalent airspeed at a geometric altitude AMSL (get_EAS2TAS_for_alt_amsl)."""
-    return math.sqrt(SSL_AIR_DENSITY_KG_M3 / max(0.00001, air_density_kg_m3(alt_amsl_m)))
+    rho = air_density_kg_m3(alt_amsl_m)
+    return math.sqrt(SSL_AIR_DENSITY_KG_M3 / (rho if rho > 0.00001 else 0.00001))

@@ -91,7 +91,6 @@ from sitl_stub.items import MissionItem
 from sitl_stub.l1 import clamp, l1_loiter, l1_waypoint, wrap_pi
 from sitl_stub.model import GRAVITY_M_S2, AirframeParams, FlightState, Wind
 
-_DEG = math.pi / 180.0
 _TWO_PI = 2.0 * math.pi
 
 _CMD_WAYPOINT = int(mav.MAV_CMD_NAV_WAYPOINT)
@@ -562,11 +561,32 @@ class Autopilot:
         self._pending = []
         if dt_s <= 0.0:
             return events
-        n = max(1, math.ceil(dt_s / self._params.max_substep_s - 1e-9))
+        n = math.ceil(dt_s / self._params.max_substep_s - 1e-9)
+        if n <= 1:
+            self._substep(dt_s, events)  # the usual case: one physics step, one sub-step
+            return events
         h = dt_s / n
         for _ in range(n):
             self._substep(h, events)
         return events
+
+    def _fly(
+        self,
+        st: FlightState,
+        airspeed_m_s: float,
+        bank_rad: float,
+        climb_m_s: float,
+        ground_m: float,
+        motor: bool,
+        dt_s: float,
+        climb_max_m_s: float = 0.0,
+    ) -> FlightState:
+        """The airframe flown one sub-step from ``st`` (:func:`model.step_scalar`) with these
+        controls, in this vehicle's wind and airspeed error."""
+        return model.step_scalar(
+            st, airspeed_m_s, bank_rad, climb_m_s, ground_m, motor, self._params, self._wind,
+            dt_s, self._prng, self._tas_scale, climb_max_m_s, m_per_deg=self._scales(),
+        )  # fmt: skip
 
     def _substep(self, dt_s: float, events: list[Event]) -> None:
         st = self._state
@@ -584,18 +604,8 @@ class Autopilot:
         if not self._armed:
             self._nav_roll = 0.0
             self._target_airspeed_m_s = p.airspeed_cruise_m_s
-            self._state = model.step_scalar(
-                st,
-                p.airspeed_cruise_m_s * scale,
-                0.0,
-                0.0,
-                ground,
-                False,
-                p,
-                self._wind,
-                dt_s,
-                self._prng,
-                scale,
+            self._state = self._fly(
+                st, p.airspeed_cruise_m_s * scale, 0.0, 0.0, ground, False, dt_s
             )
             self._roll_on_terrain(st, dt_s)
             return
@@ -605,9 +615,7 @@ class Autopilot:
             mode = self._mode  # mission end may have switched to RTL
         if st.on_ground and self._nav != _NAV_TAKEOFF and self._nav != _NAV_LAND:
             # Throttle suppressed on the ground outside a takeoff.
-            self._state = model.step_scalar(
-                st, 0.0, 0.0, 0.0, ground, False, p, self._wind, dt_s, self._prng, scale
-            )
+            self._state = self._fly(st, 0.0, 0.0, 0.0, ground, False, dt_s)
             self._roll_on_terrain(st, dt_s)
             return
         if (
@@ -621,20 +629,7 @@ class Autopilot:
             self._start_loiter_here()
         eas, bank, climb, motor = self._guidance(st, mode)
         climb_max = p.takeoff_climb_rate_m_s if self._nav == _NAV_TAKEOFF else 0.0
-        self._state = new = model.step_scalar(
-            st,
-            eas * scale,
-            bank,
-            climb,
-            ground,
-            motor,
-            p,
-            self._wind,
-            dt_s,
-            self._prng,
-            scale,
-            climb_max,
-        )
+        self._state = new = self._fly(st, eas * scale, bank, climb, ground, motor, dt_s, climb_max)
         if not st.on_ground and (new.alt_m < ground or (new.on_ground and self._nav != _NAV_LAND)):
             self._crash(ground)
             return
@@ -777,12 +772,18 @@ class Autopilot:
                 climb_ff = -p.land_flare_sink_m_s
                 target_alt = st.alt_m
                 motor = self._land_stage == _LAND_FLARE
-        bank = clamp(bank, -p.max_bank_rad, p.max_bank_rad)
+        # The limits written out (not clamp()/max() calls): this runs every physics step.
+        max_bank = p.max_bank_rad
+        bank = -max_bank if bank < -max_bank else max_bank if bank > max_bank else bank
         climb = climb_ff + (target_alt - st.alt_m) / p.alt_time_constant_s
         self._nav_roll = bank
         self._alt_error = target_alt - st.alt_m
+        sink_max = p.sink_rate_max_m_s
+        climb_max = p.climb_rate_max_m_s
+        airspeed = st.airspeed_m_s
         self._nav_pitch = math.atan2(
-            clamp(climb, -p.sink_rate_max_m_s, p.climb_rate_max_m_s), max(st.airspeed_m_s, 1.0)
+            -sink_max if climb < -sink_max else climb_max if climb > climb_max else climb,
+            1.0 if airspeed < 1.0 else airspeed,
         )
         self._target_airspeed_m_s = tas
         return tas, bank, climb, motor
@@ -1198,12 +1199,11 @@ class Autopilot:
         return math.hypot((point[0] - st.lat_deg) * kn, (point[1] - st.lon_deg) * ke)
 
     def _scales(self) -> tuple[float, float]:
-        """Metres per degree of latitude / longitude at the vehicle (cached per state)."""
+        """Metres per degree of latitude / longitude at the vehicle (cached per state; the
+        physics step moves the vehicle with them too)."""
         st = self._state
         if self._scales_for is not st:
-            lat_rad = st.lat_deg * _DEG
-            m, n = model.radii_of_curvature_m(lat_rad)
-            self._scales_kn_ke = ((m + st.alt_m) * _DEG, (n + st.alt_m) * math.cos(lat_rad) * _DEG)
+            self._scales_kn_ke = model.metres_per_degree(st.lat_deg, st.alt_m)
             self._scales_for = st
         return self._scales_kn_ke
 

@@ -44,7 +44,9 @@ def l1_waypoint(
         vn = 0.1 * math.cos(heading_rad)
         ve = 0.1 * math.sin(heading_rad)
         gs = 0.1
-    l1 = max(0.3183099 * damping * period_s * gs, 0.1)
+    l1 = 0.3183099 * damping * period_s * gs
+    if l1 < 0.1:  # limits written out, not max()/clamp() calls: this runs every step
+        l1 = 0.1
     abn = bn - an
     abe = be - ae
     ab_len = math.hypot(abn, abe)
@@ -71,10 +73,11 @@ def l1_waypoint(
         nav_bearing = math.atan2(ue, un)
     else:
         nu2 = math.atan2(vn * abe - ve * abn, vn * abn + ve * abe)
-        nu1 = math.asin(clamp(xtrack / l1, -0.7071, 0.7071))
+        sin_nu1 = xtrack / l1
+        nu1 = math.asin(-0.7071 if sin_nu1 < -0.7071 else 0.7071 if sin_nu1 > 0.7071 else sin_nu1)
         nu = nu1 + nu2
         nav_bearing = math.atan2(abe, abn) + nu1
-    nu = clamp(nu, -1.5708, 1.5708)
+    nu = -1.5708 if nu < -1.5708 else 1.5708 if nu > 1.5708 else nu
     lat_acc = 4.0 * damping * damping * gs * gs / l1 * math.sin(nu)
     return lat_acc, nav_bearing, xtrack
 

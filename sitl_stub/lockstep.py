@@ -33,8 +33,6 @@ import os
 import time
 from pathlib import Path
 
-import numpy as np
-
 STALE_WALL_S = 3.0
 """An acknowledgement older than this (monotonic wall seconds) holds nothing back: long
 enough that a ground station its machine keeps busy (two other processes on each core, a
@@ -68,13 +66,16 @@ class Lockstep:
             self._map = mmap.mmap(fd, _SIZE)
         finally:
             os.close(fd)
-        self._slots = np.frombuffer(self._map, dtype=np.float64, count=5)
+        # The five float64 slots, read and written as Python floats (a numpy view's scalar
+        # access costs several times more, and the simulator reads them every step).
+        self._slots = memoryview(self._map).cast("d")
         if create:
             if not (math.isfinite(speedup) and speedup > 0.0):
                 raise ValueError(f"speedup must be a positive number, got {speedup!r}")
             if not (math.isfinite(lead_s) and lead_s > 0.0):
                 raise ValueError(f"lead_s must be a positive number of seconds, got {lead_s!r}")
-            self._slots[:] = (0.0, -math.inf, -math.inf, speedup, lead_s)
+            for slot, value in enumerate((0.0, -math.inf, -math.inf, speedup, lead_s)):
+                self._slots[slot] = value
 
     @property
     def speedup(self) -> float:
@@ -121,5 +122,7 @@ class Lockstep:
 
     def close(self) -> None:
         """Unmap the file; the clock reads on as it last was (a flight record may ask)."""
-        self._slots = self._slots.copy()  # the map cannot close while a view of it lives
+        # The map cannot close while a view of it lives: go on with a copy of the slots.
+        mapped, self._slots = self._slots, memoryview(bytearray(self._slots)).cast("d")
+        mapped.release()
         self._map.close()

@@ -13,7 +13,9 @@ from __future__ import annotations
 
 import math
 import random
-from dataclasses import dataclass
+from collections.abc import Callable
+from dataclasses import dataclass, fields
+from typing import Any
 
 import numpy as np
 
@@ -124,6 +126,72 @@ class FlightState:
         return math.atan2(self.vel_east_m_s, self.vel_north_m_s) % _TWO_PI
 
 
+def _slot_setter(name: str) -> Callable[[FlightState, Any], None]:
+    setter: Callable[[FlightState, Any], None] = vars(FlightState)[name].__set__
+    return setter
+
+
+(
+    _set_time_s,
+    _set_lat_deg,
+    _set_lon_deg,
+    _set_alt_m,
+    _set_airspeed_m_s,
+    _set_heading_rad,
+    _set_roll_rad,
+    _set_pitch_rad,
+    _set_climb_rate_m_s,
+    _set_vel_north_m_s,
+    _set_vel_east_m_s,
+    _set_wind_north_m_s,
+    _set_wind_east_m_s,
+    _set_on_ground,
+    _set_distance_flown_m,
+) = (_slot_setter(f.name) for f in fields(FlightState))
+
+
+def new_flight_state(
+    time_s: float,
+    lat_deg: float,
+    lon_deg: float,
+    alt_m: float,
+    airspeed_m_s: float,
+    heading_rad: float,
+    roll_rad: float,
+    pitch_rad: float,
+    climb_rate_m_s: float,
+    vel_north_m_s: float,
+    vel_east_m_s: float,
+    wind_north_m_s: float,
+    wind_east_m_s: float,
+    on_ground: bool,
+    distance_flown_m: float,
+) -> FlightState:
+    """``FlightState(...)`` with every field given, for the once-a-step path.
+
+    The frozen dataclass's ``__init__`` stores each field through ``object.__setattr__``,
+    which cost a good share of a physics step; this stores them through the slots' own
+    setters, in half the time. The same object with the same fields
+    (``tests/sitl_stub/test_model.py`` checks the field order)."""
+    state: FlightState = object.__new__(FlightState)
+    _set_time_s(state, time_s)
+    _set_lat_deg(state, lat_deg)
+    _set_lon_deg(state, lon_deg)
+    _set_alt_m(state, alt_m)
+    _set_airspeed_m_s(state, airspeed_m_s)
+    _set_heading_rad(state, heading_rad)
+    _set_roll_rad(state, roll_rad)
+    _set_pitch_rad(state, pitch_rad)
+    _set_climb_rate_m_s(state, climb_rate_m_s)
+    _set_vel_north_m_s(state, vel_north_m_s)
+    _set_vel_east_m_s(state, vel_east_m_s)
+    _set_wind_north_m_s(state, wind_north_m_s)
+    _set_wind_east_m_s(state, wind_east_m_s)
+    _set_on_ground(state, on_ground)
+    _set_distance_flown_m(state, distance_flown_m)
+    return state
+
+
 @dataclass(frozen=True, slots=True)
 class Controls:
     """What the autopilot asks of the airframe for one step.
@@ -151,6 +219,14 @@ def radii_of_curvature_m(lat_rad: float) -> tuple[float, float]:
     n = WGS84_A_M / w
     m = WGS84_A_M * (1.0 - WGS84_E2) / (w2 * w)
     return m, n
+
+
+def metres_per_degree(lat_deg: float, alt_m: float) -> tuple[float, float]:
+    """Metres per degree of latitude and of longitude at a latitude and altitude (AMSL), from
+    the local radii of curvature: ``(M + alt) pi/180``, ``(N + alt) cos(lat) pi/180``."""
+    lat_rad = lat_deg * _DEG
+    m, n = radii_of_curvature_m(lat_rad)
+    return (m + alt_m) * _DEG, (n + alt_m) * math.cos(lat_rad) * _DEG
 
 
 def offset_ne_m(
@@ -247,12 +323,15 @@ def step_scalar(
     rng: Rng,
     tas_scale: float = 1.0,
     climb_max_m_s: float = 0.0,
+    m_per_deg: tuple[float, float] | None = None,
 ) -> FlightState:
     """``step`` with the controls unpacked (the autopilot's hot path; no Controls object).
 
     ``tas_scale`` is true airspeed per unit of the airframe's airspeeds (EAS2TAS x (1 + bias)):
     it scales the airspeed limits and the rotate speed; ``target_airspeed_m_s`` is true.
     ``climb_max_m_s`` > 0 replaces ``climb_rate_max_m_s`` (a full-throttle takeoff climb).
+    ``m_per_deg`` is :func:`metres_per_degree` at ``state`` (its latitude and altitude), if
+    the caller has it already (the autopilot navigates with it); else it is worked out here.
     """
     exp = math.exp
     cos = math.cos
@@ -274,22 +353,25 @@ def step_scalar(
         we = mean_e
 
     heading = state.heading_rad
-    ch = cos(heading)
-    sh = sin(heading)
     on_ground = state.on_ground
     lifted_off = False
     climb = state.climb_rate_m_s
     roll = state.roll_rad
     airspeed = state.airspeed_m_s
 
+    # Limits below are written out rather than max() calls: this runs every physics step.
     if on_ground:
         # Ground roll along the heading; the ground speed is what the wheels integrate.
+        ch = cos(heading)
+        sh = sin(heading)
         gs = state.vel_north_m_s * ch + state.vel_east_m_s * sh
         if motor_on:
             gs += p.takeoff_accel_m_s2 * dt_s
         else:
-            gs = max(0.0, gs - p.ground_brake_decel_m_s2 * dt_s)
-        airspeed = max(0.0, gs - (wn * ch + we * sh))
+            gs -= p.ground_brake_decel_m_s2 * dt_s
+            gs = gs if gs > 0.0 else 0.0
+        airspeed = gs - (wn * ch + we * sh)
+        airspeed = airspeed if airspeed > 0.0 else 0.0
         rotate = (p.takeoff_rotate_speed_m_s or p.airspeed_min_m_s) * tas_scale
         roll = 0.0
         climb = state.climb_rate_m_s  # rolling up or down the ground (0 on flat ground)
@@ -318,7 +400,8 @@ def step_scalar(
         lim = p.roll_rate_max_rad_s * dt_s
         roll += lim if d > lim else -lim if d < -lim else d
         # Coordinated turn: yaw rate = g tan(bank) / V.
-        heading = (heading + GRAVITY_M_S2 * math.tan(roll) / max(airspeed, 1.0) * dt_s) % _TWO_PI
+        speed = 1.0 if airspeed < 1.0 else airspeed  # no turn-rate blow-up at a standstill
+        heading = (heading + GRAVITY_M_S2 * math.tan(roll) / speed * dt_s) % _TWO_PI
         ch = cos(heading)
         sh = sin(heading)
         if motor_on:
@@ -355,20 +438,17 @@ def step_scalar(
         gs = vn * ch + ve * sh
         vn = gs * ch
         ve = gs * sh
-    lat_rad = state.lat_deg * _DEG
-    sl = sin(lat_rad)
-    w2 = 1.0 - WGS84_E2 * sl * sl
-    w = math.sqrt(w2)
-    rn = WGS84_A_M / w + alt
-    rm = WGS84_A_M * (1.0 - WGS84_E2) / (w2 * w) + alt
-    lon = state.lon_deg + de / (rn * cos(lat_rad) * _DEG)
+    if m_per_deg is None:
+        m_per_deg = metres_per_degree(state.lat_deg, alt)
+    m_per_deg_lat, m_per_deg_lon = m_per_deg
+    lon = state.lon_deg + de / m_per_deg_lon
     if lon >= 180.0 or lon < -180.0:
         lon = (lon + 180.0) % 360.0 - 180.0
-    pitch = 0.0 if on_ground else math.atan2(climb, max(airspeed, 1.0))
+    pitch = 0.0 if on_ground else math.atan2(climb, 1.0 if airspeed < 1.0 else airspeed)
 
-    return FlightState(
+    return new_flight_state(
         state.time_s + dt_s,
-        state.lat_deg + dn / (rm * _DEG),
+        state.lat_deg + dn / m_per_deg_lat,
         lon,
         new_alt,
         airspeed,

@@ -107,7 +107,12 @@ class GridTerrain:
         self._tile_deg = cell_deg * tile_cells
         self._side = tile_cells + 1
         self._tiles: dict[tuple[int, int], array[float]] = {}
-        self._last_key: tuple[int, int] | None = None
+        # The tile of the last lookup (the next one is nearly always in it): its row and
+        # column of tiles (inf: none yet), its south-west corner (deg) and its samples.
+        self._last_ti: float = math.inf
+        self._last_tj: float = math.inf
+        self._last_lat0_deg = 0.0
+        self._last_lon0_deg = 0.0
         self._last_tile: array[float] = array("d")
 
     @property
@@ -117,19 +122,31 @@ class GridTerrain:
     def elevation_m(self, lat_deg: float, lon_deg: float) -> float:
         """Elevation AMSL (m) at one point (the per-step lookup: plain floats)."""
         tile_deg = self._tile_deg
-        ti = math.floor(lat_deg / tile_deg)
-        tj = math.floor(lon_deg / tile_deg)
-        key = (ti, tj)
-        if key == self._last_key:
+        tile_row = lat_deg / tile_deg
+        tile_col = lon_deg / tile_deg
+        ti = self._last_ti
+        tj = self._last_tj
+        # The tile is (floor(tile_row), floor(tile_col)); most lookups stay in the last one.
+        if ti <= tile_row < ti + 1.0 and tj <= tile_col < tj + 1.0:
             tile = self._last_tile
         else:
+            key = (math.floor(tile_row), math.floor(tile_col))
             tile = self._tiles.get(key) or self._load(key)
-            self._last_key, self._last_tile = key, tile
-        cells = self.tile_cells
-        y = (lat_deg - ti * tile_deg) / self.cell_deg
-        x = (lon_deg - tj * tile_deg) / self.cell_deg
-        r = min(int(y), cells - 1)
-        c = min(int(x), cells - 1)
+            self._last_tile = tile
+            self._last_ti = float(key[0])  # exact: float-to-float compares are the fast ones
+            self._last_tj = float(key[1])
+            self._last_lat0_deg = key[0] * tile_deg
+            self._last_lon0_deg = key[1] * tile_deg
+        last_cell = self.tile_cells - 1
+        cell_deg = self.cell_deg
+        y = (lat_deg - self._last_lat0_deg) / cell_deg
+        x = (lon_deg - self._last_lon0_deg) / cell_deg
+        r = int(y)
+        if r > last_cell:
+            r = last_cell
+        c = int(x)
+        if c > last_cell:
+            c = last_cell
         fy = y - r
         fx = x - c
         side = self._side
@@ -151,7 +168,8 @@ class GridTerrain:
         except ValueError:  # no data there (TerrainError is a ValueError)
             values = np.full(lat.shape, self.fallback_m)
         values = np.where(np.isfinite(values), values, self.fallback_m)
-        tile = array("d", values.ravel().tolist())
+        tile = array("d")
+        tile.frombytes(values.tobytes())  # float64, row-major: what the lookup indexes
         if len(self._tiles) >= self.max_tiles:
             self._tiles.pop(next(iter(self._tiles)))  # the oldest: the vehicles have moved on
         self._tiles[key] = tile

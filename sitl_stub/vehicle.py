@@ -183,9 +183,9 @@ class Vehicle(TelemetryMessages, CommandHandlers, ParameterHandlers):
 
     def step(self, dt_s: float) -> None:
         """Advance the autopilot by ``dt_s`` simulated seconds and send what falls due."""
-        prev = self.autopilot.state
-        events = self.autopilot.step(dt_s)
-        new = self.autopilot.state
+        autopilot = self.autopilot
+        prev = autopilot.state
+        events = autopilot.step(dt_s)
         for ev in events:
             if isinstance(ev, ItemReached):
                 self.emit(mavlink2.MAVLink_mission_item_reached_message(ev.seq))
@@ -194,8 +194,8 @@ class Vehicle(TelemetryMessages, CommandHandlers, ParameterHandlers):
             elif isinstance(ev, Text):
                 self.statustext(int(ev.severity), ev.text)
         if self._watches:
-            self._check_watches(prev, new)
-        if self.autopilot.home is not self._home_src:
+            self._check_watches(prev, autopilot.state)
+        if autopilot.home is not self._home_src:
             self._sync_home()
         if self.clock.sim_time_s + 1e-9 >= self._streams_due_s:
             self._send_streams()

@@ -9,6 +9,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from planner import geo
 from planner.geo import WGS84_A_M, WGS84_F, LocalFrame, geodesic_distance_m
 
 ORIGIN_LATS_DEG = (0.0, 37.0, 60.0, -45.0)
@@ -398,3 +399,44 @@ def test_frame_is_a_frozen_value() -> None:
     assert hash(frame) == hash(LocalFrame(37.0, -122.0))
     with pytest.raises(AttributeError):
         frame.origin_lat_deg = 38.0  # type: ignore[misc]
+
+
+def _tm_forward_term_by_term(
+    lat_rad: np.ndarray, dlon_rad: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Karney (2011) eqs (7)-(11), (25)-(26) with the Krüger series summed term by term."""
+    series = geo._WGS84_SERIES
+    e = series.e
+    tau = np.tan(lat_rad)
+    sigma = np.sinh(e * np.arctanh(e * tau / np.hypot(1.0, tau)))
+    tau_p = tau * np.hypot(1.0, sigma) - sigma * np.hypot(1.0, tau)
+    xi_p = np.arctan2(tau_p, np.cos(dlon_rad))
+    eta_p = np.arcsinh(np.sin(dlon_rad) / np.hypot(tau_p, np.cos(dlon_rad)))
+    xi, eta, p, q = xi_p.copy(), eta_p.copy(), np.ones_like(xi_p), np.zeros_like(xi_p)
+    for j, alpha_j in enumerate(series.alpha, start=1):
+        xi += alpha_j * np.sin(2 * j * xi_p) * np.cosh(2 * j * eta_p)
+        eta += alpha_j * np.cos(2 * j * xi_p) * np.sinh(2 * j * eta_p)
+        p += 2 * j * alpha_j * np.cos(2 * j * xi_p) * np.cosh(2 * j * eta_p)
+        q += 2 * j * alpha_j * np.sin(2 * j * xi_p) * np.sinh(2 * j * eta_p)
+    big_a = series.rectifying_radius_m
+    k = (
+        big_a
+        / WGS84_A_M
+        * np.hypot(1.0, math.sqrt(1.0 - e * e) * tau)
+        * np.hypot(p, q)
+        / np.hypot(tau_p, np.cos(dlon_rad))
+    )
+    return big_a * eta, big_a * xi, k
+
+
+def test_clenshaw_summation_is_the_series_summed_term_by_term() -> None:
+    rng = np.random.default_rng(3)
+    lat_rad = np.radians(rng.uniform(-85.0, 85.0, 20000))
+    dlon_rad = np.radians(rng.uniform(-40.0, 40.0, 20000))
+    x_m, y_m, k = geo._tm_forward(geo._WGS84_SERIES, lat_rad, dlon_rad)
+    x_ref, y_ref, k_ref = _tm_forward_term_by_term(lat_rad, dlon_rad)
+    assert np.abs(x_m - x_ref).max() < 1e-8  # metres: a few ulps of 1e7 m
+    assert np.abs(y_m - y_ref).max() < 1e-8
+    assert np.abs(k - k_ref).max() < 1e-14
+    x_only, y_only = geo._tm_forward_xy(geo._WGS84_SERIES, lat_rad, dlon_rad)
+    assert np.array_equal(x_only, x_m) and np.array_equal(y_only, y_m)

@@ -106,3 +106,10 @@ def test_delay_queue_releases_in_time_order() -> None:
     assert q.pop_due(1.5) == ["a"]
     assert q.pop_due(2.0) == ["b", "c"]
     assert len(q) == 0 and q.next_due() is None
+
+
+def test_losses_follow_the_generators_sequence_of_random_draws() -> None:
+    link, _ = make(seed=7, loss=0.5)
+    draws = np.random.default_rng(7).random(1000)  # one draw per packet: only loss is on
+    delivered = [bool(link.schedule(0.0, outbound=i % 2 == 0)) for i in range(1000)]
+    assert delivered == [bool(d >= 0.5) for d in draws]

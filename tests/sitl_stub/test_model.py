@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import math
 import random
-from dataclasses import replace
+from dataclasses import FrozenInstanceError, fields, replace
 
 import numpy as np
 import pytest
@@ -239,3 +239,33 @@ def test_crossing_time_lies_inside_the_step(north: float, east: float, heading_d
     t = crossing_time(s0, s1, lat, lon, 1e6)
     if t is not None:
         assert s0.time_s <= t <= s1.time_s
+
+
+def test_new_flight_state_is_the_dataclass_with_its_fields_in_order() -> None:
+    values = [float(i) + 0.25 for i in range(len(fields(FlightState)))]
+    values[[f.name for f in fields(FlightState)].index("on_ground")] = False
+    made = model.new_flight_state(*values)  # type: ignore[arg-type]
+    assert type(made) is FlightState
+    assert made == FlightState(*values)  # type: ignore[arg-type]
+    with pytest.raises(FrozenInstanceError):
+        made.alt_m = 1.0  # type: ignore[misc]
+
+
+def test_a_step_given_the_metres_per_degree_is_the_same_step() -> None:
+    s = airborne(heading_deg=30.0, lat=47.3)
+    wind = Wind(5.0, 1.0)
+    plain = model.step_scalar(s, 25.0, 0.2, 1.0, GROUND, True, P, wind, DT, random.Random(0))
+    given = model.step_scalar(
+        s,
+        25.0,
+        0.2,
+        1.0,
+        GROUND,
+        True,
+        P,
+        wind,
+        DT,
+        random.Random(0),
+        m_per_deg=model.metres_per_degree(s.lat_deg, s.alt_m),
+    )
+    assert given == plain

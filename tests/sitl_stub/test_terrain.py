@@ -231,3 +231,34 @@ async def test_terrain_report_is_off_over_flat_ground() -> None:
         finally:
             await c.close()
     assert got is None
+
+
+def test_grid_lookups_in_and_across_tiles_are_the_bilinear_interpolation_of_their_tile() -> None:
+    cells = 8
+    grid = GridTerrain(ridge, tile_cells=cells)
+    cell = grid.cell_deg
+    tile_deg = cell * cells
+
+    def bilinear(lat: float, lon: float) -> float:
+        """The lookup written plainly: the tile by floor, its samples from ``ridge``."""
+        ti, tj = math.floor(lat / tile_deg), math.floor(lon / tile_deg)
+        y = (lat - ti * tile_deg) / cell
+        x = (lon - tj * tile_deg) / cell
+        r, c = min(int(y), cells - 1), min(int(x), cells - 1)
+        k = np.arange(cells + 1, dtype=np.float64) * cell
+        la, lo = np.meshgrid(ti * tile_deg + k, tj * tile_deg + k, indexing="ij")
+        z = ridge(la, lo)
+        south = z[r, c] + (z[r, c + 1] - z[r, c]) * (x - c)
+        north = z[r + 1, c] + (z[r + 1, c + 1] - z[r + 1, c]) * (x - c)
+        return float(south + (north - south) * (y - r))
+
+    rng = np.random.default_rng(2)
+    lats = list(HOME[0] + rng.uniform(0.0, 0.05, 300))
+    lons = list(HOME[1] + rng.uniform(-0.02, 0.02, 300))
+    base_i, base_j = math.floor(HOME[0] / tile_deg), math.floor(HOME[1] / tile_deg)
+    for k in range(3):  # on tile edges and a hair either side of them
+        for eps in (0.0, 1e-12, -1e-12):
+            lats.append((base_i + k) * tile_deg + eps)
+            lons.append((base_j + k) * tile_deg - eps)
+    for lat, lon in zip(lats, lons, strict=True):
+        assert grid.elevation_m(lat, lon) == bilinear(lat, lon)
