@@ -88,3 +88,4 @@ bench: $(STAMP)
 
 clean:
 	rm -rf $(VENV) $(OUT) .mypy_cache .ruff_cache .pytest_cache .hypothesis
+	find planner gcs sitl_stub tests bench -name __pycache__ -prune -exec rm -rf {} +

@@ -49,6 +49,8 @@ TIMESYNC_PERIOD_S = 5.0
 STREAM_REFRESH_S = 30.0
 # A sequence jump larger than this is a restart or reordering, not loss.
 MAX_SEQ_GAP = 128
+_MAVLINK2_STX = 0xFD
+_MAVLINK1_STX = 0xFE
 # type, autopilot, base_mode, custom_mode, system_status, mavlink_version
 _GCS_HEARTBEAT = (mavlink2.MAV_TYPE_GCS, mavlink2.MAV_AUTOPILOT_INVALID, 0, 0,
                   mavlink2.MAV_STATE_ACTIVE, 3)  # fmt: skip
@@ -385,6 +387,7 @@ class Link:
             return
         if mtype == "UNKNOWN" or mtype.startswith("UNKNOWN_"):
             c.unknown_message += 1
+            self._track_unknown(msg)
             return
         sysid = msg.get_srcSystem()
         compid = msg.get_srcComponent()
@@ -426,6 +429,21 @@ class Link:
             c.bad_signature += 1
         else:
             c.malformed += 1
+
+    def _track_unknown(self, msg: Any) -> None:
+        """A message this dialect cannot decode (one of PX4's that ArduPilot's dialect lacks)
+        still took its sender's next sequence number: kept in the sequence from its frame's
+        header, so that it is counted unknown and not as a lost packet."""
+        frame = bytes(getattr(msg, "data", b"") or b"")
+        if len(frame) >= 7 and frame[0] == _MAVLINK2_STX:
+            seq, sysid, compid = frame[4], frame[5], frame[6]
+        elif len(frame) >= 5 and frame[0] == _MAVLINK1_STX:
+            seq, sysid, compid = frame[2], frame[3], frame[4]
+        else:
+            return
+        if sysid == 0 or (self.allowed_systems is not None and sysid not in self.allowed_systems):
+            return
+        self._track_sequence(sysid, compid, seq)
 
     def _track_sequence(self, sysid: int, compid: int, seq: int) -> None:
         key = (sysid, compid)

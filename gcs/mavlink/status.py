@@ -38,7 +38,8 @@ def status_line(
         f"wp {_num(state.mission_current_seq, 'd')}",
         f"bat {_num(state.battery_remaining_pct, 'd', '%')}",
         f"utc {utc}",
-        f"link {health} rx {counters.received} lost {counters.seq_lost} rtt {rtt}",
+        f"link {health} rx {counters.received} lost {counters.seq_lost} rtt {rtt}"
+        + (f" unknown {counters.unknown_message}" if counters.unknown_message else ""),
     ]
     line = "  ".join(parts)
     return f"{line}  [{link_name}]" if link_name else line

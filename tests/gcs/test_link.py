@@ -7,12 +7,15 @@ import os
 from typing import Any
 
 import pytest
+from pymavlink.dialects.v20 import all as mavlink_all
 from pymavlink.dialects.v20 import ardupilotmega as mavlink2
 
 from gcs.errors import ConnectionStringError, LinkTimeout
 from gcs.mavlink.endpoints import Endpoint, Kind, parse_connection
 from gcs.mavlink.link import Link
 from gcs.mavlink.signing import SigningConfig, apply_signing, key_from_passphrase
+from gcs.mavlink.status import status_line
+from gcs.mavlink.telemetry import VehicleState
 from sitl_stub.api import Home, SimTeam
 from tests.gcs.conftest import HOME, Packer, TcpVehicle, free_udp_port, heartbeat
 
@@ -253,6 +256,40 @@ async def test_sequence_gaps_count_lost_packets() -> None:
             await until(lambda: link.counters.received == 7, timeout_s=2.0)
             assert link.counters.seq_lost == 4
             assert link.counters.seq_out_of_order == 1
+    finally:
+        await vehicle.stop()
+
+
+def _undecodable(seq: int) -> bytes:
+    """A MAVLink 2 frame from system 1 with sequence ``seq`` carrying a message of the full
+    dialect (pymavlink's ``all``: MISSION_CHECKSUM, id 53, from ``development.xml``, which
+    PX4 sends) that ArduPilot's dialect, the link's, does not have."""
+    mav = mavlink_all.MAVLink(None, srcSystem=1, srcComponent=1)
+    mav.seq = seq
+    assert 53 not in mavlink2.mavlink_map
+    msg = mavlink_all.mavlink_map[53](0, 0)
+    return bytes(msg.pack(mav))
+
+
+async def test_messages_the_dialect_cannot_decode_are_unknown_not_lost() -> None:
+    vehicle = TcpVehicle()
+    port = await vehicle.start()
+    try:
+        async with Link.open(f"tcp:127.0.0.1:{port}") as link:
+            await link.wait_connected(2.0)
+            p = Packer(1)
+            frames = [p.pack(heartbeat()) for _ in range(6)]
+            frames[2] = _undecodable(2)  # a PX4 message in the sequence
+            frames[4] = _undecodable(4)
+            for frame in frames:
+                vehicle.send(frame)
+            await until(lambda: link.counters.received == 4, timeout_s=2.0)
+            await until(lambda: link.counters.unknown_message == 2, timeout_s=2.0)
+            assert link.counters.seq_lost == 0
+            assert link.counters.seq_out_of_order == 0
+            assert link.counters.malformed == link.counters.crc_errors == 0
+            line = status_line(VehicleState(system_id=1), link.counters, 0.0)
+            assert "lost 0 rtt" in line and line.endswith("unknown 2"), line
     finally:
         await vehicle.stop()
 
