@@ -15,6 +15,8 @@ import pytest
 from gcs.__main__ import main
 from gcs.coordination.missionclock import MissionClock
 from gcs.coordination.runner import FlightRunner, InfeasibleRequest
+from gcs.mavlink.link import LinkCounters
+from gcs.mavlink.telemetry import TelemetryReducer
 from planner.atmosphere import eas2tas
 from planner.errors import InfeasibleError, PlannerError
 from planner.mission import (
@@ -31,6 +33,7 @@ from planner.schedule import Anchor, Schedule
 from planner.schedulefile import path_mission, splice_mission
 from planner.threats import active, build_threats
 from planner.timing import flyable_loiter_radius_m
+from tests.gcs.test_telemetry import heartbeat
 
 PAPER = Path(__file__).resolve().parents[2] / "scenarios" / "paper_three_uav.yaml"
 
@@ -356,3 +359,25 @@ def test_a_re_plan_the_others_cannot_wait_for_times_the_re_planned_among_themsel
         assert float(zone.distance_m(pts[:, 0], pts[:, 1]).min()) > 0.0, vid
     (said,) = [e.text for e in out.events if e.kind == "arrival"]
     assert "they keep their schedules" in said and "UAV3" in said, said
+
+
+async def test_a_vehicle_whose_reports_stopped_shows_its_mode_unknown_in_the_snapshot() -> None:
+    """The snapshot's ``link`` for a vehicle the flight has judged silent (on a simulator's
+    pace clock, in its time): not healthy, mode and armed null, its last word kept; the
+    others as they say."""
+    runner = FlightRunner(load_scenario(PAPER), MissionClock())
+    await runner.prepare()
+    said = TelemetryReducer(1)
+    said.update(heartbeat(), 0.0)  # AUTO, armed
+    for k, vid in enumerate(runner.members, start=1):
+        runner.vehicles[vid] = SimpleNamespace(  # type: ignore[assignment]
+            system_id=k, state=said.state, link=SimpleNamespace(counters=LinkCounters())
+        )
+    runner.members["UAV2"].link_silent = True
+    links = {v["id"]: v["link"] for v in runner.snapshot()["vehicles"]}
+    assert links["UAV2"]["healthy"] is False
+    assert (links["UAV2"]["mode"], links["UAV2"]["armed"]) == (None, None)
+    assert (links["UAV2"]["last_mode"], links["UAV2"]["last_armed"]) == ("AUTO", True)
+    for vid in ("UAV1", "UAV3"):
+        assert links[vid]["healthy"] is True
+        assert (links[vid]["mode"], links[vid]["armed"]) == ("AUTO", True)
