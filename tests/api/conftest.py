@@ -4,6 +4,7 @@ run."""
 
 from __future__ import annotations
 
+import asyncio
 import secrets
 from collections.abc import AsyncIterator
 from pathlib import Path
@@ -20,7 +21,9 @@ from tests.gcs.conftest import PAPER, store_url
 __all__ = [
     "PAPER",
     "TOKENS",
+    "app_with",
     "auth",
+    "job_until",
     "problem",
     "running",
     "settings_for",
@@ -46,6 +49,23 @@ def db_url(tmp_path: Path) -> str:
     """The store of the app: SQLite (a module whose tests touch what is kept overrides it
     with ``store_url``, SQLite and PostgreSQL)."""
     return f"sqlite:///{tmp_path / 'tcgcs.db'}"
+
+
+def app_with(tmp_path: Path, **settings: Any) -> FastAPI:
+    """The app on a SQLite file in ``tmp_path``, a token for every scope, with these
+    settings changed (limits, folders)."""
+    base = settings_for(tmp_path / "data", f"sqlite:///{tmp_path / 'tcgcs.db'}")
+    return create_app(base.model_copy(update=settings))
+
+
+async def job_until(client: httpx.AsyncClient, job_id: str, *states: str) -> dict[str, Any]:
+    """Poll a job until it is in one of ``states``."""
+    for _ in range(6000):
+        job: dict[str, Any] = (await client.get(f"/v1/jobs/{job_id}", headers=auth())).json()
+        if job["state"] in states:
+            return job
+        await asyncio.sleep(0.02)
+    raise AssertionError(f"job {job_id} never reached {states}: {job}")
 
 
 async def running(app: FastAPI) -> AsyncIterator[httpx.AsyncClient]:

@@ -5,7 +5,6 @@ processes of their own, report progress, stop at their time limit and are cancel
 
 from __future__ import annotations
 
-import asyncio
 import json
 import os
 from collections.abc import AsyncIterator
@@ -15,26 +14,19 @@ from typing import Any
 import httpx
 import pytest
 import yaml
-from fastapi import FastAPI
 
-from gcs.api.app import create_app
-from tests.api.conftest import PAPER, auth, problem, running, settings_for
+from tests.api.conftest import PAPER, app_with, auth, job_until, problem, running
 from tests.procs import goes, gone
 from tests.teams import ring_team
 
 PAPER_TEXT = PAPER.read_text(encoding="utf-8")
 
 
-def _app(tmp_path: Path, **limits: Any) -> FastAPI:
-    settings = settings_for(tmp_path / "data", f"sqlite:///{tmp_path / 'tcgcs.db'}")
-    return create_app(settings.model_copy(update=limits))
-
-
 @pytest.fixture
 async def small(tmp_path: Path) -> AsyncIterator[httpx.AsyncClient]:
     """A service with small limits: 64 KiB bodies, 2 vehicles, 50,000 grid nodes (the
     paper's map has 40,401), 20 hills (it has 18)."""
-    app = _app(
+    app = app_with(
         tmp_path,
         max_body_bytes=65_536,
         max_vehicles=2,
@@ -61,16 +53,6 @@ def _two() -> dict[str, Any]:
     doc["vehicles"] = doc["vehicles"][:2]
     doc["buffers"] = [b for b in doc.get("buffers", []) if "UAV3" not in b.get("vehicles", [])]
     return doc
-
-
-async def _until(client: httpx.AsyncClient, job_id: str, *states: str) -> dict[str, Any]:
-    """Poll a job until it is in one of ``states``."""
-    for _ in range(6000):
-        job: dict[str, Any] = (await client.get(f"/v1/jobs/{job_id}", headers=auth())).json()
-        if job["state"] in states:
-            return job
-        await asyncio.sleep(0.02)
-    raise AssertionError(f"job {job_id} never reached {states}: {job}")
 
 
 async def test_a_body_over_the_size_limit_is_413_whether_its_length_is_said_or_not(
@@ -124,7 +106,7 @@ async def test_a_scenario_over_the_service_limits_is_422_naming_the_field(
 async def test_a_token_past_its_job_quota_gets_429_with_retry_after_and_a_cancel_frees_it(
     tmp_path: Path,
 ) -> None:
-    app = _app(tmp_path, jobs_running=1, jobs_per_token=2)
+    app = app_with(tmp_path, jobs_running=1, jobs_per_token=2)
     async for client in running(app):
         body = {"scenario_id": await _scenario(client, ring_team(1000))}
         jobs = []
@@ -141,7 +123,7 @@ async def test_a_token_past_its_job_quota_gets_429_with_retry_after_and_a_cancel
         assert r.status_code == 202, r.text
         jobs.append(r.json())
         # The queued one cancelled never starts; the quota has room again.
-        await _until(client, jobs[0]["id"], "running")
+        await job_until(client, jobs[0]["id"], "running")
         cancelled = await client.delete(f"/v1/jobs/{jobs[1]['id']}", headers=auth("plan"))
         assert cancelled.status_code == 200 and cancelled.json()["state"] == "cancelled"
         assert cancelled.json()["started_utc_s"] is None
@@ -158,7 +140,7 @@ async def test_a_job_reports_its_progress_and_times(small: httpx.AsyncClient) ->
     r = await small.post(
         "/v1/schedules", json={"scenario_id": await _scenario(small, doc)}, headers=auth("plan")
     )
-    done = await _until(small, r.json()["id"], "succeeded", "failed")
+    done = await job_until(small, r.json()["id"], "succeeded", "failed")
     assert done["state"] == "succeeded" and done["progress"] == 1.0 and done["stage"] == "done"
     assert done["created_utc_s"] <= done["started_utc_s"] <= done["finished_utc_s"]
     assert [v["id"] for v in done["result"]["vehicles"]] == ["UAV1", "UAV2"]
@@ -167,12 +149,12 @@ async def test_a_job_reports_its_progress_and_times(small: httpx.AsyncClient) ->
 async def test_a_running_thousand_vehicle_job_is_cancelled_with_its_process_gone(
     tmp_path: Path,
 ) -> None:
-    app = _app(tmp_path)
+    app = app_with(tmp_path)
     async for client in running(app):
         sid = await _scenario(client, ring_team(1000))
         r = await client.post("/v1/schedules", json={"scenario_id": sid}, headers=auth("plan"))
         job = r.json()
-        running_job = await _until(client, job["id"], "running")
+        running_job = await job_until(client, job["id"], "running")
         assert running_job["stage"] != "queued"
         work = app.state.engine.planning.work
         pid = work.running_pid(job["id"])
@@ -194,11 +176,11 @@ async def test_a_running_thousand_vehicle_job_is_cancelled_with_its_process_gone
 
 
 async def test_a_job_past_its_time_limit_is_stopped_and_failed(tmp_path: Path) -> None:
-    app = _app(tmp_path, job_time_limit_s=0.5)
+    app = app_with(tmp_path, job_time_limit_s=0.5)
     async for client in running(app):
         sid = await _scenario(client, ring_team(1000))
         r = await client.post("/v1/schedules", json={"scenario_id": sid}, headers=auth("plan"))
-        failed = await _until(client, r.json()["id"], "failed", "succeeded")
+        failed = await job_until(client, r.json()["id"], "failed", "succeeded")
         assert failed["state"] == "failed"
         assert failed["error"] == {
             "status": 422,

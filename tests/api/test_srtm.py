@@ -5,7 +5,6 @@ a 422 naming ``terrain.directory`` and nothing is kept; a folder under it is pla
 
 from __future__ import annotations
 
-import asyncio
 import json
 from pathlib import Path
 from typing import Any
@@ -15,8 +14,7 @@ import numpy as np
 import pytest
 from fastapi import FastAPI
 
-from gcs.api.app import create_app
-from tests.api.conftest import auth, problem, running, settings_for
+from tests.api.conftest import app_with, auth, job_until, problem, running
 from tests.api.test_bad_input import row_counts
 from tests.planner.conftest import small_scenario
 from tests.planner.test_terrain import write_tile
@@ -29,11 +27,6 @@ TILES = [(44, 6), (44, 7), (45, 6), (45, 7)]
 def _srtm(directory: str) -> str:
     """The planner tests' small scenario (40 km square round 45 N 7 E) on SRTM terrain."""
     return json.dumps(small_scenario(terrain={"kind": "srtm", "directory": directory}))
-
-
-def _app(tmp_path: Path, srtm_dir: Path | None) -> FastAPI:
-    settings = settings_for(tmp_path / "data", f"sqlite:///{tmp_path / 'tcgcs.db'}")
-    return create_app(settings.model_copy(update={"srtm_dir": srtm_dir}))
 
 
 @pytest.fixture
@@ -57,7 +50,7 @@ def _kept(app: FastAPI) -> int:
 
 
 async def test_without_an_srtm_folder_srtm_terrain_is_refused(tmp_path: Path) -> None:
-    app = _app(tmp_path, None)
+    app = app_with(tmp_path, srtm_dir=None)
     async for client in running(app):
         r = await client.post("/v1/scenarios", content=_srtm("."), headers=auth("plan") | _JSON)
         detail = problem(r, 422)["detail"]
@@ -79,7 +72,7 @@ async def test_without_an_srtm_folder_srtm_terrain_is_refused(tmp_path: Path) ->
 async def test_a_folder_outside_the_srtm_folder_is_422_and_nothing_is_kept(
     tmp_path: Path, srtm_dir: Path, directory: str, said: str
 ) -> None:
-    app = _app(tmp_path, srtm_dir)
+    app = app_with(tmp_path, srtm_dir=srtm_dir)
     async for client in running(app):
         r = await client.post(
             "/v1/scenarios", content=_srtm(directory), headers=auth("plan") | _JSON
@@ -91,22 +84,17 @@ async def test_a_folder_outside_the_srtm_folder_is_422_and_nothing_is_kept(
         assert _kept(app) == 0
 
 
-async def _job(client: httpx.AsyncClient, scenario_id: str) -> dict[str, Any]:
+async def _planned(client: httpx.AsyncClient, scenario_id: str) -> dict[str, Any]:
+    """The schedule job of a scenario, once it has ended."""
     r = await client.post("/v1/schedules", json={"scenario_id": scenario_id}, headers=auth("plan"))
     assert r.status_code == 202, r.text
-    job_id = r.json()["id"]
-    for _ in range(6000):
-        job: dict[str, Any] = (await client.get(f"/v1/jobs/{job_id}", headers=auth())).json()
-        if job["state"] in ("succeeded", "failed"):
-            return job
-        await asyncio.sleep(0.02)
-    raise AssertionError(f"job {job_id} did not end: {job}")
+    return await job_until(client, r.json()["id"], "succeeded", "failed")
 
 
 async def test_a_folder_under_the_srtm_folder_is_planned_on_that_folders_tiles(
     tmp_path: Path, srtm_dir: Path
 ) -> None:
-    app = _app(tmp_path, srtm_dir)
+    app = app_with(tmp_path, srtm_dir=srtm_dir)
     async for client in running(app):
         ids = {}
         for name in ("alps", "empty"):
@@ -116,10 +104,10 @@ async def test_a_folder_under_the_srtm_folder_is_planned_on_that_folders_tiles(
             assert r.status_code == 201, r.text
             ids[name] = r.json()["id"]
         assert _kept(app) == 2
-        done = await _job(client, ids["alps"])
+        done = await _planned(client, ids["alps"])
         assert done["state"] == "succeeded", done
         # The empty folder is where the planner looked: no tile there, though the same name
         # exists in the service's other folders.
-        failed = await _job(client, ids["empty"])
+        failed = await _planned(client, ids["empty"])
         assert failed["state"] == "failed", failed
         assert ".hgt not found in" in json.dumps(failed), failed

@@ -3,7 +3,9 @@
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import os
+from collections.abc import AsyncIterator
 from typing import Any
 
 import pytest
@@ -146,25 +148,33 @@ async def test_stream_rate_request_raises_position_rate() -> None:
 # -- hand-driven vehicles: reconnect, garbage, sequence gaps ---------------------------------
 
 
-async def test_reconnects_with_backoff_after_the_connection_drops() -> None:
+@contextlib.asynccontextmanager
+async def _linked(**options: Any) -> AsyncIterator[tuple[TcpVehicle, Link]]:
+    """A TCP vehicle on a free loopback port and a link connected to it (``options`` for
+    :meth:`Link.open`); the vehicle is stopped after."""
     vehicle = TcpVehicle()
     port = await vehicle.start()
     try:
-        async with Link.open(f"tcp:127.0.0.1:{port}", reconnect_min_s=0.05) as link:
+        async with Link.open(f"tcp:127.0.0.1:{port}", **options) as link:
             await link.wait_connected(2.0)
-            vehicle.send(Packer(1).pack(heartbeat()))
-            await link.wait_vehicle(1, timeout_s=2.0)
-            vehicle.drop_clients()
-            await until(lambda: vehicle.connections == 2, timeout_s=3.0)
-            await link.wait_connected(2.0)
-            assert link.counters.reconnects == 1
-            # The new connection carries traffic both ways.
-            with link.subscribe({"HEARTBEAT"}) as sub:
-                vehicle.send(Packer(1).pack(heartbeat()))
-                assert await sub.get(timeout_s=2.0) is not None
-            await until(lambda: len(vehicle.of_type("HEARTBEAT")) >= 2, timeout_s=3.0)
+            yield vehicle, link
     finally:
         await vehicle.stop()
+
+
+async def test_reconnects_with_backoff_after_the_connection_drops() -> None:
+    async with _linked(reconnect_min_s=0.05) as (vehicle, link):
+        vehicle.send(Packer(1).pack(heartbeat()))
+        await link.wait_vehicle(1, timeout_s=2.0)
+        vehicle.drop_clients()
+        await until(lambda: vehicle.connections == 2, timeout_s=3.0)
+        await link.wait_connected(2.0)
+        assert link.counters.reconnects == 1
+        # The new connection carries traffic both ways.
+        with link.subscribe({"HEARTBEAT"}) as sub:
+            vehicle.send(Packer(1).pack(heartbeat()))
+            assert await sub.get(timeout_s=2.0) is not None
+        await until(lambda: len(vehicle.of_type("HEARTBEAT")) >= 2, timeout_s=3.0)
 
 
 async def test_connect_failures_retry_until_the_vehicle_appears() -> None:
@@ -240,24 +250,18 @@ async def test_garbage_crc_errors_and_unknown_systems_are_counted_and_dropped() 
 
 
 async def test_sequence_gaps_count_lost_packets() -> None:
-    vehicle = TcpVehicle()
-    port = await vehicle.start()
-    try:
-        async with Link.open(f"tcp:127.0.0.1:{port}") as link:
-            await link.wait_connected(2.0)
-            p = Packer(1)
-            frames = [p.pack(heartbeat()) for _ in range(10)]
-            for i in (0, 1, 2, 5, 6, 9):  # 3, 4, 7, 8 lost
-                vehicle.send(frames[i])
-            await until(lambda: link.counters.received == 6, timeout_s=2.0)
-            assert link.counters.seq_lost == 4
-            assert link.counters.seq_out_of_order == 0
-            vehicle.send(frames[7])  # late arrival: reordering, not loss
-            await until(lambda: link.counters.received == 7, timeout_s=2.0)
-            assert link.counters.seq_lost == 4
-            assert link.counters.seq_out_of_order == 1
-    finally:
-        await vehicle.stop()
+    async with _linked() as (vehicle, link):
+        p = Packer(1)
+        frames = [p.pack(heartbeat()) for _ in range(10)]
+        for i in (0, 1, 2, 5, 6, 9):  # 3, 4, 7, 8 lost
+            vehicle.send(frames[i])
+        await until(lambda: link.counters.received == 6, timeout_s=2.0)
+        assert link.counters.seq_lost == 4
+        assert link.counters.seq_out_of_order == 0
+        vehicle.send(frames[7])  # late arrival: reordering, not loss
+        await until(lambda: link.counters.received == 7, timeout_s=2.0)
+        assert link.counters.seq_lost == 4
+        assert link.counters.seq_out_of_order == 1
 
 
 def _undecodable(seq: int) -> bytes:
@@ -272,44 +276,32 @@ def _undecodable(seq: int) -> bytes:
 
 
 async def test_messages_the_dialect_cannot_decode_are_unknown_not_lost() -> None:
-    vehicle = TcpVehicle()
-    port = await vehicle.start()
-    try:
-        async with Link.open(f"tcp:127.0.0.1:{port}") as link:
-            await link.wait_connected(2.0)
-            p = Packer(1)
-            frames = [p.pack(heartbeat()) for _ in range(6)]
-            frames[2] = _undecodable(2)  # a PX4 message in the sequence
-            frames[4] = _undecodable(4)
-            for frame in frames:
-                vehicle.send(frame)
-            await until(lambda: link.counters.received == 4, timeout_s=2.0)
-            await until(lambda: link.counters.unknown_message == 2, timeout_s=2.0)
-            assert link.counters.seq_lost == 0
-            assert link.counters.seq_out_of_order == 0
-            assert link.counters.malformed == link.counters.crc_errors == 0
-            line = status_line(VehicleState(system_id=1), link.counters, 0.0)
-            assert "lost 0 rtt" in line and line.endswith("unknown 2"), line
-    finally:
-        await vehicle.stop()
+    async with _linked() as (vehicle, link):
+        p = Packer(1)
+        frames = [p.pack(heartbeat()) for _ in range(6)]
+        frames[2] = _undecodable(2)  # a PX4 message in the sequence
+        frames[4] = _undecodable(4)
+        for frame in frames:
+            vehicle.send(frame)
+        await until(lambda: link.counters.received == 4, timeout_s=2.0)
+        await until(lambda: link.counters.unknown_message == 2, timeout_s=2.0)
+        assert link.counters.seq_lost == 0
+        assert link.counters.seq_out_of_order == 0
+        assert link.counters.malformed == link.counters.crc_errors == 0
+        line = status_line(VehicleState(system_id=1), link.counters, 0.0)
+        assert "lost 0 rtt" in line and line.endswith("unknown 2"), line
 
 
 async def test_slow_subscriber_keeps_the_newest_messages() -> None:
-    vehicle = TcpVehicle()
-    port = await vehicle.start()
-    try:
-        async with Link.open(f"tcp:127.0.0.1:{port}") as link:
-            await link.wait_connected(2.0)
-            p = Packer(1)
-            with link.subscribe({"SYSTEM_TIME"}, maxsize=3) as sub:
-                times = [mavlink2.MAVLink_system_time_message(i, i) for i in range(10)]
-                vehicle.send(b"".join(p.pack(m) for m in times))
-                await until(lambda: link.counters.received == 10, timeout_s=2.0)
-                kept = [sub.get_nowait().time_boot_ms for _ in range(3)]
-                assert kept == [7, 8, 9]
-                assert sub.dropped == 7 and link.counters.subscriber_overflow == 7
-    finally:
-        await vehicle.stop()
+    async with _linked() as (vehicle, link):
+        p = Packer(1)
+        with link.subscribe({"SYSTEM_TIME"}, maxsize=3) as sub:
+            times = [mavlink2.MAVLink_system_time_message(i, i) for i in range(10)]
+            vehicle.send(b"".join(p.pack(m) for m in times))
+            await until(lambda: link.counters.received == 10, timeout_s=2.0)
+            kept = [sub.get_nowait().time_boot_ms for _ in range(3)]
+            assert kept == [7, 8, 9]
+            assert sub.dropped == 7 and link.counters.subscriber_overflow == 7
 
 
 # -- UDP: several vehicles on one port; through MAVProxy -----------------------------------
