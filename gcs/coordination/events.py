@@ -109,7 +109,7 @@ class FlightEvent:
         is the mission start plus ``t_s`` when ``start_utc_s`` is given, else null; the
         payload without an upload's items (kept in the store)."""
         utc: float | None = self.utc_s
-        if utc is None or math.isnan(utc):
+        if math.isnan(self.utc_s):
             utc = None if start_utc_s is None else start_utc_s + self.t_s
         return {
             "seq": self.seq,

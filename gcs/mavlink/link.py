@@ -49,8 +49,6 @@ TIMESYNC_PERIOD_S = 5.0
 STREAM_REFRESH_S = 30.0
 # A sequence jump larger than this is a restart or reordering, not loss.
 MAX_SEQ_GAP = 128
-_MAVLINK2_STX = 0xFD
-_MAVLINK1_STX = 0xFE
 # type, autopilot, base_mode, custom_mode, system_status, mavlink_version
 _GCS_HEARTBEAT = (mavlink2.MAV_TYPE_GCS, mavlink2.MAV_AUTOPILOT_INVALID, 0, 0,
                   mavlink2.MAV_STATE_ACTIVE, 3)  # fmt: skip
@@ -434,10 +432,10 @@ class Link:
         """A message this dialect cannot decode (one of PX4's that ArduPilot's dialect lacks)
         still took its sender's next sequence number: kept in the sequence from its frame's
         header, so that it is counted unknown and not as a lost packet."""
-        frame = bytes(getattr(msg, "data", b"") or b"")
-        if len(frame) >= 7 and frame[0] == _MAVLINK2_STX:
+        frame = msg.get_msgbuf()
+        if len(frame) >= 7 and frame[0] == mavlink2.PROTOCOL_MARKER_V2:
             seq, sysid, compid = frame[4], frame[5], frame[6]
-        elif len(frame) >= 5 and frame[0] == _MAVLINK1_STX:
+        elif len(frame) >= 5 and frame[0] == mavlink2.PROTOCOL_MARKER_V1:
             seq, sysid, compid = frame[2], frame[3], frame[4]
         else:
             return
