@@ -200,6 +200,11 @@ class FlightRunner:
         self._stopped = False
         self._fix_wall_s: dict[str, float] = {}
         self._clock_said: dict[str, float | None] = {}
+        self._computing = 0
+        """Planning jobs running while the simulator waits for them (a pace clock)."""
+        self._deferred: list[act.Fix] = []
+        """Fixes heard while :attr:`_computing`: taken after the job's result (
+        :meth:`_compute`)."""
 
     # -- views ----------------------------------------------------------------------------------
 
@@ -735,6 +740,7 @@ class FlightRunner:
             end_s = t0 + REPLAN_SEARCH_SHARE * job.lead_s / self.clock.rate
             job = replace(job, time_up=lambda: time.perf_counter() >= end_s)
         self.clock.hold()  # a simulator in lock step waits for the plan
+        self._computing += self.clock.paced
         try:
             result = await asyncio.to_thread(job.run)
         except Exception as err:
@@ -743,15 +749,33 @@ class FlightRunner:
             error = err
         finally:
             self.clock.release()
+            self._computing -= self.clock.paced
         wall = time.perf_counter() - t0
         if isinstance(a.job, act.LoiterJob):
             self.loiter_wall_s = max(self.loiter_wall_s, wall)
         if isinstance(a.job, act.PopupJob):
             self.plan_wall_s = max(self.plan_wall_s, wall)
             if self.config.replan_delay_wall_s > 0.0 and not a.job.from_hold:
+                self._take_deferred()  # the vehicles fly on through the delay
                 await self._late_by(self.config.replan_delay_wall_s)  # the test hook
         self._feed(act.Computed(a.job, result, error, wall))
         self._feed(self._planning_lead())
+        self._take_deferred()
+
+    def _take_deferred(self) -> None:
+        """Feed the fixes heard while planning jobs ran in lock step, once none runs.
+
+        The simulator waits for a job (:meth:`MissionClock.hold`), but its reports of the
+        lead it may already have flown (:meth:`MissionClock.follow`) still come in while the
+        job runs, and how many depends on how busy the machine is. Taken then, they would let
+        the team act on that stretch (a zone's guard holding a vehicle the re-plan is about to
+        route round) before the plan it waits for, and the flight would differ with the
+        machine's load. Taken after the result, the job takes no flight time at all."""
+        if self._computing:
+            return
+        deferred, self._deferred = self._deferred, []
+        for fix in deferred:
+            self._feed(fix)
 
     async def _late_by(self, wall_s: float) -> None:
         """Wait ``wall_s`` of wall time, or on a pace clock ``wall_s`` times its rate of
@@ -845,8 +869,9 @@ class FlightRunner:
     async def _timeline(self) -> None:
         """Ticks of the mission clock: launches, pop-ups, the overrun, the clocks."""
         while not self._over():
-            self._feed(self._planning_lead())
-            self._feed(act.Tick())
+            if not self._computing:  # a tick is at the newest time heard: see _take_deferred
+                self._feed(self._planning_lead())
+                self._feed(act.Tick())
             self._check_clocks()
             if self._checkpoint_dirty:
                 self._checkpoint(False)
@@ -982,25 +1007,32 @@ class FlightRunner:
             and abs(fix_rx - hud_rx) * self.clock.rate <= 1.5
         )
         climb = st.climb_m_s if st.climb_m_s is not None else -(st.vd_m_s or 0.0)
-        self._feed(
-            act.Fix(
-                vid,
-                utc,
-                st.lat_deg,
-                st.lon_deg,
-                st.alt_amsl_m,
-                st.airspeed_m_s,
-                st.groundspeed_m_s,
-                st.heading_deg,
-                st.ve_m_s,
-                st.vn_m_s,
-                climb,
-                st.mission_current_seq,
-                st.wind_speed_m_s,
-                st.wind_from_deg,
-                fresh,
-            )
+        fix = act.Fix(
+            vid,
+            utc,
+            st.lat_deg,
+            st.lon_deg,
+            st.alt_amsl_m,
+            st.airspeed_m_s,
+            st.groundspeed_m_s,
+            st.heading_deg,
+            st.ve_m_s,
+            st.vn_m_s,
+            climb,
+            st.mission_current_seq,
+            st.wind_speed_m_s,
+            st.wind_from_deg,
+            fresh,
         )
+        self._take_fix(fix)
+
+    def _take_fix(self, fix: act.Fix) -> None:
+        """Feed a fix to the team, or keep it until the planning jobs in lock step are done
+        (:meth:`_take_deferred`)."""
+        if self._computing:
+            self._deferred.append(fix)
+        else:
+            self._feed(fix)
 
     # -- operator requests ----------------------------------------------------------------------
 

@@ -4,7 +4,9 @@ pre-launch refusal and the rehearsal CLI's input checks (the team controller is 
 
 from __future__ import annotations
 
+import asyncio
 import re
+import threading
 from dataclasses import replace
 from pathlib import Path
 from types import SimpleNamespace
@@ -13,6 +15,7 @@ import numpy as np
 import pytest
 
 from gcs.__main__ import main
+from gcs.coordination import actions as act
 from gcs.coordination.missionclock import MissionClock
 from gcs.coordination.runner import FlightRunner, InfeasibleRequest
 from gcs.mavlink.link import LinkCounters
@@ -381,3 +384,43 @@ async def test_a_vehicle_whose_reports_stopped_shows_its_mode_unknown_in_the_sna
     for vid in ("UAV1", "UAV3"):
         assert links[vid]["healthy"] is True
         assert (links[vid]["mode"], links[vid]["armed"]) == ("AUTO", True)
+
+
+@pytest.mark.parametrize("paced", [True, False])
+async def test_in_lock_step_fixes_heard_while_a_plan_is_computed_are_taken_after_its_result(
+    paced: bool,
+) -> None:
+    """A simulator in lock step waits for a planning job, but the reports of the lead it had
+    already flown still come in while the job runs, as many as the machine's load lets
+    through. They reach the team after the job's result, in the order heard, so what the
+    team does with them (a zone's guard holding a vehicle the re-plan routes round) does not
+    depend on the load. Real vehicles do not wait: their fixes are taken as they come."""
+    clock = MissionClock()
+    if paced:
+        clock.follow(lambda: 0.0, rate=200.0)
+    runner = FlightRunner(load_scenario(PAPER), clock)
+    fed: list[object] = []
+    runner._feed = fed.append  # type: ignore[method-assign]
+    started, go = threading.Event(), threading.Event()
+
+    def run() -> str:
+        started.set()
+        go.wait(10.0)
+        return "the plan"
+
+    task = asyncio.create_task(runner._compute(act.Compute(SimpleNamespace(run=run))))  # type: ignore[arg-type]
+    assert await asyncio.to_thread(started.wait, 10.0)
+    fixes = [act.Fix("UAV1", 100.0 + k, 47.0, 8.0) for k in range(3)]
+    for fix in fixes:
+        runner._take_fix(fix)
+    go.set()
+    await task
+    kinds = [type(i).__name__ for i in fed]
+    if paced:
+        assert kinds == ["Computed", "PlanningLead", "Fix", "Fix", "Fix"], kinds
+        assert fed[2:] == fixes
+    else:
+        assert kinds == ["Fix", "Fix", "Fix", "Computed", "PlanningLead"], kinds
+    assert fed[kinds.index("Computed")].result == "the plan"  # type: ignore[attr-defined]
+    runner._take_fix(fixes[0])  # none running: at once
+    assert fed[-1] is fixes[0]
