@@ -15,11 +15,10 @@ from gcs.coordination.runner import FlightState
 
 class _Engine:
     def __init__(self, bus: EventBus) -> None:
-        runner = SimpleNamespace(bus=bus, state=FlightState.RUNNING)
-        self.handle = SimpleNamespace(runner=runner, record=None)
+        self.flight = SimpleNamespace(bus=bus, state=FlightState.RUNNING, over=False)
 
     def known(self, flight_id: str) -> Any:
-        return self.handle
+        return self.flight
 
     def snapshot(self, flight_id: str, *, max_age_s: float = 0.0) -> dict[str, Any]:
         return {"t_s": 0.0, "state": "running", "team_time_s": 1.0, "team_time_version": 1,
@@ -54,8 +53,8 @@ async def test_a_stream_resumed_after_the_flight_ended_replays_every_event_it_mi
     for k in range(n):
         bus.publish(FlightEvent(1.0, float(k), "UAV1", EventKind.SPEED, f"event {k}"))
     engine = _Engine(bus)
-    engine.handle.runner.state = FlightState.COMPLETED
-    engine.handle.record = {"state": "completed"}
+    engine.flight.state = FlightState.COMPLETED
+    engine.flight.over = True  # its record and last snapshot kept
     seqs: list[int] = []
     kinds: list[str] = []
     async for msg in stream(engine, "f", 20):  # type: ignore[arg-type]

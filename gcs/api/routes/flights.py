@@ -15,7 +15,6 @@ from starlette.websockets import WebSocketDisconnect
 from gcs.api.auth import grants, require
 from gcs.api.routes.common import ERRORS, engine_of
 from gcs.api.schemas import AbortIn, FlightIn, LaunchIn, TeamTimeIn, TeamTimeOut, ThreatIn
-from gcs.coordination.runner import ENDED
 from gcs.service.ended import EndedFlight
 from gcs.service.engine import Engine, InvalidInput, NotFound, PreconditionFailed, Rehearsal
 
@@ -36,8 +35,8 @@ async def create_flight(body: FlightIn, request: Request) -> dict[str, Any]:
     if r is not None:
         rehearsal = Rehearsal(r.speedup, r.wind_m_s, r.wind_from_deg, r.loss, r.seed)
     engine = engine_of(request)
-    handle = await engine.create_flight(body.schedule_id, body.vehicles, rehearsal)
-    return engine.snapshot(handle.id)
+    flight = await engine.create_flight(body.schedule_id, body.vehicles, rehearsal)
+    return engine.snapshot(flight.id)
 
 
 @router.get("/flights", dependencies=observe)
@@ -168,8 +167,8 @@ async def stream(engine: Engine, flight_id: str, after_seq: int) -> AsyncIterato
             yield {"type": "event", "data": e.to_json()}
         yield {"type": "end", "data": {"state": found.state}}
         return
-    handle = found
-    bus = handle.runner.bus
+    flight = found
+    bus = flight.bus
     if after_seq < bus.first_kept_seq - 1:
         backlog = engine.events(flight_id, after_seq, 100_000)
     else:
@@ -199,14 +198,14 @@ async def stream(engine: Engine, flight_id: str, after_seq: int) -> AsyncIterato
             next_telemetry = loop.time() + TELEMETRY_WALL_S
             snap = engine.snapshot(flight_id, max_age_s=TELEMETRY_WALL_S / 2)
             yield {"type": "telemetry", "data": _telemetry(snap)}
-            if handle.runner.state in ENDED and handle.record is not None:
+            if flight.over:
                 # Every event still queued goes out before the end (a stream resumed after
                 # the flight is over replays all it missed).
                 while (rest := sub.get_nowait()) is not None:
                     if rest.seq > last:
                         last = rest.seq
                         yield {"type": "event", "data": rest.to_json()}
-                yield {"type": "end", "data": {"state": handle.runner.state.value}}
+                yield {"type": "end", "data": {"state": flight.state.value}}
                 return
     finally:
         sub.close()
