@@ -358,11 +358,10 @@ async def fly(url: str, token: str, pid: int, schedule_id: str, args: argparse.N
     return f
 
 
-async def prepare(url: str, token: str, scenario: Path) -> str:
-    """The scenario kept and scheduled (seed 1): the schedule's id."""
+async def prepare(url: str, token: str, body: str) -> str:
+    """A scenario (its YAML text) kept and scheduled (seed 1): the schedule's id."""
     headers = {"Authorization": f"Bearer {token}"}
     async with httpx.AsyncClient(base_url=url, headers=headers, timeout=60) as client:
-        body = scenario.read_text(encoding="utf-8")
         kept = ok(
             await client.post(
                 "/v1/scenarios", content=body, headers={"Content-Type": "application/yaml"}
@@ -474,7 +473,7 @@ def notes(r: dict[str, Any]) -> str:
 async def bench(args: argparse.Namespace) -> list[dict[str, Any]]:
     token = uuid.uuid4().hex
     with service(token) as (url, pid):
-        schedule_id = await prepare(url, token, Path(args.scenario))
+        schedule_id = await prepare(url, token, Path(args.scenario).read_text(encoding="utf-8"))
         rows = []
         for with_load in (False, True):
             f = await fly(url, token, pid, schedule_id, args, with_load)

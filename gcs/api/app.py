@@ -78,7 +78,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
         store = Store.open(settings.db_url())
         engine = Engine(store, settings.data_dir, limits=_limits(settings))
         app.state.engine = engine
-        for fid in engine.resume_kept():
+        for fid in await engine.resume_kept():
             log.warning("flight %s was running when the service stopped: flying it on", fid)
         app.state.store = store
         try:

@@ -10,8 +10,6 @@ from prometheus_client import CollectorRegistry, generate_latest
 from prometheus_client.core import CounterMetricFamily, GaugeMetricFamily, Metric
 from prometheus_client.registry import Collector
 
-from gcs.coordination.events import EventKind
-from gcs.coordination.separationlog import separation_kind
 from gcs.service.engine import Engine
 
 __all__ = ["metrics_text"]
@@ -23,8 +21,7 @@ class _EngineCollector(Collector):
 
     def collect(self) -> Iterator[Metric]:
         e = self.engine
-        found = [e.fleet.held(c) for c in e.vehicle_ids.values()]
-        links = [v for v in found if v is not None]
+        links = e.link_counters()
         yield GaugeMetricFamily("tcgcs_links", "vehicle links open", value=len(links))
         fields = {
             "received": "messages received",
@@ -35,11 +32,12 @@ class _EngineCollector(Collector):
         }
         for name, doc in fields.items():
             m = CounterMetricFamily(f"tcgcs_link_{name}", doc, labels=["connection"])
-            for v in links:
-                m.add_metric([v.connection], float(getattr(v.link.counters, name)))
+            for conn, counters in links.items():
+                m.add_metric([conn], float(counters[name]))
             yield m
+        figures = {fid: f.figures() for fid, f in e.flights.items()}
         flights = GaugeMetricFamily("tcgcs_flights", "flights by state", labels=["state"])
-        states = Counter(h.runner.state.value for h in e.flights.values())
+        states = Counter(f.state.value for f in e.flights.values())
         for state, n in states.items():
             flights.add_metric([state], n)
         yield flights
@@ -70,30 +68,20 @@ class _EngineCollector(Collector):
         )
         tally: Counter[tuple[str, str]] = Counter()
         up: Counter[str] = Counter()
-        for fid, h in e.flights.items():
-            kinds: Counter[str] = Counter()
-            lost_m: list[float] = []
-            for ev in h.runner.events:
-                sep = separation_kind(ev)
-                if sep is not None:
-                    kinds[sep.kind] += 1
-                    if sep.kind == "loss" and sep.said_m is not None:
-                        lost_m.append(sep.said_m)
-                if ev.kind is EventKind.SPEED:
-                    tally["speed", "failed" if "failed" in ev.reason else "ok"] += 1
-                elif ev.kind is EventKind.LAUNCH:
-                    tally["launch", "ok" if ev.payload.get("ok", True) else "failed"] += 1
-                elif ev.kind is EventKind.UPLOAD:
-                    up["failed" if "failed" in ev.reason else "ok"] += 1
-            for member in h.runner.members.values():
-                if member.arrival_s is not None:
-                    late_s = member.arrival_s - member.target_s
-                    error.add_metric([fid, member.vehicle_id], late_s)
-            drops.add_metric([fid], float(h.runner.bus.dropped))
-            for kind, n in kinds.items():
+        for fid, fig in figures.items():
+            if not fig:
+                continue
+            for kind_result, n in fig["commands"].items():
+                kind, result = kind_result.split(" ", 1)
+                tally[kind, result] += n
+            up.update(fig["uploads"])
+            for vid, late_s in fig["arrival_error_s"].items():
+                error.add_metric([fid, vid], float(late_s))
+            drops.add_metric([fid], float(fig["event_drops"]))
+            for kind, n in fig["separation_events"].items():
                 separations.add_metric([fid, kind], float(n))
-            if lost_m:
-                least.add_metric([fid], min(lost_m))
+            if fig["separation_loss_min_m"] is not None:
+                least.add_metric([fid], float(fig["separation_loss_min_m"]))
         for (kind, result), n in tally.items():
             commands.add_metric([kind, result], float(n))
         for result, n in up.items():

@@ -67,6 +67,12 @@ class RehearsalIn(_Body):
     wind_from_deg: float = Field(default=0.0, ge=0.0, lt=360.0)
     loss: float = Field(default=0.0, ge=0.0, lt=1.0)
     seed: int = Field(default=0, ge=0, le=2**31 - 1)
+    lockstep: bool = Field(
+        default=True,
+        description="the simulator waits for the flight's worker (a busy machine slows the "
+        "rehearsal instead of making it late); false: it runs on the wall clock, as real "
+        "vehicles do",
+    )
 
 
 class FlightIn(_Body):

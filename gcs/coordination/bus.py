@@ -113,7 +113,19 @@ class EventBus:
 
     def publish(self, event: FlightEvent) -> FlightEvent:
         """Number the event, keep it and offer it to every subscriber; never blocks."""
-        numbered = replace(event, seq=next(self._seq))
+        return self._offer(replace(event, seq=next(self._seq)))
+
+    def take(self, event: FlightEvent) -> bool:
+        """Keep and offer an event numbered elsewhere (another process's bus, mirrored here)
+        with its own number; the next :meth:`publish` goes on after it. One not numbered
+        after the newest here is not taken (False)."""
+        if event.seq <= self.last_seq:
+            return False
+        self._seq = itertools.count(event.seq + 1)
+        self._offer(event)
+        return True
+
+    def _offer(self, numbered: FlightEvent) -> FlightEvent:
         self._history.append(numbered)
         self.published += 1
         for listener in self._listeners:

@@ -122,3 +122,34 @@ class FlightEvent:
             "reason": self.reason,
             "payload": {k: v for k, v in self.payload.items() if k != "items"},
         }
+
+    def to_wire(self) -> dict[str, Any]:
+        """The event whole for another process (:meth:`from_wire`): unrounded, a UTC not
+        known as null; an upload's items left out (they are in the store)."""
+        return {
+            "seq": self.seq,
+            "utc_s": None if math.isnan(self.utc_s) else self.utc_s,
+            "t_s": self.t_s,
+            "vehicle": self.vehicle,
+            "kind": self.kind.value,
+            "reason": self.reason,
+            "strategy": self.strategy,
+            "value": self.value,
+            "payload": {k: v for k, v in self.payload.items() if k != "items"},
+        }
+
+    @classmethod
+    def from_wire(cls, doc: Mapping[str, Any]) -> FlightEvent:
+        """The event :meth:`to_wire` gave."""
+        utc = doc["utc_s"]
+        return cls(
+            utc_s=math.nan if utc is None else float(utc),
+            t_s=float(doc["t_s"]),
+            vehicle=doc["vehicle"],
+            kind=EventKind(doc["kind"]),
+            reason=doc["reason"],
+            strategy=doc["strategy"],
+            value=doc["value"],
+            seq=int(doc["seq"]),
+            payload=doc["payload"],
+        )

@@ -23,12 +23,12 @@ from typing import Any
 
 from gcs.coordination.config import FlightConfig
 from gcs.coordination.events import FlightEvent
-from gcs.coordination.runner import ENDED
+from gcs.coordination.runner import ENDED, FlightState
 from gcs.errors import GcsError
 from gcs.mavlink.signing import SigningConfig
-from gcs.service.ended import EndedFlight, EndedFlights
-from gcs.service.fleet import Fleet, FleetVehicle
-from gcs.service.flight import Flight, Rehearsal
+from gcs.service.ended import FINAL_FILE, EndedFlight, EndedFlights
+from gcs.service.fleet import Fleet, FleetVehicle, VehicleBusy
+from gcs.service.flight import Rehearsal
 from gcs.service.planning import Limits, Planning
 from gcs.service.scenariotext import (
     Conflict,
@@ -40,14 +40,14 @@ from gcs.service.scenariotext import (
     TooBusy,
     parse_scenario_text,
 )
-from gcs.service.stubs import StubProcess
+from gcs.service.worker import FlightSpec, VehicleSpec
+from gcs.service.workers import WorkerFlight
 from gcs.store.repository import Store
 from planner.scenario import Threat
 
 __all__ = [
     "Conflict",
     "Engine",
-    "Flight",
     "Infeasible",
     "InvalidInput",
     "Limits",
@@ -56,6 +56,7 @@ __all__ = [
     "Rehearsal",
     "ServiceError",
     "TooBusy",
+    "WorkerFlight",
     "parse_scenario_text",
 ]
 
@@ -77,6 +78,8 @@ class Engine:
         limits: Limits | None = None,
     ):
         self.store = store
+        self.db_url = store.engine.url.render_as_string(hide_password=False)
+        """Where the flight workers find the store."""
         self.data_dir = data_dir
         self.config = config or FlightConfig()
         self.limits = limits or Limits()
@@ -85,25 +88,24 @@ class Engine:
         self.ended = EndedFlights(data_dir / "flights")
         """Flights that ended before this process started (read from their folders)."""
         self.fleet = Fleet()
-        self.flights: dict[str, Flight] = {}
+        self.flights: dict[str, WorkerFlight] = {}
         self.vehicle_ids: dict[str, str] = {}
         """Vehicle id (the API's) -> connection string."""
         self._named = 0
         self._tasks: set[asyncio.Task[Any]] = set()
-        self._stubs: list[StubProcess] = []
 
     async def close(self) -> None:
         """Stop: flights on bundled simulator vehicles end (failed: their simulator stops
-        with the service); flights on live vehicles stay running in the store, and the next
-        service process flies them on (:meth:`resume_kept`)."""
+        with the service); flights on live vehicles in the air fly on in their workers, and
+        the next service process follows them again (:meth:`resume_kept`); those not launched
+        yet stop with the service."""
         for flight in list(self.flights.values()):
-            await flight.close()
+            airborne = flight.state is FlightState.RUNNING
+            await flight.close(stop=flight.simulated or not airborne)
         for task in list(self._tasks):
             task.cancel()
         await self.planning.close()
         await self.fleet.close()
-        for stub in self._stubs:
-            await stub.stop()
 
     def _spawn(self, coro: Any) -> asyncio.Task[Any]:
         task = asyncio.get_running_loop().create_task(coro)
@@ -156,40 +158,50 @@ class Engine:
         return held
 
     def vehicle_view(self, vehicle_id: str) -> dict[str, Any]:
-        """A vehicle held by the service: its link, and its mode and armed state while the
-        link is up (null once it is down, its last word kept as ``last_mode`` and
-        ``last_armed``)."""
-        held = self._held(vehicle_id)
-        st = held.vehicle.state
-        c = held.link.counters
-        now_s = held.link.clock()  # what it stamps receptions with
-        age = st.heartbeat_age_s(now_s)
-        mode, armed = st.mode_now(now_s)
-        return {
-            "id": vehicle_id,
-            "connection": held.connection,
-            "system_id": held.vehicle.system_id,
-            "flight_id": held.flight_id,
-            "link": {
-                "heartbeat_age_s": None if age is None else round(max(age, 0.0), 3),
-                "healthy": st.link_ok(now_s),
-                "received": c.received,
-                "sent": c.sent,
-                "malformed": c.malformed + c.crc_errors,
-                "rtt_s": c.rtt_s,
-            },
-            "mode": mode,
-            "armed": armed,
-            "last_mode": st.mode,
-            "last_armed": st.armed,
-            "lat_deg": st.lat_deg,
-            "lon_deg": st.lon_deg,
-            "alt_amsl_m": st.alt_amsl_m,
-            "battery_pct": st.battery_remaining_pct,
-        }
+        """A vehicle held by the service, or by the worker of the flight it is in: its link,
+        and its mode and armed state while the link is up (null once it is down, its last
+        word kept as ``last_mode`` and ``last_armed``)."""
+        conn = self.vehicle_ids.get(vehicle_id)
+        view = None if conn is None else self._view(conn)
+        if view is None:
+            raise NotFound(f"no vehicle {vehicle_id!r}")
+        return {"id": vehicle_id, **view}
+
+    def _view(self, connection: str) -> dict[str, Any] | None:
+        held = self.fleet.held(connection)
+        if held is not None and not held.lent:
+            view = held.view()
+        else:
+            flight = next(
+                (f for f in self.flights.values() if connection in f.vehicle_views()), None
+            )
+            if flight is None:
+                return None
+            view = dict(flight.vehicle_views()[connection])
+        view.pop("counters", None)
+        return view
 
     def vehicle_views(self) -> list[dict[str, Any]]:
-        return [self.vehicle_view(vid) for vid in self.vehicle_ids]
+        out = []
+        for vid, conn in self.vehicle_ids.items():
+            view = self._view(conn)
+            if view is not None:
+                out.append({"id": vid, **view})
+        return out
+
+    def link_counters(self) -> dict[str, dict[str, int]]:
+        """Per connection of every open link (here and in the flight workers), its
+        counters (``/metrics``)."""
+        out = {}
+        for conn in self.vehicle_ids.values():
+            held = self.fleet.held(conn)
+            if held is not None and not held.lent:
+                out[conn] = held.view()["counters"]
+        for flight in self.flights.values():
+            if not flight.over:
+                for conn, view in flight.vehicle_views().items():
+                    out[conn] = view["counters"]
+        return out
 
     # -- flights --------------------------------------------------------------------------------
 
@@ -198,10 +210,11 @@ class Engine:
         schedule_id: str,
         vehicles: Mapping[str, str] | None,
         rehearsal: Rehearsal | None,
-    ) -> Flight:
+    ) -> WorkerFlight:
         """A flight of ``schedule_id`` on registered vehicles (scenario vehicle -> vehicle
         id), or, with ``rehearsal`` and no vehicles, on bundled simulator vehicles started for
-        it (on the ground at each start, nose along its path).
+        it (on the ground at each start, nose along its path); flown by a worker process of
+        its own (:mod:`gcs.service.worker`), which is ready when this returns.
 
         Raises
         ------
@@ -214,7 +227,9 @@ class Engine:
         """
         entry = await self.planning.planned(schedule_id)
         ids = [v.id for v in entry.scenario.vehicles]
-        held: list[tuple[str, int | None]] | None = None
+        lent: list[str] = []
+        specs = None
+        fid = uuid.uuid4().hex
         if vehicles is not None:
             unknown = sorted(set(vehicles) - set(ids))
             if unknown:
@@ -223,55 +238,76 @@ class Engine:
             if missing:
                 raise InvalidInput(f"vehicles: no vehicle for {', '.join(missing)}")
             chosen = [self._held(vehicles[i]) for i in ids]
-            held = [(h.connection, h.vehicle.system_id) for h in chosen]
-        fid = uuid.uuid4().hex
-        flight = await Flight.create(
-            fid, entry, held, rehearsal, store=self.store, fleet=self.fleet,
-            folder=self.data_dir / "flights" / fid,
-        )  # fmt: skip
+            specs = tuple(
+                VehicleSpec(h.connection, h.vehicle.system_id, _key_hex(self.fleet, h.connection))
+                for h in chosen
+            )
+            lent = [h.connection for h in chosen]
+            try:
+                await self.fleet.lend(lent, fid)
+            except VehicleBusy as err:
+                raise Conflict(str(err)) from None
+        elif rehearsal is None:
+            raise InvalidInput("a flight needs vehicles, or rehearsal options for stubs")
+        folder = self.data_dir / "flights" / fid
+        FlightSpec(fid, schedule_id, specs, rehearsal).write(folder)
+        try:
+            flight = await WorkerFlight.start(folder, self.db_url)
+        except BaseException:
+            await self.fleet.take_back(lent)
+            raise
         self._adopt(flight)
         return flight
 
-    def _adopt(self, flight: Flight) -> None:
+    def _adopt(self, flight: WorkerFlight) -> None:
         for conn in flight.connections.values():
             self._name(conn)
         flight.on_over = self._over
         self.flights[flight.id] = flight
 
-    def _over(self, flight: Flight) -> None:
+    def _over(self, flight: WorkerFlight) -> None:
+        conns = sorted(set(flight.connections.values()))
         if flight.simulated:
             # Its simulator vehicles went with their simulator: no longer the service's.
-            gone = set(flight.connections.values())
-            self.vehicle_ids = {v: c for v, c in self.vehicle_ids.items() if c not in gone}
+            self.vehicle_ids = {v: c for v, c in self.vehicle_ids.items() if c not in conns}
+        else:
+            self._spawn(self.fleet.take_back(conns))
 
     # -- restart --------------------------------------------------------------------------------
 
-    def resume_kept(self) -> list[str]:
-        """Fly on every flight the store says is running (its service process died): from its
-        checkpoint, on the vehicles it was flying (reached again by their connections), each
-        mission compared before anything is sent. Returns their ids; each goes on in a task
-        (a vehicle that cannot be reached fails the flight, with an event)."""
+    async def resume_kept(self) -> list[str]:
+        """Follow again every flight an earlier service process left (killed, or stopped
+        with live vehicles in the air) that has not left its last snapshot yet: its worker
+        if it still answers, else, for a flight the store says is running, a new worker on
+        its checkpoint, on the vehicles it was flying (reached again by their connections),
+        each mission compared before anything is sent. Returns their ids (a vehicle that
+        cannot be reached fails the flight, with an event)."""
         resumed = []
-        for fid in self.store.flights_in(("running",)):
-            if fid in self.flights:
+        for fid in self.store.flights_in([s.value for s in FlightState]):
+            folder = self.data_dir / "flights" / fid
+            if fid in self.flights or (folder / FINAL_FILE).exists():
                 continue
-            flight = Flight.resumed(
-                fid, store=self.store, fleet=self.fleet, folder=self.data_dir / "flights" / fid
-            )
+            flight = await WorkerFlight.adopt(folder, self.db_url)
             if flight is None:
-                continue
+                if self.store.flight(fid).state != "running" or not self.store.checkpoint(fid):
+                    continue
+                try:
+                    flight = await WorkerFlight.start(folder, self.db_url, resume=True)
+                except ServiceError as err:
+                    log.error("flight %s: not flown on: %s", fid, err)
+                    continue
             self._adopt(flight)
             resumed.append(fid)
         return resumed
 
-    def flight(self, flight_id: str) -> Flight:
+    def flight(self, flight_id: str) -> WorkerFlight:
         """A flight of this process (running, or ended since it started)."""
         flight = self.flights.get(flight_id)
         if flight is None:
             raise NotFound(f"no flight {flight_id!r}")
         return flight
 
-    def known(self, flight_id: str) -> Flight | EndedFlight:
+    def known(self, flight_id: str) -> WorkerFlight | EndedFlight:
         """A flight of this process, or one that ended before it started."""
         flight = self.flights.get(flight_id)
         if flight is not None:
@@ -284,17 +320,13 @@ class Engine:
     async def record(self, flight_id: str) -> dict[str, Any]:
         """The flight record (``tcgcs-flight/1``) once the flight is over."""
         found = self.known(flight_id)
-        if isinstance(found, EndedFlight):
-            try:
-                doc: dict[str, Any] = json.loads(
-                    await asyncio.to_thread(found.record_path.read_text)
-                )
-            except (OSError, ValueError):
-                raise NotFound(f"flight {flight_id} left no record") from None
-            return doc
-        if found.record is None:
+        if isinstance(found, WorkerFlight) and not found.over:
             raise NotFound(f"flight {flight_id} has no record yet (it is {found.state})")
-        return found.record
+        try:
+            doc: dict[str, Any] = json.loads(await asyncio.to_thread(found.record_path.read_text))
+        except (OSError, ValueError):
+            raise NotFound(f"flight {flight_id} left no record") from None
+        return doc
 
     def report_dir(self, flight_id: str) -> Path:
         """The folder of the flight's report."""
@@ -304,64 +336,80 @@ class Engine:
             raise NotFound(f"flight {flight_id} has no report yet")
         return folder
 
-    # -- steering -------------------------------------------------------------------------------
+    # -- steering (commands to the flight's worker) ---------------------------------------------
 
-    def upload(self, flight_id: str) -> dict[str, Any]:
+    async def upload(self, flight_id: str) -> dict[str, Any]:
         """Start the upload of every vehicle's mission (:meth:`Flight.upload`)."""
-        return self.flight(flight_id).upload()
+        result: dict[str, Any] = await self.flight(flight_id).request("upload")
+        return result
 
-    def launch(
+    async def launch(
         self, flight_id: str, start_utc_s: float | None, delay_s: float | None
     ) -> dict[str, Any]:
         """Start the flight at a UTC, or ``delay_s`` mission seconds from now
         (:meth:`Flight.launch`)."""
-        return self.flight(flight_id).launch(start_utc_s, delay_s)
+        result: dict[str, Any] = await self.flight(flight_id).request(
+            "launch", start_utc_s=start_utc_s, delay_s=delay_s
+        )
+        return result
 
-    def add_threat(self, flight_id: str, threat: Threat, at_s: float | None) -> dict[str, Any]:
-        return self.flight(flight_id).add_threat(threat, at_s)
+    async def add_threat(
+        self, flight_id: str, threat: Threat, at_s: float | None
+    ) -> dict[str, Any]:
+        result: dict[str, Any] = await self.flight(flight_id).request(
+            "add_threat", threat=threat.model_dump(mode="json"), at_s=at_s
+        )
+        return result
 
-    def remove_threat(self, flight_id: str, threat_id: str) -> None:
-        self.flight(flight_id).remove_threat(threat_id)
+    async def remove_threat(self, flight_id: str, threat_id: str) -> None:
+        await self.flight(flight_id).request("remove_threat", threat_id=threat_id)
 
-    def team_time(self, flight_id: str) -> dict[str, Any]:
+    async def team_time(self, flight_id: str) -> dict[str, Any]:
         found = self.known(flight_id)
-        if isinstance(found, EndedFlight):
-            snap = found.snapshot
+        if isinstance(found, EndedFlight) or found.over:
+            snap = found.snapshot if isinstance(found, EndedFlight) else found.snapshot()
             return {"team_time_s": snap["team_time_s"], "version": snap["team_time_version"]}
-        return found.team_time()
+        result: dict[str, Any] = await found.request("team_time")
+        return result
 
-    def move_team_time(
+    async def move_team_time(
         self, flight_id: str, arrival_s: float, version: int | None
     ) -> dict[str, Any]:
         """Move the team arrival, mission s (:meth:`Flight.move_team_time`)."""
-        return self.flight(flight_id).move_team_time(arrival_s, version)
+        result: dict[str, Any] = await self.flight(flight_id).request(
+            "move_team_time", arrival_s=arrival_s, version=version
+        )
+        return result
 
     async def abort(self, flight_id: str, vehicle: str | None, mode: str) -> dict[str, Any]:
-        return await self.flight(flight_id).abort(vehicle, mode)
+        result: dict[str, Any] = await self.flight(flight_id).request(
+            "abort", vehicle=vehicle, mode=mode
+        )
+        return result
 
     # -- reading --------------------------------------------------------------------------------
 
     def snapshot(self, flight_id: str, *, max_age_s: float = 0.0) -> dict[str, Any]:
-        """The flight's snapshot; with ``max_age_s``, one taken that recently may be given
-        again (many stream clients share one per flight)."""
+        """The flight's snapshot (as its worker last told it, within a quarter of a second
+        of wall time)."""
         found = self.known(flight_id)
         if isinstance(found, EndedFlight):
             return found.snapshot
         return found.snapshot(max_age_s=max_age_s)
 
-    def flight_map(self, flight_id: str) -> dict[str, Any]:
+    async def flight_map(self, flight_id: str) -> dict[str, Any]:
         """What the map draws (:meth:`Flight.flight_map`)."""
         found = self.known(flight_id)
         if isinstance(found, EndedFlight):
             if found.map is None:
                 raise NotFound(f"flight {flight_id} left no map")
             return found.map
-        return found.flight_map()
+        return await found.flight_map()
 
     def flight_views(self) -> list[dict[str, Any]]:
         """Every flight: this process's, then those that ended before it started."""
         out: list[dict[str, Any]] = [
-            {"id": fid, "state": f.state.value, "schedule_id": f.schedule.id}
+            {"id": fid, "state": f.state.value, "schedule_id": f.schedule_id}
             for fid, f in self.flights.items()
         ]
         for fid in self.store.flights_in(ENDED_STATES):
@@ -374,6 +422,11 @@ class Engine:
     def events(self, flight_id: str, after_seq: int, limit: int) -> list[FlightEvent]:
         self.known(flight_id)
         return self.store.events(flight_id, after_seq=after_seq, limit=limit)
+
+
+def _key_hex(fleet: Fleet, connection: str) -> str | None:
+    signing = fleet.signing.get(connection)
+    return None if signing is None else signing.secret_key.hex()
 
 
 def _signing(key_hex: str) -> SigningConfig:

@@ -13,6 +13,7 @@ import asyncio
 import contextlib
 from collections.abc import Sequence
 from dataclasses import dataclass
+from typing import Any
 
 from gcs.errors import GcsError
 from gcs.mavlink.link import Link
@@ -40,6 +41,46 @@ class FleetVehicle:
     link: Link
     vehicle: Vehicle
     flight_id: str | None = None
+    lent: bool = False
+    """Lent to a flight flown by another process (:meth:`Fleet.lend`): its link is closed."""
+
+    def view(self) -> dict[str, Any]:
+        """The vehicle as ``/v1/vehicles`` shows it (without the API's id): its link, and its
+        mode and armed state while the link is up (null once it is down, its last word kept
+        as ``last_mode`` and ``last_armed``)."""
+        st = self.vehicle.state
+        c = self.link.counters
+        now_s = self.link.clock()  # what it stamps receptions with
+        age = st.heartbeat_age_s(now_s)
+        mode, armed = st.mode_now(now_s)
+        return {
+            "connection": self.connection,
+            "system_id": self.vehicle.system_id,
+            "flight_id": self.flight_id,
+            "link": {
+                "heartbeat_age_s": None if age is None else round(max(age, 0.0), 3),
+                "healthy": st.link_ok(now_s),
+                "received": c.received,
+                "sent": c.sent,
+                "malformed": c.malformed + c.crc_errors,
+                "rtt_s": c.rtt_s,
+            },
+            "counters": {
+                "received": c.received,
+                "sent": c.sent,
+                "malformed": c.malformed,
+                "crc_errors": c.crc_errors,
+                "seq_lost": c.seq_lost,
+            },
+            "mode": mode,
+            "armed": armed,
+            "last_mode": st.mode,
+            "last_armed": st.armed,
+            "lat_deg": st.lat_deg,
+            "lon_deg": st.lon_deg,
+            "alt_amsl_m": st.alt_amsl_m,
+            "battery_pct": st.battery_remaining_pct,
+        }
 
 
 class Fleet:
@@ -48,6 +89,8 @@ class Fleet:
     def __init__(self, *, wait_s: float = 15.0) -> None:
         self.wait_s = wait_s
         self._vehicles: dict[str, FleetVehicle] = {}
+        self.signing: dict[str, SigningConfig] = {}
+        """Per connection, the signing of its link when none is given (a worker's vehicles)."""
         self._stack = contextlib.AsyncExitStack()
         self._lock = asyncio.Lock()
 
@@ -70,6 +113,7 @@ class Fleet:
             held = self._vehicles.get(connection)
             if held is not None:
                 return held
+            signing = signing or self.signing.get(connection)
             link = Link.open(connection, signing=signing)
             await link.start()
             try:
@@ -78,6 +122,8 @@ class Fleet:
                 await link.close()
                 raise
             self._stack.push_async_callback(link.close)
+            if signing is not None:
+                self.signing[connection] = signing
             held = FleetVehicle(connection, link, Vehicle(link, peer.system_id, peer.component_id))
             self._vehicles[connection] = held
             return held
@@ -117,6 +163,39 @@ class Fleet:
         stub = await StubProcess.start(count, args, control=control)
         self._stack.push_async_callback(stub.stop)
         return stub
+
+    async def lend(self, connections: Sequence[str], flight_id: str) -> None:
+        """Lend the vehicles at ``connections`` to flight ``flight_id`` flown by another
+        process (a flight worker): their links are closed here, so that it can open its own,
+        and they stay known, in that flight, until :meth:`take_back`.
+
+        Raises
+        ------
+        VehicleBusy
+            One of them is in another flight; nothing is lent.
+        """
+        held = [self._vehicles[c] for c in connections]
+        for h in held:
+            if h.flight_id not in (None, flight_id):
+                raise VehicleBusy(h.connection, h.flight_id)
+        for h in held:
+            h.flight_id = flight_id
+            h.lent = True
+            await h.link.close()
+
+    async def take_back(self, connections: Sequence[str]) -> list[str]:
+        """Open the links of lent vehicles again (their flight has ended); returns the
+        connections no vehicle answered at (forgotten)."""
+        gone = []
+        for conn in connections:
+            lent = self._vehicles.pop(conn, None)
+            if lent is None:
+                continue
+            try:
+                await self.vehicle(conn, lent.vehicle.system_id)
+            except (GcsError, TimeoutError, OSError, ValueError):
+                gone.append(conn)
+        return gone
 
     def release(self, flight_id: str) -> None:
         """The flight's vehicles are free again (their links stay open)."""

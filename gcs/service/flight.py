@@ -17,6 +17,7 @@ import json
 import logging
 import math
 import time
+from collections import Counter
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -24,8 +25,10 @@ from typing import Any
 
 from gcs.coordination.bus import EventBus
 from gcs.coordination.config import FlightConfig
+from gcs.coordination.events import EventKind
 from gcs.coordination.missionclock import MissionClock
 from gcs.coordination.runner import ENDED, FlightRunner, FlightState
+from gcs.coordination.separationlog import separation_kind
 from gcs.coordination.team import TeamTimeRefused
 from gcs.errors import GcsError
 from gcs.rehearsal.rehearse import RehearsalOptions, flight_record, stub_args
@@ -46,13 +49,16 @@ from gcs.service.stubs import DEFAULT_SPEEDUP, StubProcess, follow_lockstep, sto
 from gcs.store.repository import FlightKeeper, Store
 from planner.scenario import SrtmTerrainSpec, Threat
 
-__all__ = ["LOCKSTEP_FILE", "STUB_PID_FILE", "Flight", "Rehearsal"]
+__all__ = ["COUNTERS_FILE", "LOCKSTEP_FILE", "STUB_PID_FILE", "Flight", "Rehearsal"]
 
 log = logging.getLogger(__name__)
 
 LOCKSTEP_FILE = "pace"
 """A flight's bundled simulator keeps its lock-step file here, beside the flight's other
 files (``sitl_stub --lockstep``): a service restarted on the flight follows it again."""
+COUNTERS_FILE = "counters.json"
+"""What a flight's bundled simulator's vehicles were made to do (arms, AUTO entries, mission
+transfers: ``sitl_stub --counters``), beside its files."""
 STUB_PID_FILE = "stub.pid"
 """The pid of a flight's bundled simulator, beside its files: a later process stops it."""
 CLOCK_WAIT_S = 15.0
@@ -68,6 +74,9 @@ class Rehearsal:
     wind_from_deg: float = 0.0
     loss: float = 0.0
     seed: int = 0
+    lockstep: bool = True
+    """The simulator waits for the flight (a busy machine slows it instead of making the
+    flight late); False: it runs on the wall clock, as real vehicles do."""
 
 
 class Flight:
@@ -113,6 +122,8 @@ class Flight:
         self.report_dir: Path | None = None
         self.final: tuple[dict[str, Any], dict[str, Any]] | None = None
         """Once it has ended and its record is written: its last snapshot and map, as kept."""
+        self.about_worker: Callable[[], dict[str, Any]] | None = None
+        """The snapshot's ``worker``: the process flying it (:mod:`gcs.service.worker`)."""
         self.on_over: Callable[[Flight], None] | None = None
         """Called once it has ended and all it leaves is kept."""
         self._simulator_stopped = False
@@ -169,8 +180,12 @@ class Flight:
             opts = _options(store, entry, rehearsal, folder, None)
             pace = folder / LOCKSTEP_FILE
             args = stub_args(opts, runner, folder / "truth.jsonl", time.time())
-            stub = await fleet.start_stubs(len(ids), [*args, "--lockstep", str(pace)])
-            pacer = follow_lockstep(pace, clock, runner.unwatched)
+            args += ["--counters", str(folder / COUNTERS_FILE)]
+            if rehearsal.lockstep:
+                args += ["--lockstep", str(pace)]
+            stub = await fleet.start_stubs(len(ids), args)
+            if rehearsal.lockstep:
+                pacer = follow_lockstep(pace, clock, runner.unwatched)
             vehicles = [(c, k) for k, c in enumerate(stub.connections, start=1)]
         conns = {vid: conn for vid, (conn, _) in zip(ids, vehicles, strict=True)}
         try:
@@ -291,6 +306,8 @@ class Flight:
         snap["schedule_id"] = self.schedule.id
         snap["uploads"] = self._uploads()
         snap["record_ready"] = self.final is not None and self.record is not None
+        if self.about_worker is not None:
+            snap["worker"] = self.about_worker()
         return snap
 
     def _uploads(self) -> dict[str, dict[str, Any]]:
@@ -318,6 +335,45 @@ class Flight:
         doc = flight_map(team, self.runner.now_s())
         doc["scenario_id"] = self.schedule.scenario_id
         return doc
+
+    def vehicle_views(self) -> dict[str, dict[str, Any]]:
+        """Per connection, its vehicle as ``/v1/vehicles`` shows it (:meth:`FleetVehicle.view`)."""
+        return {h.connection: h.view() for h in self.vehicles.values()}
+
+    def figures(self) -> dict[str, Any]:
+        """What ``/metrics`` shows of the flight: its state, commands and uploads by result,
+        each arrival's error against its slot, the events a subscriber could not take, its
+        separation events by kind and the least distance a separation alarm reported."""
+        commands: Counter[str] = Counter()
+        uploads: Counter[str] = Counter()
+        separations: Counter[str] = Counter()
+        lost_m: list[float] = []
+        for ev in self.runner.events:
+            sep = separation_kind(ev)
+            if sep is not None:
+                separations[sep.kind] += 1
+                if sep.kind == "loss" and sep.said_m is not None:
+                    lost_m.append(sep.said_m)
+            if ev.kind is EventKind.SPEED:
+                commands["speed " + ("failed" if "failed" in ev.reason else "ok")] += 1
+            elif ev.kind is EventKind.LAUNCH:
+                commands["launch " + ("ok" if ev.payload.get("ok", True) else "failed")] += 1
+            elif ev.kind is EventKind.UPLOAD:
+                uploads["failed" if "failed" in ev.reason else "ok"] += 1
+        late_s = {
+            m.vehicle_id: m.arrival_s - m.target_s
+            for m in self.runner.members.values()
+            if m.arrival_s is not None
+        }
+        return {
+            "state": self.state.value,
+            "commands": dict(commands),
+            "uploads": dict(uploads),
+            "arrival_error_s": late_s,
+            "event_drops": self.bus.dropped,
+            "separation_events": dict(separations),
+            "separation_loss_min_m": min(lost_m) if lost_m else None,
+        }
 
     def team_time(self) -> dict[str, Any]:
         team = self.runner.team

@@ -11,21 +11,19 @@ from prometheus_client.parser import text_string_to_metric_families
 
 from gcs.api.metrics import metrics_text
 from gcs.coordination.events import FlightEvent
+from gcs.coordination.runner import FlightState
+from gcs.service.flight import Flight
 from tests.gcs.test_separationlog import an_encounter
 
 
 def _engine(events: list[FlightEvent]) -> Any:
-    runner = SimpleNamespace(
-        state=SimpleNamespace(value="running"),
-        events=events,
-        members={},
-        bus=SimpleNamespace(dropped=0),
-    )
-    return SimpleNamespace(
-        fleet=SimpleNamespace(held=lambda _c: None),
-        vehicle_ids={},
-        flights={"f1": SimpleNamespace(runner=runner)},
-    )
+    """An engine with one flight whose worker's figures are those of ``events``
+    (:meth:`Flight.figures`)."""
+    runner = SimpleNamespace(events=events, members={}, bus=SimpleNamespace(dropped=0))
+    flight = SimpleNamespace(runner=runner, bus=runner.bus, state=FlightState.RUNNING)
+    figures = Flight.figures(flight)  # type: ignore[arg-type]
+    told = SimpleNamespace(state=FlightState.RUNNING, figures=lambda: figures)
+    return SimpleNamespace(link_counters=dict, flights={"f1": told})
 
 
 def test_metrics_count_separation_events_by_kind_and_the_least_loss() -> None:

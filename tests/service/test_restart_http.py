@@ -12,9 +12,11 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import json
 import os
 import pickle
 import signal
+from collections import Counter
 from pathlib import Path
 from typing import Any
 
@@ -68,19 +70,77 @@ has said in its checkpoint (a team-time move is checkpointed at once)."""
 
 
 def _stop_orphans(data: Path) -> None:
-    """The simulators the killed service started (they outlive it) are stopped whatever
-    the test found."""
-    for pid_file in data.glob("flights/*/stub.pid"):
+    """The simulators and flight workers a killed service started (they outlive it) are
+    stopped whatever the test found."""
+    for pid_file in [*data.glob("flights/*/stub.pid"), *data.glob("flights/*/worker.pid")]:
         with contextlib.suppress(ValueError, OSError):
             os.kill(int(pid_file.read_text()), signal.SIGINT)
 
 
-async def test_a_killed_service_flies_its_flight_on_when_started_again(tmp_path: Path) -> None:
+async def test_a_killed_flight_worker_is_flown_on_from_its_checkpoint(tmp_path: Path) -> None:
+    """The flight's worker killed (SIGKILL) after the re-plan: the service starts another on
+    its checkpoint, which finds the vehicles (flown on by the simulator, :data:`AWAY_S` of
+    flight past the kill) holding their missions and flies them home."""
     data = tmp_path / "data"
     try:
-        await _kill_and_restart(data)
+        async with serve(data) as svc, svc.client() as client:
+            fid, said, said_seq, before = await _past_the_replan(client, data)
+            pid = _ok(await client.get(f"/v1/flights/{fid}"))["worker"]["pid"]
+            os.kill(pid, signal.SIGKILL)
+            away = asyncio.create_task(hold_while_away(data / "flights" / fid / "pace", AWAY_S))
+            try:
+                while _ok(await client.get(f"/v1/flights/{fid}"))["worker"]["pid"] == pid:
+                    await asyncio.sleep(0.05)
+                await _flown_on(client, svc, fid, said, said_seq, before, restarted=True)
+            finally:
+                away.cancel()
     finally:
         _stop_orphans(data)
+
+
+async def test_a_killed_service_leaves_its_flight_flying_and_the_next_one_follows_it(
+    tmp_path: Path,
+) -> None:
+    """The service killed (SIGKILL) after the re-plan: the flight's worker flies on (the
+    same process throughout); the service started again lists the flight, and its stream
+    from the last event seen before the kill loses none."""
+    data = tmp_path / "data"
+    try:
+        async with serve(data) as first, first.client() as client:
+            fid, said, said_seq, before = await _past_the_replan(client, data)
+            pid = _ok(await client.get(f"/v1/flights/{fid}"))["worker"]["pid"]
+            first.proc.send_signal(signal.SIGKILL)
+            await first.proc.wait()
+        async with serve(data) as second, second.client() as client:
+            streamed = await _streamed(second, fid, before[-1]["seq"])
+            assert [e["seq"] for e in streamed] == list(
+                range(before[-1]["seq"] + 1, before[-1]["seq"] + 1 + len(streamed))
+            )
+            await _flown_on(client, second, fid, said, said_seq, before, restarted=False)
+            snap = _ok(await client.get(f"/v1/flights/{fid}"))
+            assert snap["worker"]["pid"] == pid, "the flight changed workers"
+            after = await _all_events(client, fid)
+            assert streamed == after[len(before) :]
+    finally:
+        _stop_orphans(data)
+
+
+async def _streamed(svc: Any, fid: str, after_seq: int) -> list[dict[str, Any]]:
+    """The flight's events after ``after_seq`` from its stream (SSE), until its end."""
+    events = []
+    async with svc.client() as client, client.stream(
+        "GET", f"/v1/flights/{fid}/stream", params={"after_seq": after_seq},
+        headers={"Accept": "text/event-stream"}, timeout=None,
+    ) as r:  # fmt: skip
+        kind = None
+        async for line in r.aiter_lines():
+            if line.startswith("event: "):
+                kind = line[len("event: ") :]
+            elif line.startswith("data: ") and kind == "event":
+                events.append(json.loads(line[len("data: ") :]))
+            elif line.startswith("data: ") and kind == "end":
+                break
+    return events
 
 
 def _carried_on(
@@ -126,72 +186,74 @@ def _kept_team_time(data: Path, fid: str) -> tuple[float, int] | None:
     return float(team.team_ref_s), int(team.version)
 
 
-async def _kill_and_restart(data: Path) -> None:
-    async with serve(data) as first, first.client() as client:
-        fid, _ = await _flight(
-            client, {"speedup": 200.0, "wind_m_s": 4.0, "seed": 3}, scenario_name="compact"
-        )
-        _ok(await client.post(f"/v1/flights/{fid}/launch", json={}), 202)
-        await _until(client, fid, POPUP_NOT_BEFORE_S)  # launched, and up to the pop-up
+async def _past_the_replan(
+    client: httpx.AsyncClient, data: Path
+) -> tuple[str, tuple[float, int], int, list[dict[str, Any]]]:
+    """A flight launched and flown past its re-plan round POPUP1: its id, the team time and
+    version it says (kept in its checkpoint too), the last event it had said then, and its
+    events so far."""
+    fid, _ = await _flight(
+        client, {"speedup": 200.0, "wind_m_s": 4.0, "seed": 3}, scenario_name="compact"
+    )
+    _ok(await client.post(f"/v1/flights/{fid}/launch", json={}), 202)
+    await _until(client, fid, POPUP_NOT_BEFORE_S)  # launched, and up to the pop-up
+    before = await _all_events(client, fid)
+    while not any(e["kind"] == "replan" for e in before):
+        await asyncio.sleep(0.05)
         before = await _all_events(client, fid)
-        while not any(e["kind"] == "replan" for e in before):
-            await asyncio.sleep(0.05)
-            before = await _all_events(client, fid)
-        # The team time the service says, once its checkpoint holds it too (the kill must
-        # not race the checkpoint's writer): bounded in flight seconds.
-        said_at = _ok(await client.get(f"/v1/flights/{fid}"))["t_s"]
-        while True:
-            said, said_seq = await _team_time(client, fid)
-            kept = await asyncio.to_thread(_kept_team_time, data, fid)
-            if kept == said:
-                break
-            now = _ok(await client.get(f"/v1/flights/{fid}"))["t_s"]
-            assert now - said_at <= CHECKPOINT_WITHIN_S, (
-                f"the checkpoint holds {kept}, the service says {said} (team time, version) "
-                f"{now - said_at:.0f} s of flight later"
-            )
-            await asyncio.sleep(0.05)
-        first.proc.send_signal(signal.SIGKILL)
-        await first.proc.wait()
-        away = asyncio.create_task(hold_while_away(data / "flights" / fid / "pace", AWAY_S))
-    try:
-        assert {e["kind"] for e in before} >= {"launch", "replan"}
-        await _resumed(data, fid, said, said_seq, before)
-    finally:
-        away.cancel()
+    # The team time the service says, once its checkpoint holds it too (the kill must not
+    # race the checkpoint's writer): bounded in flight seconds.
+    said_at = _ok(await client.get(f"/v1/flights/{fid}"))["t_s"]
+    while True:
+        said, said_seq = await _team_time(client, fid)
+        kept = await asyncio.to_thread(_kept_team_time, data, fid)
+        if kept == said:
+            break
+        now = _ok(await client.get(f"/v1/flights/{fid}"))["t_s"]
+        assert now - said_at <= CHECKPOINT_WITHIN_S, (
+            f"the checkpoint holds {kept}, the service says {said} (team time, version) "
+            f"{now - said_at:.0f} s of flight later"
+        )
+        await asyncio.sleep(0.05)
+    before = await _all_events(client, fid)
+    assert {e["kind"] for e in before} >= {"launch", "replan"}
+    return fid, said, said_seq, before
 
 
-async def _resumed(
-    data: Path,
+async def _flown_on(
+    client: httpx.AsyncClient,
+    second: Any,
     fid: str,
     said: tuple[float, int],
     said_seq: int,
     before: list[dict[str, Any]],
+    *,
+    restarted: bool,
 ) -> None:
-    """The service started again on ``data``: it resumes flight ``fid`` (killed when it had
-    said team time ``said`` at event ``said_seq``, events ``before``) and flies it home."""
-    async with serve(data) as second, second.client() as client:
-        flights = _ok(await client.get("/v1/flights"))
-        assert [f["id"] for f in flights] == [fid]
-        # The team time and its version survived the restart: the resumed flight's first
-        # snapshot has the ones the first service said, moved on by any team arrival said
-        # since (up to the snapshot's last event).
-        resumed, resumed_seq = await _team_time(client, fid)
+    """Flight ``fid`` (which had said team time ``said`` at event ``said_seq``, events
+    ``before``, when its worker or its service was killed) flown home: on its checkpoint by a
+    new worker (``restarted``), or by the same one."""
+    flights = _ok(await client.get("/v1/flights"))
+    assert [f["id"] for f in flights] == [fid]
+    # The team time and its version survived the restart: the resumed flight's first
+    # snapshot has the ones the first service said, moved on by any team arrival said
+    # since (up to the snapshot's last event).
+    resumed, resumed_seq = await _team_time(client, fid)
+    kept_events = await _all_events(client, fid)
+    while kept_events[-1]["seq"] < resumed_seq:  # the store's writer is behind
+        await asyncio.sleep(0.05)
         kept_events = await _all_events(client, fid)
-        while kept_events[-1]["seq"] < resumed_seq:  # the store's writer is behind
-            await asyncio.sleep(0.05)
-            kept_events = await _all_events(client, fid)
-        assert resumed == _carried_on(said, kept_events, said_seq, resumed_seq), (said, resumed)
-        while (snap := _ok(await client.get(f"/v1/flights/{fid}")))["state"] not in (
-            "completed", "failed", "aborted",
-        ):  # fmt: skip
-            await asyncio.sleep(0.2)
-        assert snap["state"] == "completed", snap
-        while (r := await client.get(f"/v1/flights/{fid}/record")).status_code == 404:
-            await asyncio.sleep(0.2)
-        record: dict[str, Any] = _ok(r)
-        after = await _all_events(client, fid)
-        truth = truth_log(second, fid)
+    assert resumed == _carried_on(said, kept_events, said_seq, resumed_seq), (said, resumed)
+    while (snap := _ok(await client.get(f"/v1/flights/{fid}")))["state"] not in (
+        "completed", "failed", "aborted",
+    ):  # fmt: skip
+        await asyncio.sleep(0.2)
+    assert snap["state"] == "completed", snap
+    while (r := await client.get(f"/v1/flights/{fid}/record")).status_code == 404:
+        await asyncio.sleep(0.2)
+    record: dict[str, Any] = _ok(r)
+    after = await _all_events(client, fid)
+    truth = truth_log(second, fid)
     print(story(after, limit=200))  # shown when the test fails
     # The team time: the wind and the pop-up moved it later by no more than they can
     # (tests.paperbounds), and the resumed flight carried it (and its version) on to the
@@ -220,4 +282,20 @@ async def _resumed(
     later = after[len(before) :]
     assert not [e for e in later if e["kind"] == "launch"]
     found = [e for e in later if e["kind"] == "flight" and e["reason"].startswith("resumed")]
-    assert len(found) == 3 and all("holds the" in e["reason"] for e in found), found
+    if restarted:
+        assert len(found) == 3 and all("holds the" in e["reason"] for e in found), found
+    else:
+        assert not found, found
+    # The simulator's own counters: one arm each, and one AUTO each besides the resumes the
+    # flight said; every mission it accepted is one the flight said it uploaded (none sent
+    # twice), and a restart read each mission back.
+    doc = json.loads((second.data_dir / "flights" / fid / "counters.json").read_text())
+    uploads = Counter(e["vehicle"] for e in after if e["kind"] == "upload")
+    resumes = Counter(
+        e["vehicle"] for e in after if e["kind"] == "fallback" and "resumed AUTO" in e["reason"]
+    )
+    for v, ids in zip(doc["vehicles"], ("UAV1", "UAV2", "UAV3"), strict=True):
+        assert v["arms"] == 1, (ids, v)
+        assert v["auto_mode_changes"] == 1 + resumes[ids], (ids, v, resumes)
+        assert v["mission_uploads"] == uploads[ids], (ids, v, uploads)
+        assert v["mission_downloads"] >= 1 + restarted, (ids, v)

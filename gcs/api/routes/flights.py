@@ -33,7 +33,7 @@ async def create_flight(body: FlightIn, request: Request) -> dict[str, Any]:
     r = body.rehearsal
     rehearsal = None
     if r is not None:
-        rehearsal = Rehearsal(r.speedup, r.wind_m_s, r.wind_from_deg, r.loss, r.seed)
+        rehearsal = Rehearsal(r.speedup, r.wind_m_s, r.wind_from_deg, r.loss, r.seed, r.lockstep)
     engine = engine_of(request)
     flight = await engine.create_flight(body.schedule_id, body.vehicles, rehearsal)
     return engine.snapshot(flight.id)
@@ -56,14 +56,14 @@ async def flight_map(flight_id: str, request: Request) -> dict[str, Any]:
     """What the map draws, in the scenario's local metres: the area (and the terrain image of
     ``scenario_id``), threats (in force or queued, with when they appear), loiter buffers, each
     vehicle's start, goal, planned route and loiter circles as they are now."""
-    return engine_of(request).flight_map(flight_id)
+    return await engine_of(request).flight_map(flight_id)
 
 
 @router.post("/flights/{flight_id}/upload", status_code=202, dependencies=operate)
 async def upload(flight_id: str, request: Request) -> dict[str, Any]:
     """Upload every vehicle's mission (verified); per-vehicle results in the snapshot's
     ``uploads`` and in ``upload`` events."""
-    return engine_of(request).upload(flight_id)
+    return await engine_of(request).upload(flight_id)
 
 
 @router.post("/flights/{flight_id}/launch", status_code=202, dependencies=operate)
@@ -71,7 +71,7 @@ async def launch(flight_id: str, request: Request, body: LaunchIn | None = None)
     """Start the mission at a UTC (or ``delay_s`` from now): each vehicle is launched at its
     takeoff time and the arrivals held."""
     body = body or LaunchIn()
-    return engine_of(request).launch(flight_id, body.start_utc_s, body.delay_s)
+    return await engine_of(request).launch(flight_id, body.start_utc_s, body.delay_s)
 
 
 @router.post("/flights/{flight_id}/abort", dependencies=operate)
@@ -85,18 +85,18 @@ async def abort(flight_id: str, request: Request, body: AbortIn | None = None) -
 async def add_threat(flight_id: str, body: ThreatIn, request: Request) -> dict[str, Any]:
     """A threat for the flight: re-planned around (the vehicles it touches) when it appears;
     before the launch it is queued."""
-    return engine_of(request).add_threat(flight_id, body.threat, body.at_s)
+    return await engine_of(request).add_threat(flight_id, body.threat, body.at_s)
 
 
 @router.delete("/flights/{flight_id}/threats/{threat_id}", status_code=204, dependencies=operate)
 async def remove_threat(flight_id: str, threat_id: str, request: Request) -> Response:
-    engine_of(request).remove_threat(flight_id, threat_id)
+    await engine_of(request).remove_threat(flight_id, threat_id)
     return Response(status_code=204)
 
 
 @router.get("/flights/{flight_id}/team-time", dependencies=observe)
 async def team_time(flight_id: str, request: Request, response: Response) -> TeamTimeOut:
-    out = engine_of(request).team_time(flight_id)
+    out = await engine_of(request).team_time(flight_id)
     response.headers["ETag"] = f'"{out["version"]}"'
     return TeamTimeOut(**out)
 
@@ -118,7 +118,7 @@ async def move_team_time(
             version = int(if_match.strip().strip('"'))
         except ValueError:
             raise PreconditionFailed(f"If-Match: {if_match!r} is not a version") from None
-    out = engine_of(request).move_team_time(flight_id, body.arrival_s, version)
+    out = await engine_of(request).move_team_time(flight_id, body.arrival_s, version)
     response.headers["ETag"] = f'"{out["version"]}"'
     return TeamTimeOut(**out)
 

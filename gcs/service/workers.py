@@ -1,0 +1,382 @@
+"""The service's side of its flight workers (:mod:`gcs.service.worker`): each flight flies in a
+worker process the service starts, follows and restarts, and the service answers for it from
+what the worker tells it.
+
+A :class:`WorkerFlight` starts its worker (:meth:`WorkerFlight.start`), or finds one a killed
+service process left flying (:meth:`WorkerFlight.adopt`), and follows its feed: the events go
+on a bus of the service's own (numbered as the worker numbered them), the snapshot, vehicles
+and figures are kept as last told. Reads are answered from those, never by waiting on the
+worker; commands go to it on its socket. A worker that dies before its flight is over is
+started again on the flight's checkpoint (``--resume``), at most :data:`RESTARTS` times in
+:data:`RESTART_WINDOW_S`.
+
+The channel is the worker's Unix socket in the flight's folder: local to the machine, the same
+for SQLite and PostgreSQL, and nothing to run beside the service. What must survive the
+service, the flight's events and checkpoints, the worker writes to the store itself.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import json
+import logging
+import os
+import signal
+import sys
+import time
+from collections.abc import Callable, Mapping
+from pathlib import Path
+from typing import Any
+
+from gcs.coordination.bus import EventBus
+from gcs.coordination.events import FlightEvent
+from gcs.coordination.runner import ENDED, FlightState
+from gcs.service.ended import FINAL_FILE
+from gcs.service.scenariotext import Conflict, NotFound, ServiceError
+from gcs.service.worker import LINE_LIMIT, LOG_FILE, error_of, socket_path
+
+__all__ = ["RESTARTS", "WorkerFlight", "WorkerGone"]
+
+log = logging.getLogger(__name__)
+
+READY_WALL_S = 60.0
+"""How long (wall s) a new worker may take to say it is ready (its simulator started, its
+vehicles heard)."""
+RESTARTS = 5
+RESTART_WINDOW_S = 60.0
+"""A worker that died is started again at most :data:`RESTARTS` times in this many wall s."""
+REQUEST_WALL_S = 30.0
+"""How long (wall s) a command may take in the worker (an abort waits for its vehicles)."""
+
+
+class WorkerGone(ServiceError):
+    """The flight's worker could not be reached (it is being started again)."""
+
+    status = 503
+
+
+class WorkerFlight:
+    """A flight flown by a worker process, as the service sees it."""
+
+    def __init__(self, folder: Path, ready: Mapping[str, Any], db_url: str) -> None:
+        self.folder = folder
+        self.db_url = db_url
+        self.id: str = ready["flight_id"]
+        self.schedule_id: str = ready["schedule_id"]
+        self.scenario_id: str = ready["scenario_id"]
+        self.connections: dict[str, str] = dict(ready["connections"])
+        self.simulated: bool = bool(ready["simulated"])
+        self.pid: int = int(ready["pid"])
+        self.bus = EventBus(first_seq=int(ready["last_seq"]) + 1)
+        """The flight's events as the worker numbered them (from those it still keeps)."""
+        self.proc: asyncio.subprocess.Process | None = None
+        self.on_over: Callable[[WorkerFlight], None] | None = None
+        self.final: tuple[dict[str, Any], dict[str, Any] | None] | None = None
+        """Once it is over: its last snapshot and map, as the worker kept them."""
+        self.restarts: list[float] = []
+        self._state: dict[str, Any] = {}
+        self._told = 0
+        self._take_state(ready)
+        self._feed: asyncio.Task[None] | None = None
+        self._closing = False
+
+    # -- starting -------------------------------------------------------------------------------
+
+    @classmethod
+    async def start(cls, folder: Path, db_url: str, *, resume: bool = False) -> WorkerFlight:
+        """Start a worker on the flight of ``folder`` (its spec, or with ``resume`` its
+        checkpoint) and follow it once it is ready.
+
+        Raises
+        ------
+        ServiceError
+            The worker could not make the flight (its error, made again).
+        """
+        proc, ready = await _spawn(folder, db_url, resume)
+        flight = cls(folder, ready, db_url)
+        flight.proc = proc
+        flight.follow()
+        return flight
+
+    @classmethod
+    async def adopt(cls, folder: Path, db_url: str) -> WorkerFlight | None:
+        """The worker a killed service process left flying in ``folder``, if it answers."""
+        try:
+            ready = (await _request(folder, "ready", {}, timeout_s=2.0))["result"]
+        except (OSError, TimeoutError, ValueError, ServiceError):
+            return None
+        flight = cls(folder, {**ready, "last_seq": 0}, db_url)
+        flight.follow()
+        return flight
+
+    def follow(self) -> None:
+        """Follow the worker's feed (restarting it when it dies) until the flight is over."""
+        self._feed = asyncio.get_running_loop().create_task(self._follow())
+
+    # -- what the worker told -------------------------------------------------------------------
+
+    def _take_state(self, doc: Mapping[str, Any]) -> None:
+        """The worker's state, unless a newer one was taken (a command's answer overtakes
+        the feed); a new worker numbers from 1 again."""
+        n = int(doc.get("n", 0))
+        if self._state and n <= self._told:
+            return
+        self._told = n
+        self._state = {
+            "snapshot": doc["snapshot"],
+            "vehicles": doc.get("vehicles", {}),
+            "figures": doc.get("figures", {}),
+        }
+
+    @property
+    def state(self) -> FlightState:
+        return FlightState(self._state["snapshot"]["state"])
+
+    @property
+    def over(self) -> bool:
+        """It has ended and what it leaves is kept (its record, report and last snapshot)."""
+        return self.final is not None
+
+    def snapshot(self, *, max_age_s: float = 0.0) -> dict[str, Any]:
+        """The flight's snapshot as the worker last told it (at most
+        :data:`~gcs.service.worker.STATE_WALL_S` of wall time old)."""
+        if self.final is not None:
+            return self.final[0]
+        snap: dict[str, Any] = self._state["snapshot"]
+        return snap
+
+    def vehicle_views(self) -> dict[str, dict[str, Any]]:
+        """Per connection, its vehicle as the worker last told it."""
+        views: dict[str, dict[str, Any]] = self._state["vehicles"]
+        return views
+
+    def figures(self) -> dict[str, Any]:
+        figures: dict[str, Any] = self._state["figures"]
+        return figures
+
+    @property
+    def record_path(self) -> Path:
+        return self.folder / "flight.json"
+
+    @property
+    def report_dir(self) -> Path | None:
+        folder = self.folder / "report"
+        return folder if self.over and folder.is_dir() else None
+
+    # -- commands -------------------------------------------------------------------------------
+
+    async def request(self, op: str, **args: Any) -> Any:
+        """Ask the worker (a :class:`~gcs.service.scenariotext.ServiceError` it answered is
+        raised again here).
+
+        Raises
+        ------
+        WorkerGone
+            It could not be reached.
+        """
+        if self.over:
+            raise _ended(self)
+        try:
+            doc = await _request(self.folder, op, args, timeout_s=REQUEST_WALL_S)
+        except (OSError, TimeoutError, ValueError) as err:
+            if self.over:
+                raise _ended(self) from None
+            raise WorkerGone(f"flight {self.id}: its worker did not answer ({err})") from None
+        if "state" in doc and self.final is None:
+            self._take_state(doc["state"])
+        return doc.get("result")
+
+    async def flight_map(self) -> dict[str, Any]:
+        if self.final is not None:
+            if self.final[1] is None:
+                raise NotFound(f"flight {self.id} left no map")
+            return self.final[1]
+        doc: dict[str, Any] = await self.request("map")
+        return doc
+
+    # -- the feed -------------------------------------------------------------------------------
+
+    async def _follow(self) -> None:
+        try:
+            while not self._closing:
+                ended = await self._read_feed()
+                if ended or self._closing:
+                    break
+                if await self._ended_meanwhile():
+                    break
+                if not await self._restart():
+                    break
+        finally:
+            self._end()
+
+    async def _read_feed(self) -> bool:
+        """Read the feed until it ends (True) or breaks (False: the worker died)."""
+        try:
+            reader, writer = await asyncio.open_unix_connection(
+                str(socket_path(self.folder)), limit=LINE_LIMIT
+            )
+        except OSError:
+            return False
+        try:
+            req = {"op": "follow", "args": {"after_seq": self.bus.last_seq}}
+            writer.write(json.dumps(req).encode() + b"\n")
+            await writer.drain()
+            while line := await reader.readline():
+                msg = json.loads(line)
+                kind = msg.get("type")
+                if kind == "event":
+                    self.bus.take(FlightEvent.from_wire(msg["data"]))
+                elif kind == "state":
+                    self._take_state(msg["data"])
+                elif kind == "end":
+                    return True
+            return False
+        except (OSError, ValueError, asyncio.IncompleteReadError):
+            return False
+        finally:
+            writer.close()
+
+    async def _ended_meanwhile(self) -> bool:
+        """The worker went: did its flight end first (its last snapshot kept, ended)?"""
+        try:
+            doc = json.loads((self.folder / FINAL_FILE).read_text())
+        except (OSError, ValueError):
+            return False
+        return doc.get("snapshot", {}).get("state") in {s.value for s in ENDED}
+
+    async def _restart(self) -> bool:
+        """Start the flight's worker again on its checkpoint; False once it has died too
+        often (the flight is then left as the store has it, and said in the log)."""
+        now = time.monotonic()
+        self.restarts = [t for t in self.restarts if now - t < RESTART_WINDOW_S]
+        if len(self.restarts) >= RESTARTS:
+            log.error("flight %s: its worker died %d times in a minute", self.id, RESTARTS)
+            return False
+        self.restarts.append(now)
+        await self._wait_gone(5.0)
+        log.warning("flight %s: its worker (pid %d) died; flying on from its checkpoint",
+                    self.id, self.pid)  # fmt: skip
+        try:
+            self.proc, ready = await _spawn(self.folder, self.db_url, True)
+        except ServiceError as err:
+            log.error("flight %s: not flown on: %s", self.id, err)
+            return False
+        self.pid = int(ready["pid"])
+        self._told = 0
+        self._take_state(ready)
+        return True
+
+    def _end(self) -> None:
+        try:
+            doc = json.loads((self.folder / FINAL_FILE).read_text())
+            self.final = doc["snapshot"], doc.get("map")
+        except (OSError, ValueError, KeyError):
+            self.final = None
+        if self.final is None and self._closing:
+            return
+        if self.final is None:
+            self.final = self._state["snapshot"], None
+        if self.on_over is not None:
+            self.on_over(self)
+
+    # -- stopping -------------------------------------------------------------------------------
+
+    async def close(self, *, stop: bool) -> None:
+        """Stop following; with ``stop`` tell the worker to stop first (a flight on bundled
+        simulator vehicles then ends; one on live vehicles flies on, for the next service
+        process) and wait for it to exit."""
+        if stop and not self.over:
+            with contextlib.suppress(ServiceError):
+                await self.request("stop")
+            await self._wait_gone(30.0)
+        self._closing = True
+        if self._feed is not None:
+            self._feed.cancel()
+            with contextlib.suppress(BaseException):
+                await self._feed
+
+    async def _wait_gone(self, timeout_s: float) -> None:
+        """Until its worker has exited (at most ``timeout_s`` of wall time)."""
+        with contextlib.suppress(TimeoutError):
+            async with asyncio.timeout(timeout_s):
+                if self.proc is not None and self.proc.pid == self.pid:
+                    await self.proc.wait()  # ours: reaped by the event loop
+                    return
+                while _alive(self.pid):
+                    await asyncio.sleep(0.01)
+
+    def kill(self) -> None:
+        """Kill the worker at once (its flight is flown on from its checkpoint)."""
+        with contextlib.suppress(ProcessLookupError):
+            os.kill(self.pid, signal.SIGKILL)
+
+
+def _ended(flight: WorkerFlight) -> ServiceError:
+    return Conflict(f"flight {flight.id} is {flight.state.value}")
+
+
+async def _spawn(
+    folder: Path, db_url: str, resume: bool
+) -> tuple[asyncio.subprocess.Process, dict[str, Any]]:
+    """Start a worker and read its first line: ready, or why not."""
+    args = [sys.executable, "-m", "gcs.service.worker", str(folder), "--db", db_url]
+    if resume:
+        args.append("--resume")
+    folder.mkdir(parents=True, exist_ok=True)
+    with (folder / LOG_FILE).open("ab") as errors:
+        proc = await asyncio.create_subprocess_exec(
+            *args,
+            stdin=asyncio.subprocess.DEVNULL,
+            stdout=asyncio.subprocess.PIPE,
+            stderr=errors,
+            start_new_session=True,  # a signal to the service's process group is not its
+        )
+    assert proc.stdout is not None
+    try:
+        line = await asyncio.wait_for(proc.stdout.readline(), READY_WALL_S)
+    except TimeoutError:
+        proc.kill()
+        raise ServiceError(f"flight {folder.name}: its worker did not start") from None
+    try:
+        doc = json.loads(line)
+    except ValueError:
+        doc = {}
+    if "ready" in doc:
+        return proc, doc["ready"]
+    await proc.wait()
+    error = doc.get("error") or {"message": f"its worker exited ({proc.returncode})"}
+    raise error_of(error)
+
+
+async def _request(
+    folder: Path, op: str, args: Mapping[str, Any], *, timeout_s: float
+) -> dict[str, Any]:
+    """One request on the worker's socket: its whole answer (an error raised again)."""
+    async with asyncio.timeout(timeout_s):
+        reader, writer = await asyncio.open_unix_connection(
+            str(socket_path(folder)), limit=LINE_LIMIT
+        )
+        try:
+            writer.write(json.dumps({"op": op, "args": args}).encode() + b"\n")
+            await writer.drain()
+            line = await reader.readline()
+        finally:
+            writer.close()
+    if not line:
+        raise ConnectionResetError("no answer")
+    doc: dict[str, Any] = json.loads(line)
+    if not doc.get("ok"):
+        raise error_of(doc.get("error") or {})
+    return doc
+
+
+def _alive(pid: int) -> bool:
+    """A process another service process started (not this one's child) still runs."""
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:
+        return True
+    return True

@@ -1,0 +1,204 @@
+"""A client load on the service while a flight flies, from a process of its own: oversized
+uploads, large planning jobs started and cancelled, many readers and many stream clients
+(:class:`Load`). What it saw comes back as a :class:`LoadSeen`: every status, the latencies of
+``/v1/health``, every 5xx named. Used by ``tests/service/test_isolation.py`` and
+``bench/bench_isolation.py``."""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import multiprocessing as mp
+import time
+from collections import Counter
+from collections.abc import Iterator
+from dataclasses import dataclass, field
+from typing import Any
+
+import httpx
+import yaml
+
+from tests.teams import ring_team
+
+__all__ = ["Load", "LoadSeen", "loaded"]
+
+
+@dataclass(frozen=True)
+class Load:
+    """What the load does (the issue's figures by default)."""
+
+    uploads: int = 10
+    upload_bytes: int = 20 << 20
+    big_jobs: int = 5
+    big_team: int = 1000
+    big_work_s: float = 3.0
+    """How long (wall s) each large job may work before it is cancelled."""
+    readers: int = 200
+    read_s: float = 60.0
+    streams: int = 50
+
+
+@dataclass
+class LoadSeen:
+    """What the load saw."""
+
+    statuses: Counter[int] = field(default_factory=Counter)
+    health_ms: list[float] = field(default_factory=list)
+    server_errors: list[str] = field(default_factory=list)
+    """Each 5xx (or a request that got no answer): method, path, status, body."""
+    streamed: int = 0
+    """Messages the stream clients read."""
+    cancelled: int = 0
+
+    def percentile_ms(self, q: float) -> float:
+        xs = sorted(self.health_ms)
+        return xs[min(len(xs) - 1, int(q * len(xs)))] if xs else float("nan")
+
+
+class _Client:
+    def __init__(self, client: httpx.AsyncClient, seen: LoadSeen) -> None:
+        self.c = client
+        self.seen = seen
+
+    async def request(self, method: str, path: str, **kw: Any) -> httpx.Response | None:
+        try:
+            r = await self.c.request(method, path, **kw)
+        except httpx.HTTPError as err:
+            self.seen.server_errors.append(f"{method} {path}: {type(err).__name__}: {err}")
+            return None
+        self.seen.statuses[r.status_code] += 1
+        if r.status_code >= 500:
+            self.seen.server_errors.append(f"{method} {path}: {r.status_code} {r.text[:200]}")
+        return r
+
+
+async def _uploads(c: _Client, load: Load) -> None:
+    await asyncio.gather(*(_oversized(c, load.upload_bytes) for _ in range(load.uploads)))
+
+
+async def _oversized(c: _Client, nbytes: int) -> None:
+    """POST a scenario of ``nbytes`` as a client such as curl does: the service may answer
+    (413) and close before the body is all sent; the answer is read whatever the send met."""
+    url = c.c.base_url
+    reader, writer = await asyncio.open_connection(url.host, url.port)
+    head = (
+        f"POST /v1/scenarios HTTP/1.1\r\nHost: {url.host}:{url.port}\r\n"
+        f"Authorization: {c.c.headers['Authorization']}\r\n"
+        f"Content-Type: application/yaml\r\nContent-Length: {nbytes}\r\n"
+        "Connection: close\r\n\r\n"
+    )
+    chunk = b"#" * (1 << 16)
+    try:
+        writer.write(head.encode())
+        for _ in range(0, nbytes, len(chunk)):
+            writer.write(chunk)
+            await writer.drain()
+    except ConnectionError:
+        pass  # answered and closed early: read what it said
+    try:
+        status_line = await asyncio.wait_for(reader.readline(), 60.0)
+        status = int(status_line.split()[1])
+    except (ConnectionError, TimeoutError, IndexError, ValueError) as err:
+        c.seen.server_errors.append(f"POST /v1/scenarios ({nbytes} bytes): no answer ({err!r})")
+        return
+    finally:
+        writer.close()
+    c.seen.statuses[status] += 1
+    if status >= 500:
+        c.seen.server_errors.append(f"POST /v1/scenarios ({nbytes} bytes): {status}")
+
+
+async def _big_jobs(c: _Client, load: Load) -> None:
+    text = yaml.safe_dump(ring_team(load.big_team), sort_keys=False)
+    r = await c.request(
+        "POST", "/v1/scenarios", content=text, headers={"Content-Type": "application/yaml"}
+    )
+    if r is None or r.status_code != 201:
+        return
+    sid = r.json()["id"]
+    posted = await asyncio.gather(
+        *(
+            c.request("POST", "/v1/schedules", json={"scenario_id": sid})
+            for _ in range(load.big_jobs)
+        )
+    )
+    jobs = [p.json()["id"] for p in posted if p is not None and p.status_code == 202]
+    await asyncio.sleep(load.big_work_s)
+    for jid in jobs:
+        r = await c.request("DELETE", f"/v1/jobs/{jid}")
+        if r is not None and r.status_code == 200:
+            c.seen.cancelled += 1
+
+
+async def _reader(c: _Client, flight_id: str, until: float) -> None:
+    paths = ["/v1/health", f"/v1/flights/{flight_id}", f"/v1/flights/{flight_id}/map"]
+    k = 0
+    while time.monotonic() < until:
+        path = paths[k % len(paths)]
+        k += 1
+        t0 = time.perf_counter()
+        r = await c.request("GET", path)
+        if path == "/v1/health" and r is not None and r.status_code == 200:
+            c.seen.health_ms.append((time.perf_counter() - t0) * 1e3)
+
+
+async def _stream(c: _Client, flight_id: str, until: float) -> None:
+    with contextlib.suppress(httpx.HTTPError, TimeoutError):
+        async with asyncio.timeout(max(0.0, until - time.monotonic())):
+            async with c.c.stream(
+                "GET", f"/v1/flights/{flight_id}/stream",
+                headers={"Accept": "text/event-stream"}, timeout=None,
+            ) as r:  # fmt: skip
+                c.seen.statuses[r.status_code] += 1
+                async for line in r.aiter_lines():
+                    if line.startswith("event: "):
+                        c.seen.streamed += 1
+                        if line == "event: end":
+                            return
+
+
+async def apply(url: str, token: str, flight_id: str, load: Load) -> LoadSeen:
+    """The load, once each part, readers for :attr:`Load.read_s`; streams as long."""
+    seen = LoadSeen()
+    limits = httpx.Limits(max_connections=load.readers + load.streams + 20)
+    headers = {"Authorization": f"Bearer {token}"}
+    async with httpx.AsyncClient(
+        base_url=url, headers=headers, limits=limits, timeout=60.0
+    ) as client:
+        c = _Client(client, seen)
+        until = time.monotonic() + load.read_s
+        await asyncio.gather(
+            _uploads(c, load),
+            _big_jobs(c, load),
+            *(_reader(c, flight_id, until) for _ in range(load.readers)),
+            *(_stream(c, flight_id, until) for _ in range(load.streams)),
+        )
+    return seen
+
+
+def _run(url: str, token: str, flight_id: str, load: Load, out: Any) -> None:
+    out.put(asyncio.run(apply(url, token, flight_id, load)))
+
+
+@contextlib.contextmanager
+def loaded(url: str, token: str, flight_id: str, load: Load) -> Iterator[Any]:
+    """The load in a process of its own (spawned) while in the block; ``result()`` of what is
+    yielded waits for it to end and gives its :class:`LoadSeen`."""
+    ctx = mp.get_context("spawn")
+    out = ctx.Queue()
+    proc = ctx.Process(target=_run, args=(url, token, flight_id, load, out), daemon=True)
+    proc.start()
+
+    class _Handle:
+        def result(self, timeout_s: float = 600.0) -> LoadSeen:
+            seen: LoadSeen = out.get(timeout=timeout_s)
+            proc.join(10.0)
+            return seen
+
+    try:
+        yield _Handle()
+    finally:
+        if proc.is_alive():
+            proc.join(timeout=1.0)
+        if proc.is_alive():
+            proc.kill()
