@@ -59,7 +59,8 @@ def _once(c: httpx.Client, schedule_id: str, kill_at_s: float) -> dict[str, floa
         now = time.perf_counter() - t0
         if snap.get("worker", {}).get("pid") not in (None, pid) and ready_s != ready_s:
             ready_s = now
-        events = ok(c.get(f"/v1/flights/{fid}/events", params={"after_seq": last_seq}), "events")
+        page = c.get(f"/v1/flights/{fid}/events", params={"after_seq": last_seq})
+        events = ok(page, "events")["events"]
         found = [e for e in events if e["kind"] == "flight" and e["reason"].startswith("resumed")]
         if len(found) >= 3:
             resumed_s = now

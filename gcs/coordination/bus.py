@@ -125,6 +125,18 @@ class EventBus:
         self._offer(event)
         return True
 
+    def rebase(self, last_seq: int) -> None:
+        """Forget the events after ``last_seq`` and number on from it (the process that
+        numbered them died before they were kept, and its successor numbers from the last one
+        kept); every subscription is closed, so its reader starts again from what it saw."""
+        while self._history and self._history[-1].seq > last_seq:
+            self._history.pop()
+        self._seq = itertools.count(last_seq + 1)
+        if not self._history:
+            self._first_seq = last_seq + 1
+        for sub in tuple(self._subscribers):
+            sub.close()
+
     def _offer(self, numbered: FlightEvent) -> FlightEvent:
         self._history.append(numbered)
         self.published += 1

@@ -41,7 +41,7 @@ from gcs.service.scenariotext import (
     parse_scenario_text,
 )
 from gcs.service.worker import FlightSpec, VehicleSpec
-from gcs.service.workers import WorkerFlight
+from gcs.service.workers import Spawner, WorkerFlight
 from gcs.store.repository import Store
 from planner.scenario import Threat
 
@@ -78,8 +78,8 @@ class Engine:
         limits: Limits | None = None,
     ):
         self.store = store
-        self.db_url = store.engine.url.render_as_string(hide_password=False)
-        """Where the flight workers find the store."""
+        self.workers = Spawner(store.engine.url.render_as_string(hide_password=False))
+        """Starts the flight workers (they find the store by its URL)."""
         self.data_dir = data_dir
         self.config = config or FlightConfig()
         self.limits = limits or Limits()
@@ -105,6 +105,7 @@ class Engine:
         for task in list(self._tasks):
             task.cancel()
         await self.planning.close()
+        await self.workers.close()
         await self.fleet.close()
 
     def _spawn(self, coro: Any) -> asyncio.Task[Any]:
@@ -252,7 +253,7 @@ class Engine:
         folder = self.data_dir / "flights" / fid
         FlightSpec(fid, schedule_id, specs, rehearsal).write(folder)
         try:
-            flight = await WorkerFlight.start(folder, self.db_url)
+            flight = await WorkerFlight.start(folder, self.workers)
         except BaseException:
             await self.fleet.take_back(lent)
             raise
@@ -287,12 +288,12 @@ class Engine:
             folder = self.data_dir / "flights" / fid
             if fid in self.flights or (folder / FINAL_FILE).exists():
                 continue
-            flight = await WorkerFlight.adopt(folder, self.db_url)
+            flight = await WorkerFlight.adopt(folder, self.workers)
             if flight is None:
                 if self.store.flight(fid).state != "running" or not self.store.checkpoint(fid):
                     continue
                 try:
-                    flight = await WorkerFlight.start(folder, self.db_url, resume=True)
+                    flight = await WorkerFlight.start(folder, self.workers, resume=True)
                 except ServiceError as err:
                     log.error("flight %s: not flown on: %s", fid, err)
                     continue

@@ -162,6 +162,11 @@ class ProcessJobs:
         self._readers.shutdown(wait=False, cancel_futures=True)
 
 
+JOB_NICENESS = 10
+"""How much lower a job's scheduling priority is than the service's (``nice``): planning is
+batch work, flights are not."""
+
+
 def _kill(proc: multiprocessing.process.BaseProcess) -> None:
     """Kill a job's process group (the job leads its own: see :func:`_child`)."""
     if proc.pid is None:
@@ -178,8 +183,12 @@ def _kill_group(pgid: int) -> None:
 
 def _child(conn: Connection, fn: Callable[..., Any], args: tuple[Any, ...]) -> None:
     """The job's process: a group of its own (so that a kill takes any worker processes it
-    starts too), the function, its result sent back."""
+    starts too), at a lower priority than the flights' workers (:data:`JOB_NICENESS`: a
+    flight's control loop is served first when the cores are busy), the function, its result
+    sent back."""
     os.setpgid(0, 0)
+    with contextlib.suppress(OSError):
+        os.nice(JOB_NICENESS)
 
     def progress(fraction: float, stage: str) -> None:
         conn.send(("progress", fraction, stage))

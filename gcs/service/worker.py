@@ -4,10 +4,14 @@ process does (requests, uploads, planning) reaches its control loop.
 
 ``python -m gcs.service.worker FOLDER --db URL [--resume]``: the flight of ``FOLDER/spec.json``
 (:class:`FlightSpec`), or with ``--resume`` the flight of that folder the store says is running,
-from its checkpoint. Its first line on stdout says it is ready (``{"ready": {...}}``) or why it
-could not start (``{"error": {...}}``, exit 1); after that it writes nothing there (the service
-that started it may be gone). It logs to ``FOLDER/worker.log`` and exits 0 once the flight has
-ended and what it leaves is kept (or when told to ``stop``).
+from its checkpoint. With ``--standby`` it starts and loads everything first, then waits for
+its flight as a line on stdin (``{"folder", "db", "resume"}``): the service keeps one waiting,
+so that a worker that died is replaced in a fraction of a second, not a Python start-up.
+
+Its first line on stdout says it is ready (``{"ready": {...}}``) or why it could not start
+(``{"error": {...}}``, exit 1); after that it writes nothing there (the service that started
+it may be gone). It logs to ``FOLDER/worker.log`` and exits 0 once the flight has ended and
+what it leaves is kept (or when told to ``stop``).
 
 It answers on the Unix socket ``FOLDER/worker.sock``, one JSON object per line. A request
 ``{"op": ..., "args": {...}}`` gets ``{"ok": true, "result": ...}`` or ``{"ok": false,
@@ -425,18 +429,37 @@ async def _main(folder: Path, db_url: str, resume: bool) -> int:
 
 def main(argv: Sequence[str] | None = None) -> int:
     ap = argparse.ArgumentParser(prog="python -m gcs.service.worker", description=__doc__)
-    ap.add_argument("folder", type=Path, help="the flight's folder (its spec.json)")
-    ap.add_argument("--db", required=True, help="the service's database URL")
+    ap.add_argument("folder", type=Path, nargs="?", help="the flight's folder (its spec.json)")
+    ap.add_argument("--db", help="the service's database URL")
     ap.add_argument("--resume", action="store_true", help="fly on from its checkpoint")
+    ap.add_argument(
+        "--standby",
+        action="store_true",
+        help="start, load everything, and wait for one flight: a line on stdin, "
+        '{"folder", "db", "resume"} (exit 0 at the end of stdin)',
+    )
     args = ap.parse_args(argv)
-    folder: Path = args.folder
+    if args.standby:
+        line = sys.stdin.readline()
+        if not line.strip():
+            return 0
+        doc = json.loads(line)
+        folder, db_url, resume = Path(doc["folder"]), str(doc["db"]), bool(doc["resume"])
+    elif args.folder is None or args.db is None:
+        ap.error("a flight's folder and --db are needed (or --standby)")
+    else:
+        folder, db_url, resume = args.folder, args.db, args.resume
     folder.mkdir(parents=True, exist_ok=True)
+    if args.standby:  # what the interpreter says on stderr goes to the flight's log too
+        fd = os.open(folder / LOG_FILE, os.O_WRONLY | os.O_CREAT | os.O_APPEND, 0o644)
+        os.dup2(fd, 2)
+        os.close(fd)
     logging.basicConfig(
         filename=folder / LOG_FILE,
         level=logging.INFO,
         format="%(asctime)s %(levelname)s %(name)s: %(message)s",
     )
-    return asyncio.run(_main(folder, args.db, args.resume))
+    return asyncio.run(_main(folder, db_url, resume))
 
 
 if __name__ == "__main__":

@@ -36,7 +36,7 @@ from gcs.service.ended import FINAL_FILE
 from gcs.service.scenariotext import Conflict, NotFound, ServiceError
 from gcs.service.worker import LINE_LIMIT, LOG_FILE, error_of, socket_path
 
-__all__ = ["RESTARTS", "WorkerFlight", "WorkerGone"]
+__all__ = ["RESTARTS", "Spawner", "WorkerFlight", "WorkerGone"]
 
 log = logging.getLogger(__name__)
 
@@ -46,6 +46,8 @@ vehicles heard)."""
 RESTARTS = 5
 RESTART_WINDOW_S = 60.0
 """A worker that died is started again at most :data:`RESTARTS` times in this many wall s."""
+MAP_WALL_S = 1.0
+"""The map is asked of a flight's worker at most this often (wall s)."""
 REQUEST_WALL_S = 30.0
 """How long (wall s) a command may take in the worker (an abort waits for its vehicles)."""
 
@@ -59,9 +61,9 @@ class WorkerGone(ServiceError):
 class WorkerFlight:
     """A flight flown by a worker process, as the service sees it."""
 
-    def __init__(self, folder: Path, ready: Mapping[str, Any], db_url: str) -> None:
+    def __init__(self, folder: Path, ready: Mapping[str, Any], spawner: Spawner) -> None:
         self.folder = folder
-        self.db_url = db_url
+        self.spawner = spawner
         self.id: str = ready["flight_id"]
         self.schedule_id: str = ready["schedule_id"]
         self.scenario_id: str = ready["scenario_id"]
@@ -80,11 +82,13 @@ class WorkerFlight:
         self._take_state(ready)
         self._feed: asyncio.Task[None] | None = None
         self._closing = False
+        self._map: tuple[float, dict[str, Any]] | None = None
+        self._map_asked: asyncio.Task[Any] | None = None
 
     # -- starting -------------------------------------------------------------------------------
 
     @classmethod
-    async def start(cls, folder: Path, db_url: str, *, resume: bool = False) -> WorkerFlight:
+    async def start(cls, folder: Path, spawner: Spawner, *, resume: bool = False) -> WorkerFlight:
         """Start a worker on the flight of ``folder`` (its spec, or with ``resume`` its
         checkpoint) and follow it once it is ready.
 
@@ -93,20 +97,20 @@ class WorkerFlight:
         ServiceError
             The worker could not make the flight (its error, made again).
         """
-        proc, ready = await _spawn(folder, db_url, resume)
-        flight = cls(folder, ready, db_url)
+        proc, ready = await spawner.spawn(folder, resume)
+        flight = cls(folder, ready, spawner)
         flight.proc = proc
         flight.follow()
         return flight
 
     @classmethod
-    async def adopt(cls, folder: Path, db_url: str) -> WorkerFlight | None:
+    async def adopt(cls, folder: Path, spawner: Spawner) -> WorkerFlight | None:
         """The worker a killed service process left flying in ``folder``, if it answers."""
         try:
             ready = (await _request(folder, "ready", {}, timeout_s=2.0))["result"]
         except (OSError, TimeoutError, ValueError, ServiceError):
             return None
-        flight = cls(folder, {**ready, "last_seq": 0}, db_url)
+        flight = cls(folder, {**ready, "last_seq": 0}, spawner)
         flight.follow()
         return flight
 
@@ -185,14 +189,25 @@ class WorkerFlight:
             raise WorkerGone(f"flight {self.id}: its worker did not answer ({err})") from None
         if "state" in doc and self.final is None:
             self._take_state(doc["state"])
+        if op != "map":
+            self._map = None  # a command may have changed it
         return doc.get("result")
 
     async def flight_map(self) -> dict[str, Any]:
+        """What the map draws: asked of the worker at most once per :data:`MAP_WALL_S` of
+        wall time however many clients ask (they share one request and its answer), so that
+        readers cannot keep the flight's loop busy."""
         if self.final is not None:
             if self.final[1] is None:
                 raise NotFound(f"flight {self.id} left no map")
             return self.final[1]
-        doc: dict[str, Any] = await self.request("map")
+        now = time.monotonic()
+        if self._map is not None and now - self._map[0] <= MAP_WALL_S:
+            return self._map[1]
+        if self._map_asked is None or self._map_asked.done():
+            self._map_asked = asyncio.get_running_loop().create_task(self.request("map"))
+        doc: dict[str, Any] = await asyncio.shield(self._map_asked)
+        self._map = (now, doc)
         return doc
 
     # -- the feed -------------------------------------------------------------------------------
@@ -258,13 +273,18 @@ class WorkerFlight:
         log.warning("flight %s: its worker (pid %d) died; flying on from its checkpoint",
                     self.id, self.pid)  # fmt: skip
         try:
-            self.proc, ready = await _spawn(self.folder, self.db_url, True)
+            self.proc, ready = await self.spawner.spawn(self.folder, True)
         except ServiceError as err:
             log.error("flight %s: not flown on: %s", self.id, err)
             return False
         self.pid = int(ready["pid"])
         self._told = 0
         self._take_state(ready)
+        kept = int(ready["last_seq"])
+        if kept < self.bus.last_seq:  # said, but not kept before the worker died
+            log.warning("flight %s: events %d-%d were lost with its worker",
+                        self.id, kept + 1, self.bus.last_seq)  # fmt: skip
+            self.bus.rebase(kept)
         return True
 
     def _end(self) -> None:
@@ -316,22 +336,92 @@ def _ended(flight: WorkerFlight) -> ServiceError:
     return Conflict(f"flight {flight.id} is {flight.state.value}")
 
 
-async def _spawn(
-    folder: Path, db_url: str, resume: bool
-) -> tuple[asyncio.subprocess.Process, dict[str, Any]]:
-    """Start a worker and read its first line: ready, or why not."""
-    args = [sys.executable, "-m", "gcs.service.worker", str(folder), "--db", db_url]
-    if resume:
-        args.append("--resume")
-    folder.mkdir(parents=True, exist_ok=True)
-    with (folder / LOG_FILE).open("ab") as errors:
-        proc = await asyncio.create_subprocess_exec(
-            *args,
-            stdin=asyncio.subprocess.DEVNULL,
-            stdout=asyncio.subprocess.PIPE,
-            stderr=errors,
-            start_new_session=True,  # a signal to the service's process group is not its
-        )
+class Spawner:
+    """Starts flight workers for one service process, keeping one more started ahead and
+    loaded (``--standby``): a flight created, or a worker that died replaced, then waits for
+    no Python start-up (over a second here). Close it with the service (:meth:`close`)."""
+
+    def __init__(self, db_url: str) -> None:
+        self.db_url = db_url
+        self._spare: asyncio.subprocess.Process | None = None
+        self._warming: asyncio.Task[None] | None = None
+
+    async def spawn(
+        self, folder: Path, resume: bool
+    ) -> tuple[asyncio.subprocess.Process, dict[str, Any]]:
+        """Start a worker on the flight of ``folder`` and read its first line: ready, or
+        why not."""
+        folder.mkdir(parents=True, exist_ok=True)
+        proc = await self._take_spare()
+        if proc is not None:
+            assert proc.stdin is not None
+            order = {"folder": str(folder), "db": self.db_url, "resume": resume}
+            proc.stdin.write(json.dumps(order).encode() + b"\n")
+            try:
+                await proc.stdin.drain()
+                proc.stdin.close()
+            except ConnectionError:
+                proc = None  # it died waiting: start one the slow way
+        if proc is None:
+            args = [sys.executable, "-m", WORKER, str(folder), "--db", self.db_url]
+            if resume:
+                args.append("--resume")
+            with (folder / LOG_FILE).open("ab") as errors:
+                proc = await asyncio.create_subprocess_exec(
+                    *args,
+                    stdin=asyncio.subprocess.DEVNULL,
+                    stdout=asyncio.subprocess.PIPE,
+                    stderr=errors,
+                    start_new_session=True,  # a signal to the service's group is not its
+                )
+        try:
+            return proc, await _ready(proc, folder)
+        finally:
+            self._warm()
+
+    async def _take_spare(self) -> asyncio.subprocess.Process | None:
+        if self._warming is not None:
+            with contextlib.suppress(Exception):
+                await self._warming
+        spare, self._spare = self._spare, None
+        if spare is None or spare.returncode is not None:
+            return None
+        return spare
+
+    def _warm(self) -> None:
+        """Start the next spare (in the background)."""
+        if self._spare is None and (self._warming is None or self._warming.done()):
+            self._warming = asyncio.get_running_loop().create_task(self._start_spare())
+
+    async def _start_spare(self) -> None:
+        self._spare = await asyncio.create_subprocess_exec(
+            sys.executable, "-m", WORKER, "--standby",
+            stdin=asyncio.subprocess.PIPE, stdout=asyncio.subprocess.PIPE,
+            stderr=asyncio.subprocess.DEVNULL, start_new_session=True,
+        )  # fmt: skip
+
+    async def close(self) -> None:
+        """The spare ends (its stdin closed)."""
+        if self._warming is not None:
+            self._warming.cancel()
+            with contextlib.suppress(BaseException):
+                await self._warming
+        spare, self._spare = self._spare, None
+        if spare is not None and spare.returncode is None:
+            assert spare.stdin is not None
+            spare.stdin.close()
+            try:
+                await asyncio.wait_for(spare.wait(), 5.0)
+            except TimeoutError:
+                spare.kill()
+                await spare.wait()
+
+
+WORKER = "gcs.service.worker"
+
+
+async def _ready(proc: asyncio.subprocess.Process, folder: Path) -> dict[str, Any]:
+    """A worker's first line: its ready document, or its error raised here."""
     assert proc.stdout is not None
     try:
         line = await asyncio.wait_for(proc.stdout.readline(), READY_WALL_S)
@@ -343,7 +433,8 @@ async def _spawn(
     except ValueError:
         doc = {}
     if "ready" in doc:
-        return proc, doc["ready"]
+        ready: dict[str, Any] = doc["ready"]
+        return ready
     await proc.wait()
     error = doc.get("error") or {"message": f"its worker exited ({proc.returncode})"}
     raise error_of(error)

@@ -94,3 +94,20 @@ def test_listeners_run_on_publish_and_can_be_removed() -> None:
     remove()
     bus.publish(_event(1))
     assert heard == [1]
+
+
+def test_a_mirror_takes_events_with_their_numbers_and_rebases_after_a_loss() -> None:
+    """A bus mirroring another process's (a flight worker's): each event kept under its own
+    number, an old one refused, and the next publish numbered on after the newest. When that
+    process died with events it had not kept, the mirror forgets them and numbers on from the
+    last kept, closing its subscriptions."""
+    source = EventBus()
+    said = [source.publish(_event(k)) for k in range(5)]
+    mirror = EventBus(first_seq=3)
+    assert [mirror.take(e) for e in said[2:]] == [True, True, True]
+    assert not mirror.take(said[3])
+    assert [e.seq for e in mirror.since(0)] == [3, 4, 5]
+    sub = mirror.subscribe(after_seq=0)
+    mirror.rebase(3)
+    assert sub.closed and [e.seq for e in mirror.since(0)] == [3]
+    assert mirror.publish(_event(9)).seq == 4
