@@ -85,6 +85,8 @@ bench: $(STAMP)
 	$(PY) bench/bench_geometry.py
 	$(PY) bench/bench_swarm.py --vehicles 100 --speedup 20
 	$(PY) bench/bench_jobs.py
+	$(PY) bench/bench_isolation.py
+	$(PY) bench/bench_failover.py
 
 clean:
 	rm -rf $(VENV) $(OUT) .mypy_cache .ruff_cache .pytest_cache .hypothesis

@@ -196,7 +196,8 @@ class WorkerFlight:
     async def flight_map(self) -> dict[str, Any]:
         """What the map draws: asked of the worker at most once per :data:`MAP_WALL_S` of
         wall time however many clients ask (they share one request and its answer), so that
-        readers cannot keep the flight's loop busy."""
+        readers cannot keep the flight's loop busy; asked again after any event or command
+        (a re-plan, a threat, an upload may have changed it)."""
         if self.final is not None:
             if self.final[1] is None:
                 raise NotFound(f"flight {self.id} left no map")
@@ -242,6 +243,7 @@ class WorkerFlight:
                 kind = msg.get("type")
                 if kind == "event":
                     self.bus.take(FlightEvent.from_wire(msg["data"]))
+                    self._map = None  # a re-plan, a threat, an upload: the map may differ
                 elif kind == "state":
                     self._take_state(msg["data"])
                 elif kind == "end":
