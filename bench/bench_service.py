@@ -24,10 +24,11 @@ rounding (5 us wall) does not matter, but a wall-clock mapping would need one wi
 each 0.2 s of simulated time: hence the probes, not the rate. Events published before the
 stream was open (its backlog) are not counted.
 
-Telemetry batches carry the ``t_s`` of the snapshot they were built from, and the stream
-reuses a snapshot up to 0.25 s old (``engine.snapshot(max_age_s=...)``): their lag is the age
-of the data, and any GET of the snapshot (the probes at 20 Hz, the load at 200 Hz) refreshes
-it.
+Telemetry batches carry the ``t_s`` of the snapshot they were built from. Since each flight
+flies in a worker process of its own, a snapshot is the flight's state as its worker last told
+the service (every 0.25 s of wall time), not a reading taken at the request: the probes then
+date the mission clock only to within that, and the lag figures are not measurements
+(docs/benchmarks.md gives the GETs, the arrivals and the CPU).
 
     python bench/bench_service.py [--rate 200] [--speedup 200] [--json OUT]
 """
