@@ -46,6 +46,12 @@ vehicles heard)."""
 RESTARTS = 5
 RESTART_WINDOW_S = 60.0
 """A worker that died is started again at most :data:`RESTARTS` times in this many wall s."""
+FEED_SILENCE_S = 15.0
+"""A worker's feed says the flight's state every 0.25 s of wall time: silent this long (wall
+s), it is taken as broken (the worker is asked, and killed if it does not answer)."""
+RECONNECT_WALL_S = 10.0
+"""How long (wall s) a worker that still runs may take to answer again after its feed broke
+before it is killed and replaced."""
 MAP_WALL_S = 1.0
 """The map is asked of a flight's worker at most this often (wall s)."""
 REQUEST_WALL_S = 30.0
@@ -221,10 +227,34 @@ class WorkerFlight:
                     break
                 if await self._ended_meanwhile():
                     break
+                if self._worker_alive():
+                    # Its feed broke but it runs: follow it again if it answers; one that
+                    # does not is killed before another is started (never two workers on
+                    # one flight's vehicles).
+                    if await self._answers_within(RECONNECT_WALL_S):
+                        continue
+                    log.error("flight %s: its worker (pid %d) stopped answering: killed",
+                              self.id, self.pid)  # fmt: skip
+                    self.kill()
                 if not await self._restart():
                     break
         finally:
             self._end()
+
+    def _worker_alive(self) -> bool:
+        if self.proc is not None and self.proc.pid == self.pid:
+            return self.proc.returncode is None
+        return _alive(self.pid)
+
+    async def _answers_within(self, wall_s: float) -> bool:
+        deadline = time.monotonic() + wall_s
+        while time.monotonic() < deadline and self._worker_alive():
+            try:
+                await _request(self.folder, "state", {}, timeout_s=1.0)
+                return True
+            except (OSError, TimeoutError, ValueError, ServiceError):
+                await asyncio.sleep(0.1)
+        return False
 
     async def _read_feed(self) -> bool:
         """Read the feed until it ends (True) or breaks (False: the worker died)."""
@@ -238,7 +268,7 @@ class WorkerFlight:
             req = {"op": "follow", "args": {"after_seq": self.bus.last_seq}}
             writer.write(json.dumps(req).encode() + b"\n")
             await writer.drain()
-            while line := await reader.readline():
+            while line := await asyncio.wait_for(reader.readline(), FEED_SILENCE_S):
                 msg = json.loads(line)
                 kind = msg.get("type")
                 if kind == "event":
@@ -249,8 +279,8 @@ class WorkerFlight:
                 elif kind == "end":
                     return True
             return False
-        except (OSError, ValueError, asyncio.IncompleteReadError):
-            return False
+        except (OSError, ValueError, TimeoutError, asyncio.IncompleteReadError):
+            return False  # broken, or silent (a hung worker)
         finally:
             writer.close()
 
@@ -272,6 +302,9 @@ class WorkerFlight:
             return False
         self.restarts.append(now)
         await self._wait_gone(5.0)
+        if self._worker_alive():
+            self.kill()
+            await self._wait_gone(5.0)
         log.warning("flight %s: its worker (pid %d) died; flying on from its checkpoint",
                     self.id, self.pid)  # fmt: skip
         try:
