@@ -390,13 +390,13 @@ class Engine:
 
     # -- reading --------------------------------------------------------------------------------
 
-    def snapshot(self, flight_id: str, *, max_age_s: float = 0.0) -> dict[str, Any]:
+    def snapshot(self, flight_id: str) -> dict[str, Any]:
         """The flight's snapshot (as its worker last told it, within a quarter of a second
         of wall time)."""
         found = self.known(flight_id)
         if isinstance(found, EndedFlight):
             return found.snapshot
-        return found.snapshot(max_age_s=max_age_s)
+        return found.snapshot()
 
     async def flight_map(self, flight_id: str) -> dict[str, Any]:
         """What the map draws (:meth:`Flight.flight_map`)."""

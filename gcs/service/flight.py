@@ -130,7 +130,6 @@ class Flight:
         """Its bundled simulator has been stopped (its pid, were it another process's, may
         be another program's by now)."""
         self._wall0 = time.perf_counter()
-        self._snapshot_cache: tuple[float, dict[str, Any]] | None = None
         self._keeper: FlightKeeper | None = FlightKeeper(store, flight_id, runner.bus)
         runner.on_checkpoint = self._keeper.checkpoints.offer
 
@@ -286,19 +285,11 @@ class Flight:
         """It has ended and its record, report and last snapshot are kept."""
         return self.runner.state in ENDED and self.final is not None
 
-    def snapshot(self, *, max_age_s: float = 0.0) -> dict[str, Any]:
-        """The flight's snapshot; with ``max_age_s``, one taken that recently may be given
-        again (many stream clients share one per flight)."""
+    def snapshot(self) -> dict[str, Any]:
+        """The flight's snapshot now (its last, as kept, once it is over)."""
         if self.final is not None:
             return self.final[0]
-        now = time.monotonic()
-        if max_age_s > 0.0 and self._snapshot_cache is not None:
-            taken, snap = self._snapshot_cache
-            if now - taken <= max_age_s:
-                return snap
-        snap = self._snapshot()
-        self._snapshot_cache = (now, snap)
-        return snap
+        return self._snapshot()
 
     def _snapshot(self) -> dict[str, Any]:
         snap = self.runner.snapshot()

@@ -36,7 +36,7 @@ from planner.scenario import Scenario
 from planner.schedule import Schedule
 from planner.schedulefile import path_mission
 
-__all__ = ["JOB_ENDED", "Job", "JobState", "Limits", "PlannedSchedule", "Planning"]
+__all__ = ["JOB_ENDED", "Job", "JobState", "Limits", "PlannedSchedule", "Planning", "kept_planned"]
 
 log = logging.getLogger(__name__)
 
@@ -341,14 +341,7 @@ class Planning:
         entry = self.schedules.get(schedule_id)
         if entry is not None:
             return entry
-        try:
-            row, blob = await asyncio.to_thread(self.store.schedule, schedule_id)
-        except StoreNotFound:
-            raise NotFound(f"no schedule {schedule_id!r}") from None
-        scenario, schedule, world = await asyncio.to_thread(planjobs.kept_schedule, blob)
-        entry = PlannedSchedule(
-            row.id, row.scenario_id, scenario, schedule, world, row.seed, row.plan_wall_s
-        )
+        entry = await asyncio.to_thread(kept_planned, self.store, schedule_id)
         self.schedules[entry.id] = entry
         return entry
 
@@ -378,3 +371,21 @@ def _with_arrival(scenario: Scenario, required_arrival_s: float) -> Scenario:
             "required_arrival_s: needs a team arrival kind (simultaneous, spaced, waves)"
         )
     return out
+
+
+def kept_planned(store: Store, schedule_id: str) -> PlannedSchedule:
+    """A planned schedule as the store keeps it (read and unpickled: seconds for a large team).
+
+    Raises
+    ------
+    NotFound
+        No such schedule.
+    """
+    try:
+        row, blob = store.schedule(schedule_id)
+    except StoreNotFound:
+        raise NotFound(f"no schedule {schedule_id!r}") from None
+    scenario, schedule, world = planjobs.kept_schedule(blob)
+    return PlannedSchedule(
+        row.id, row.scenario_id, scenario, schedule, world, row.seed, row.plan_wall_s
+    )

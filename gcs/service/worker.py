@@ -43,10 +43,9 @@ from pydantic import TypeAdapter
 
 from gcs.errors import GcsError
 from gcs.mavlink.signing import SigningConfig
-from gcs.service import planjobs
 from gcs.service.fleet import Fleet
 from gcs.service.flight import Flight, Rehearsal
-from gcs.service.planning import PlannedSchedule
+from gcs.service.planning import kept_planned
 from gcs.service.scenariotext import (
     Conflict,
     Infeasible,
@@ -55,12 +54,13 @@ from gcs.service.scenariotext import (
     PreconditionFailed,
     ServiceError,
 )
-from gcs.store.repository import Store, StoreNotFound
+from gcs.store.repository import Store
 from planner.scenario import Threat
 
 __all__ = [
     "LOG_FILE",
     "PID_FILE",
+    "READS",
     "SOCKET_FILE",
     "SPEC_FILE",
     "STATE_WALL_S",
@@ -85,6 +85,8 @@ END_WAIT_S = 10.0
 """Once the flight is over, how long (wall s) the worker waits for its followers to read the
 end before it exits."""
 _THREAT: TypeAdapter[Threat] = TypeAdapter(Threat)
+READS = frozenset({"state", "ready", "map", "team_time"})
+"""The operations that change nothing: answered without the flight's state."""
 LINE_LIMIT = 1 << 20
 """The longest request line read (bytes)."""
 
@@ -200,10 +202,8 @@ class LoopWatch:
 class Worker:
     """Serves one flight on its socket until it is over."""
 
-    def __init__(self, flight: Flight, fleet: Fleet, store: Store) -> None:
+    def __init__(self, flight: Flight) -> None:
         self.flight = flight
-        self.fleet = fleet
-        self.store = store
         self.watch = LoopWatch()
         self.ended = asyncio.Event()
         self.stopping = False
@@ -211,6 +211,8 @@ class Worker:
         self._followers = 0
         self._told = 0
         """States told so far: each numbered, so that an older one read late is not taken."""
+        self._figures: tuple[int, dict[str, Any]] | None = None
+        """The flight's figures and the last event they count (they change with events only)."""
         flight.on_over = lambda _: self.ended.set()
         flight.about_worker = self.about
 
@@ -226,8 +228,14 @@ class Worker:
             "n": self._told,
             "snapshot": self.flight.snapshot(),
             "vehicles": self.flight.vehicle_views(),
-            "figures": self.flight.figures(),
+            "figures": self._figures_now(),
         }
+
+    def _figures_now(self) -> dict[str, Any]:
+        last_seq = self.flight.bus.last_seq
+        if self._figures is None or self._figures[0] != last_seq:
+            self._figures = last_seq, self.flight.figures()
+        return self._figures[1]
 
     def ready(self) -> dict[str, Any]:
         f = self.flight
@@ -291,6 +299,8 @@ class Worker:
         except Exception as err:
             log.exception("%s failed", op)
             return {"ok": False, "error": {"message": f"{op}: {type(err).__name__}: {err}"}}
+        if op in READS:
+            return {"ok": True, "result": result}
         self._changed.set()
         # The state after it, with the answer: what the service answers next shows it.
         return {"ok": True, "result": result, "state": self.state()}
@@ -373,17 +383,6 @@ def _say(doc: Mapping[str, Any]) -> None:
 # -- the process ----------------------------------------------------------------------------------
 
 
-def _planned(store: Store, schedule_id: str) -> PlannedSchedule:
-    try:
-        row, blob = store.schedule(schedule_id)
-    except StoreNotFound:
-        raise NotFound(f"no schedule {schedule_id!r}") from None
-    scenario, schedule, world = planjobs.kept_schedule(blob)
-    return PlannedSchedule(
-        row.id, row.scenario_id, scenario, schedule, world, row.seed, row.plan_wall_s
-    )
-
-
 async def _flight(folder: Path, store: Store, fleet: Fleet, resume: bool) -> Flight:
     if resume:
         fid = folder.name
@@ -392,7 +391,7 @@ async def _flight(folder: Path, store: Store, fleet: Fleet, resume: bool) -> Fli
             raise ServiceError(f"flight {fid}: no checkpoint to fly on from")
         return flight
     spec = FlightSpec.read(folder)
-    entry = _planned(store, spec.schedule_id)
+    entry = kept_planned(store, spec.schedule_id)
     vehicles = None
     if spec.vehicles is not None:
         for v in spec.vehicles:
@@ -416,7 +415,7 @@ async def _main(folder: Path, db_url: str, resume: bool) -> int:
             except (GcsError, OSError, TimeoutError, ValueError) as err:
                 _say({"error": {"type": "ServiceError", "message": str(err)}})
                 return 1
-            await Worker(flight, fleet, store).run(folder)
+            await Worker(flight).run(folder)
             if flight.task is not None and not flight.task.done() and not flight.over:
                 # Stopped with live vehicles in the air: the next worker flies them on.
                 flight.task.cancel()

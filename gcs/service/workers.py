@@ -34,7 +34,7 @@ from gcs.coordination.events import FlightEvent
 from gcs.coordination.runner import ENDED, FlightState
 from gcs.service.ended import FINAL_FILE
 from gcs.service.scenariotext import Conflict, NotFound, ServiceError
-from gcs.service.worker import LINE_LIMIT, LOG_FILE, error_of, socket_path
+from gcs.service.worker import LINE_LIMIT, LOG_FILE, READS, error_of, socket_path
 
 __all__ = ["RESTARTS", "Spawner", "WorkerFlight", "WorkerGone"]
 
@@ -148,7 +148,7 @@ class WorkerFlight:
         """It has ended and what it leaves is kept (its record, report and last snapshot)."""
         return self.final is not None
 
-    def snapshot(self, *, max_age_s: float = 0.0) -> dict[str, Any]:
+    def snapshot(self) -> dict[str, Any]:
         """The flight's snapshot as the worker last told it (at most
         :data:`~gcs.service.worker.STATE_WALL_S` of wall time old)."""
         if self.final is not None:
@@ -195,7 +195,7 @@ class WorkerFlight:
             raise WorkerGone(f"flight {self.id}: its worker did not answer ({err})") from None
         if "state" in doc and self.final is None:
             self._take_state(doc["state"])
-        if op != "map":
+        if op not in READS:
             self._map = None  # a command may have changed it
         return doc.get("result")
 
@@ -225,7 +225,7 @@ class WorkerFlight:
                 ended = await self._read_feed()
                 if ended or self._closing:
                     break
-                if await self._ended_meanwhile():
+                if self._ended_meanwhile():
                     break
                 if self._worker_alive():
                     # Its feed broke but it runs: follow it again if it answers; one that
@@ -284,13 +284,18 @@ class WorkerFlight:
         finally:
             writer.close()
 
-    async def _ended_meanwhile(self) -> bool:
-        """The worker went: did its flight end first (its last snapshot kept, ended)?"""
+    def _kept_final(self) -> dict[str, Any] | None:
+        """What the flight left when it ended (its last snapshot and map), if it did."""
         try:
-            doc = json.loads((self.folder / FINAL_FILE).read_text())
+            doc: dict[str, Any] = json.loads((self.folder / FINAL_FILE).read_text())
         except (OSError, ValueError):
-            return False
-        return doc.get("snapshot", {}).get("state") in {s.value for s in ENDED}
+            return None
+        return doc if "snapshot" in doc else None
+
+    def _ended_meanwhile(self) -> bool:
+        """The worker went: did its flight end first (its last snapshot kept, ended)?"""
+        doc = self._kept_final()
+        return doc is not None and doc["snapshot"].get("state") in {s.value for s in ENDED}
 
     async def _restart(self) -> bool:
         """Start the flight's worker again on its checkpoint; False once it has died too
@@ -323,11 +328,8 @@ class WorkerFlight:
         return True
 
     def _end(self) -> None:
-        try:
-            doc = json.loads((self.folder / FINAL_FILE).read_text())
-            self.final = doc["snapshot"], doc.get("map")
-        except (OSError, ValueError, KeyError):
-            self.final = None
+        doc = self._kept_final()
+        self.final = None if doc is None else (doc["snapshot"], doc.get("map"))
         if self.final is None and self._closing:
             return
         if self.final is None:

@@ -20,7 +20,7 @@ class _Engine:
     def known(self, flight_id: str) -> Any:
         return self.flight
 
-    def snapshot(self, flight_id: str, *, max_age_s: float = 0.0) -> dict[str, Any]:
+    def snapshot(self, flight_id: str) -> dict[str, Any]:
         return {"t_s": 0.0, "state": "running", "team_time_s": 1.0, "team_time_version": 1,
                 "vehicles": []}  # fmt: skip
 
