@@ -11,7 +11,9 @@ clients GETting ``/v1/health``, the snapshot and the map in turn for ``--read-s`
 
 Figures: each arrival against its slot by the simulator's truth log (:mod:`tests.verdict`),
 the flight worker's longest event-loop stall (its own measure, in its last snapshot), the
-``/v1/health`` latencies under the load, and every 5xx.
+service's own (``/metrics``), the ``/v1/health`` latencies under the load as a monitor asking
+every 0.1 s from a process of its own sees them (and, apart, as the readers saw them, their
+crowded process's own delays within), and every 5xx.
 
 Targets: every arrival within +/-1 s; the worker's longest stall <= 50 ms; ``/v1/health`` p99
 <= 50 ms; no 5xx.
@@ -88,14 +90,22 @@ def main() -> int:
             verdict = judge(record, truth, tolerance_s=1.0, team_shift_max_s=600.0,
                             together_min_s=0.0)  # fmt: skip
         errors = verdict.errors_s() if verdict is not None else record.get("arrival_errors_s")
+        log_file = _data_dir(pid) / "flights" / fid / "worker.log"
+        held = [ln for ln in log_file.read_text().splitlines() if "event loop was held" in ln]
+        metrics = ok(c.get("/metrics"), "metrics", text=True)
     out = {
         "speedup": args.speedup,
         "state": snap["state"],
         "arrival_errors_s": errors,
         "worker_loop_stall_max_ms": snap.get("worker", {}).get("loop_stall_max_ms"),
+        "worker_loop_holds_over_50_ms": held[-20:],
+        "api_loop_stall_max_ms": _api_stall_ms(metrics),
         "health_p50_ms": round(seen.percentile_ms(0.50), 1),
         "health_p99_ms": round(seen.percentile_ms(0.99), 1),
         "health_requests": len(seen.health_ms),
+        "reader_health_p50_ms": round(seen.percentile_ms(0.50, readers=True), 1),
+        "reader_health_p99_ms": round(seen.percentile_ms(0.99, readers=True), 1),
+        "reader_answers": sum(seen.statuses.values()),
         "statuses": dict(seen.statuses),
         "server_errors": seen.server_errors[:20],
         "jobs_cancelled": seen.cancelled,
@@ -105,6 +115,14 @@ def main() -> int:
     if args.json:
         args.json.write_text(json.dumps(out, indent=1) + "\n")
     return 0
+
+
+def _api_stall_ms(metrics: str) -> float | None:
+    """The service's own figure of how long its event loop was held at most (``/metrics``)."""
+    for line in metrics.splitlines():
+        if line.startswith("tcgcs_api_loop_stall_max_seconds "):
+            return round(float(line.split()[1]) * 1e3, 1)
+    return None
 
 
 def _data_dir(pid: int) -> Path:

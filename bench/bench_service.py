@@ -114,9 +114,12 @@ def cpu_s(pid: int) -> float:
     return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
 
 
-def ok(r: httpx.Response, what: str) -> Any:
+def ok(r: httpx.Response, what: str, *, text: bool = False) -> Any:
+    """The answer's JSON (its text with ``text``); an error answer ends the benchmark."""
     if r.status_code >= 400:
         raise SystemExit(f"{what}: HTTP {r.status_code}: {r.text[:500]}")
+    if text:
+        return r.text
     return r.json() if r.content else None
 
 

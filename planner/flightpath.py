@@ -444,6 +444,22 @@ class FlightPath:
             )
         return FlightPath(self.segments + other.segments)
 
+    def prefix(self, s_m: float) -> FlightPath | None:
+        """The first ``s_m`` metres of this route (None when ``s_m`` is ~0)."""
+        if s_m <= 1e-6:
+            return None
+        if s_m >= self._length_m:
+            return self
+        out: list[Segment] = []
+        for start, seg in zip(self._starts_m, self.segments, strict=True):
+            if start >= s_m:
+                break
+            if start + seg.length_m <= s_m:
+                out.append(seg)
+            else:
+                out.append(Segment(seg.start, s_m - start, seg.turn, seg.radius_m))
+        return FlightPath(tuple(out))
+
 
 _PROJECT_SLACK_M = 1e-3
 # A segment whose bounding box is farther than the best distance by this much cannot be

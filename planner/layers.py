@@ -39,7 +39,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from planner.deconflict import Separation, TeamSamples, separation
-from planner.scenario import Vehicle
+from planner.scenario import Scenario, Vehicle
 from planner.schedule import VehicleSchedule
 from planner.sequencing import SEPARATION_CHECK_MARGIN
 
@@ -57,8 +57,30 @@ LANE_STRETCHES_M = (math.inf, 20_000.0, 40_000.0, 80_000.0)
 """A vehicle timed on a layer (:func:`lanes`) flies it over the last this many metres of its
 path before the goal (and the climb to it); ``inf``: all its path after the climb-out. In
 this order: all of it first, then the shortest stretch."""
+LAYER_STEPS = 3
+"""A vehicle leaves its profile by one, two or three layer steps at most (:func:`layer_step_m`):
+in flight (:mod:`gcs.coordination.vertical`), and a re-plan where the scenario names no
+layers (:func:`replan_layers_m`)."""
 LIFT_ROUNDS = 8
 """Passes over the team's conflicts at most (each lowers their number, or the search ends)."""
+
+
+def layer_step_m(scenario: Scenario) -> float:
+    """The height of one layer, m: the scenario's first altitude layer, or half its separation
+    minimum without one (a pair a layer apart at one place is then as far apart vertically as
+    half ``d_s``; two steps make the whole of it)."""
+    layers = scenario.altitude_layers_m
+    return float(layers[0]) if layers else 0.5 * scenario.separation_m
+
+
+def replan_layers_m(scenario: Scenario) -> tuple[float, ...]:
+    """The layers a re-plan may lift a vehicle onto, lowest first, m: the scenario's, or
+    without any, :data:`LAYER_STEPS` steps of :func:`layer_step_m` (the heights the in-flight
+    resolution climbs by)."""
+    if scenario.altitude_layers_m:
+        return tuple(float(h) for h in scenario.altitude_layers_m)
+    step_m = layer_step_m(scenario)
+    return tuple(k * step_m for k in range(1, LAYER_STEPS + 1))
 
 
 def layer_profile(
@@ -179,6 +201,7 @@ def lift_team(
     *,
     from_s: float = -math.inf,
     lift_from_m: Mapping[str, float] | None = None,
+    time_up: Callable[[], bool] | None = None,
 ) -> tuple[dict[str, Lifted[T]], Separation]:
     """Lift vehicles onto the altitude layers ``heights_m`` over the stretches where they
     come too close to another, until the team keeps ``required_m`` or no lift helps.
@@ -210,6 +233,8 @@ def lift_team(
         When given, only these vehicles may be lifted, each only from this far along its
         path on (its climb to the layer included): a vehicle in flight keeps what it will
         have flown before its new mission starts.
+    time_up
+        Says when the caller's wall time is spent: no lift is tried after it.
 
     Returns
     -------
@@ -256,6 +281,8 @@ def lift_team(
         progress = False
         closest = {vid: samples.closest(vs, within_m=enough) for vid, vs in current.items()}
         for vid in sorted(closest, key=lambda k: closest[k][0]):
+            if time_up is not None and time_up():
+                break
             # Looked up again only once a lift this round may have changed it.
             near, who, when_s = (
                 samples.closest(current[vid], within_m=enough) if progress else closest[vid]

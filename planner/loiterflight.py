@@ -37,7 +37,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-__all__ = ["LINED_UP_RAD", "LoiterFlight", "loiter_flight"]
+__all__ = ["LINED_UP_RAD", "LoiterFlight", "loiter_flight", "way_out_m"]
 
 _TAU = 2.0 * math.pi
 _G = 9.80665
@@ -120,6 +120,45 @@ def loiter_flight(
     return LoiterFlight(entry_m, sweep * radius_m, -along_m, _wrap(counted), _wrap(leaves))
 
 
+def way_out_m(de: float, dn: float, course_rad: float, ground_speed_m_s: float) -> float:
+    """How far an aircraft taken out of its turns flies to the waypoint it is sent to, m.
+
+    ArduPlane made to fly the item after its NAV_LOITER_TURNS (MISSION_SET_CURRENT) leaves
+    the circle at once and flies at the waypoint: from its course, it turns towards it at the
+    roll limit (the L1 law asks more than the limit allows for a large heading error), then
+    flies straight. ``(de, dn)``: the waypoint from the aircraft, m; ``course_rad``: its
+    ground course. A waypoint inside both turning circles (nearer than one can reach
+    turning) is counted as half a turn more than the straight line.
+    """
+    rho = _turn_radius_m(ground_speed_m_s)
+    straight_m = math.hypot(de, dn)
+    if rho <= 0.0:
+        return straight_m
+    best = math.inf
+    for sign in (1.0, -1.0):  # clockwise (right), anticlockwise (left)
+        # The turn's centre, to that side of the course.
+        ce = sign * rho * math.cos(course_rad)
+        cn = -sign * rho * math.sin(course_rad)
+        we, wn = de - ce, dn - cn
+        d = math.hypot(we, wn)
+        if d < rho:
+            continue
+        # Bearing (from the centre) of where it starts on the circle, and of where the line
+        # to the waypoint leaves it tangentially.
+        start = course_rad - sign * 0.5 * math.pi
+        leave = math.atan2(we, wn) - sign * math.acos(rho / d)
+        turn = (sign * (leave - start)) % _TAU
+        if turn > _TAU - 1e-9:  # round-off of no turn at all
+            turn = 0.0
+        best = min(best, rho * turn + math.sqrt(d * d - rho * rho))
+    return best if math.isfinite(best) else straight_m + math.pi * rho
+
+
+def _turn_radius_m(ground_speed_m_s: float) -> float:
+    """The radius of a turn at the roll limit, m."""
+    return ground_speed_m_s**2 / (_G * math.tan(ROLL_LIMIT_RAD))
+
+
 def _wrap(a: float) -> float:
     return math.atan2(math.sin(a), math.cos(a))
 
@@ -158,7 +197,7 @@ def _from_inside(
         counted = math.atan2(pe, pn)
     # Headed at the centre, the circle law turns it against the loiter's way round at the roll
     # limit until it heads straight out: the centre passes on the loiter's side.
-    rho = ground_speed_m_s**2 / (_G * math.tan(ROLL_LIMIT_RAD))
+    rho = _turn_radius_m(ground_speed_m_s)
     course, way_m, gained, bearing = heading_rad, 0.0, 0.0, counted
     step = min(1.0, 0.02 * rho)
     toward = pe * math.sin(course) + pn * math.cos(course) < 0.0

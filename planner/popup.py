@@ -17,9 +17,10 @@ import numpy as np
 from planner.aco import AcoOptions
 from planner.deconflict import TeamTracks
 from planner.errors import InfeasibleError
-from planner.flightpath import FlightPath, Segment
+from planner.flightpath import FlightPath
 from planner.plan import Method, World, build_problem, build_world, solve_and_finish
 from planner.replanseparation import separate_replan
+from planner.replantiming import retime_through
 from planner.retime import (
     Retimed,
     anchored_state,
@@ -44,23 +45,6 @@ from planner.schedule import (
 )
 from planner.threats import ThreatZone, active, build_threats
 from planner.timing import TIME_TOL_S
-
-
-def truncate_path(path: FlightPath, s_m: float) -> FlightPath | None:
-    """The first ``s_m`` metres of a path (None when ``s_m`` is ~0)."""
-    if s_m <= 1e-6:
-        return None
-    if s_m >= path.length_m:
-        return path
-    out: list[Segment] = []
-    for start, seg in zip(path.cumulative_m(), path.segments, strict=True):
-        if start >= s_m:
-            break
-        if start + seg.length_m <= s_m:
-            out.append(seg)
-        else:
-            out.append(Segment(seg.start, s_m - start, seg.turn, seg.radius_m))
-    return FlightPath(tuple(out))
 
 
 def _anchor_t(at_s: float, anchor: Anchor | None) -> float:
@@ -119,7 +103,7 @@ def _replan(
     for vid, route in zip(vehicle_ids, routes, strict=True):
         vs = schedule.vehicle(vid)
         s0 = poses[vid][0] if vid in poses else 0.0
-        prefix = truncate_path(vs.path, s0)
+        prefix = vs.path.prefix(s0)
         path = route.path if prefix is None else FlightPath(prefix.segments + route.path.segments)
         keep = vs.wp_s_m < s0 - 1e-6
         wp_s = np.concatenate([vs.wp_s_m[keep], np.asarray(route.profile.s_m) + s0])
@@ -159,6 +143,7 @@ def apply_popup(
     loiter_margin_m_s: float = 0.0,
     time_up: Callable[[], bool] | None = None,
     others_may_stay: bool = False,
+    separation_up: Callable[[], bool] | None = None,
 ) -> PopupOutcome:
     """Re-plan around one new threat from where the team is at ``at_s`` and re-time it.
 
@@ -184,6 +169,10 @@ def apply_popup(
         Ends the route search with the best routes so far when it says so (asked between
         its iterations: :attr:`planner.aco.AcoOptions.time_up`); the routes are finished and
         checked as always.
+    separation_up
+        Ends the separation of the re-planned team (:func:`planner.replanseparation.
+        separate_replan`: timing, then altitude layers) with what it has separated so far
+        when it says so; the pairs left are said as always.
     others_may_stay
         In flight: when no arrival time remains common to the re-planned vehicles and the
         others (those others cannot wait as long), the re-planned ones are timed among
@@ -328,16 +317,31 @@ def apply_popup(
         and (where[v.id][0] == "ground" or not anchors or v.id in anchors)
     }
 
-    def lifted(up: VehicleSchedule) -> VehicleSchedule | None:
+    def lifted(up: VehicleSchedule) -> Retimed | None:
         try:
-            r = retime(up, None)
+            return retime(up, None)
         except InfeasibleError:
             return None
-        adjusted[up.vehicle_id] = tuple(r.adjustments)
-        return r.schedule
 
-    kept = separate_replan(scenario, final, from_s=at_s, lift_from_m=lift_from_m, retime=lifted)
+    def through(vs: VehicleSchedule, via_s_m: float, via_t_s: float) -> Retimed | None:
+        vid = vs.vehicle_id
+        anchor = anchors.get(vid)
+        at = (anchor.s_m, anchor.speed_m_s) if where[vid][0] == "leg" and anchor else None
+        try:
+            return retime_through(
+                scenario, scenario.vehicle(vid), vs, now_s=t_at[vid], via_s_m=via_s_m,
+                via_t_s=via_t_s, target_s=targets[vid], step_m_s=current.step_m_s,
+                threats=threats, at=at,
+            )  # fmt: skip
+        except InfeasibleError:
+            return None
+
+    kept = separate_replan(
+        scenario, final, from_s=at_s, lift_from_m=lift_from_m, rerouted=affected,
+        retime=lifted, through=through, time_up=separation_up,
+    )  # fmt: skip
     final = kept.vehicles
+    adjusted.update(kept.adjustments)
     events.extend(kept.events)
     adjustments = [a for done in adjusted.values() for a in done]
     retimed = [final[v.id] for v in scenario.vehicles]

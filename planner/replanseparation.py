@@ -7,11 +7,15 @@ team is checked in 4-D from the re-plan's start on: every pair, each as it will 
 (the new routes and timings, the others' as they stand), by the 3-D distance the plan and the
 flight's truth measure (:func:`planner.deconflict.separation`).
 
-A pair under ``d_s`` is separated by the plan-time means the scenario allows:
+A pair under ``d_s`` is separated by the plan-time means, in stages, each only for the pairs
+the ones before it leave under ``d_s``, while the re-plan's wall time lasts:
 
-- altitude layers (``altitude_layers_m``, :func:`planner.layers.lift_team`): one of the pair
-  flies a layer higher over the stretch where they meet, only where its new mission flies
-  (past the waypoint it is spliced at), timed again for its slot;
+1. timing (:func:`planner.replantiming.time_apart`): a re-routed vehicle passes the place
+   where it would come too close earlier or later, and still arrives at its slot;
+2. altitude layers (:func:`planner.layers.lift_team`): one of the pair flies a layer higher
+   over the stretch where they meet, only where its new mission flies (past the waypoint it
+   is spliced at), timed again for its slot. The scenario's layers, or without any, the
+   heights the in-flight resolution climbs by (:func:`planner.layers.replan_layers_m`).
 
 What none of them separates is said before it is installed: a ``conflict`` event with the
 pair, when and how close, and an ``alarm``.
@@ -20,13 +24,15 @@ pair, when and how close, and an ``alarm``.
 from __future__ import annotations
 
 import math
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Collection, Mapping
 from dataclasses import dataclass
 
-from planner.deconflict import PairSeparation
-from planner.layers import lift_team
+from planner.deconflict import PairSeparation, separation
+from planner.layers import Lifted, lift_team, replan_layers_m
+from planner.replantiming import Through, time_apart
+from planner.retime import Retimed
 from planner.scenario import Scenario
-from planner.schedule import Event, VehicleSchedule
+from planner.schedule import Adjustment, Event, VehicleSchedule
 
 __all__ = ["ReplanSeparation", "separate_replan"]
 
@@ -36,7 +42,12 @@ class ReplanSeparation:
     """The re-planned team as separated, and what was done and left."""
 
     vehicles: dict[str, VehicleSchedule]
-    """Every vehicle's schedule, by id (a lifted one's new, the others' as given)."""
+    """Every vehicle's schedule, by id (a re-timed or lifted one's new, the others' as
+    given)."""
+    adjustments: dict[str, tuple[Adjustment, ...]]
+    """The timing adjustments of each vehicle re-timed or lifted, by id."""
+    timed: tuple[str, ...]
+    """The vehicles timed to pass earlier or later to keep the separation."""
     lifted: tuple[str, ...]
     """The vehicles flown on a layer to keep the separation."""
     conflicts: tuple[PairSeparation, ...]
@@ -60,7 +71,10 @@ def separate_replan(
     *,
     from_s: float,
     lift_from_m: Mapping[str, float],
-    retime: Callable[[VehicleSchedule], VehicleSchedule | None],
+    rerouted: Collection[str],
+    retime: Callable[[VehicleSchedule], Retimed | None],
+    through: Through,
+    time_up: Callable[[], bool] | None = None,
 ) -> ReplanSeparation:
     """Check the re-planned ``team`` from ``from_s`` on and separate what it can.
 
@@ -76,40 +90,81 @@ def separate_replan(
         The vehicles that get a new mission, each with the distance along its path (m) its
         new mission starts at (0 for one still on the ground): only these may be lifted,
         and only past that point.
+    rerouted
+        The vehicles routed round the zone: of those of ``lift_from_m``, only these may be
+        timed to pass earlier or later.
     retime
         Times a lifted schedule again for its vehicle's slot, from where it is; None when
         it cannot.
+    through
+        Times a schedule for its slot through a place at a time (:data:`~planner.
+        replantiming.Through`).
+    time_up
+        Says when the re-plan's wall time is spent: a stage is not begun after it, and the
+        one under way ends with what it has.
     """
     required = scenario.separation_m
     order = [v.id for v in scenario.vehicles]
     vehicles = {v.id: v for v in scenario.vehicles}
-
-    def timed(up: VehicleSchedule) -> tuple[VehicleSchedule, None] | None:
-        r = retime(up)
-        return None if r is None else (r, None)
-
-    lifted, sep = lift_team(
-        [team[vid] for vid in order],
-        team,
-        vehicles,
-        scenario.altitude_layers_m,
-        required,
-        timed,
-        from_s=from_s,
-        lift_from_m=lift_from_m,
-    )
-    out = {vid: lifted[vid].schedule if vid in lifted else team[vid] for vid in order}
+    up = time_up or (lambda: False)
+    current = dict(team)
+    adjustments: dict[str, tuple[Adjustment, ...]] = {}
     events: list[Event] = []
+    sep = separation([current[vid] for vid in order], required, from_s=from_s)
+    timed: list[str] = []
+    if sep.conflicts and not up():
+        movable = [vid for vid in order if vid in rerouted and vid in lift_from_m]
+        moved, sep = time_apart(
+            [current[vid] for vid in order], required, from_s=from_s, movable=movable,
+            through=through, time_up=up,
+        )  # fmt: skip
+        for vid, m in moved.items():
+            current[vid] = m.schedule
+            adjustments[vid] = tuple(m.chosen.retimed.adjustments)
+            timed.append(vid)
+            p = m.conflict
+            other = p.b if p.a == vid else p.a
+            shift = m.chosen.shift_s
+            events.append(
+                Event(
+                    from_s,
+                    "conflict",
+                    f"{vid} passes {m.chosen.via_s_m / 1000.0:.1f} km along its route "
+                    f"{abs(shift):g} s {'later' if shift > 0 else 'earlier'} than timed and "
+                    f"keeps its slot: after the re-plan {other} would come within "
+                    f"{p.distance_m:.0f} m of it at {p.time_s:.0f} s",
+                    {
+                        **_pair_payload(p),
+                        "pair": [vid, other],
+                        "resolution": "timing",
+                        "shift_s": shift,
+                    },
+                )
+            )
+    layers_m = replan_layers_m(scenario)
+    lifted: dict[str, Lifted[Retimed]] = {}
+    if sep.conflicts and not up():
+
+        def timed_again(vs: VehicleSchedule) -> tuple[VehicleSchedule, Retimed] | None:
+            r = retime(vs)
+            return None if r is None else (r.schedule, r)
+
+        lifted, sep = lift_team(
+            [current[vid] for vid in order], current, vehicles, layers_m, required,
+            timed_again, from_s=from_s, lift_from_m=lift_from_m, time_up=up,
+        )  # fmt: skip
     for vid, lift in lifted.items():
+        current[vid] = lift.schedule
+        adjustments[vid] = tuple(lift.chosen.adjustments)
         for height_m, a_m, b_m, other, distance_m, time_s in lift.spans:
             events.append(
                 Event(
                     from_s,
                     "conflict",
                     f"{vid} flies {height_m:g} m above its profile from {a_m / 1000.0:.1f} "
-                    f"to {min(b_m, out[vid].path.length_m) / 1000.0:.1f} km along its route "
-                    f"after the re-plan: {other} would come within {distance_m:.0f} m of it at "
-                    f"{time_s:.0f} s",
+                    f"to {min(b_m, current[vid].path.length_m) / 1000.0:.1f} km along its "
+                    f"route after the re-plan: {other} would come within {distance_m:.0f} m "
+                    f"of it at {time_s:.0f} s",
                     {
                         "pair": [vid, other],
                         "distance_m": round(distance_m, 1),
@@ -122,9 +177,9 @@ def separate_replan(
     conflicts = tuple(p for p in sep.conflicts if math.isfinite(p.distance_m))
     for p in conflicts:
         why = (
-            "no altitude layer keeps them apart"
-            if scenario.altitude_layers_m
-            else "the scenario has no altitude layers to keep them apart"
+            "the re-plan's time ran out before they were separated"
+            if up()
+            else "neither timing nor an altitude layer keeps them apart"
         )
         said = (
             f"{p.a} and {p.b} would come within {p.distance_m:.0f} m of each other at "
@@ -132,4 +187,11 @@ def separate_replan(
         )
         events.append(Event(from_s, "conflict", said, {**_pair_payload(p), "resolution": None}))
         events.append(Event(from_s, "alarm", said, _pair_payload(p)))
-    return ReplanSeparation(out, tuple(lifted), conflicts, tuple(events))
+    return ReplanSeparation(
+        {vid: current[vid] for vid in order},
+        adjustments,
+        tuple(timed),
+        tuple(lifted),
+        conflicts,
+        tuple(events),
+    )

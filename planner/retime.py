@@ -486,16 +486,17 @@ def can_loiter_after(
     s_from_m: float,
     threats: Sequence[ThreatZone],
     terrain: Terrain | None = None,
+    keep_clear: SiteCheck | None = None,
 ) -> bool:
     """Whether loiter turns can be flown on the vehicle's path after ``s_from_m``: in a buffer
     it may use (:func:`find_loiter_site`), or with ``terrain`` on the path where the airspace
-    and the terrain allow (:func:`free_loiter_site`), as :func:`retime_on_path` would put
-    them."""
+    and the terrain allow (:func:`free_loiter_site`), and with ``keep_clear`` where it says the
+    circle may go (:func:`clear_of_team`), as :func:`retime_on_path` would put them."""
     radius = flyable_loiter_radius_m(v.min_turn_radius_m)
-    if find_loiter_site(scenario, v, vs.path, s_from_m, radius, threats) is not None:
+    if find_loiter_site(scenario, v, vs.path, s_from_m, radius, threats, keep_clear) is not None:
         return True
     return terrain is not None and (
-        free_loiter_site(v, vs, s_from_m, radius, threats, terrain) is not None
+        free_loiter_site(v, vs, s_from_m, radius, threats, terrain, keep_clear) is not None
     )
 
 
@@ -988,6 +989,20 @@ def format_arrival(t: float | None) -> str:
     return "per-vehicle windows" if t is None else f"{t:.1f} s"
 
 
+def clear_of_team(schedule: Schedule, vehicle_id: str, from_s: float) -> SiteCheck:
+    """Where a loiter circle of ``vehicle_id`` keeps the scenario's separation from every
+    place the rest of the team will fly from ``from_s`` on (:class:`~planner.deconflict.
+    TeamTracks`): the check :func:`retime_vehicle` puts its turns by with ``separate``."""
+    required = schedule.scenario.separation_m
+    others = [x for x in schedule.vehicles if x.vehicle_id != vehicle_id]
+    tracks = TeamTracks.of(others, from_s)
+
+    def keep_clear(e: float, n: float, radius_m: float) -> bool:
+        return tracks.clearance(e, n, radius_m)[0] >= required
+
+    return keep_clear
+
+
 def retime_vehicle(
     schedule: Schedule,
     vehicle_id: str,
@@ -1015,15 +1030,7 @@ def retime_vehicle(
         place for the turns that keeps the separation; names the vehicle.
     """
     v = schedule.scenario.vehicle(vehicle_id)
-    keep_clear: SiteCheck | None = None
-    required = schedule.scenario.separation_m
-    if separate:
-        others = [x for x in schedule.vehicles if x.vehicle_id != vehicle_id]
-        tracks = TeamTracks.of(others, now_s)
-
-        def keep_clear(e: float, n: float, radius_m: float) -> bool:
-            return tracks.clearance(e, n, radius_m)[0] >= required
-
+    keep_clear = clear_of_team(schedule, vehicle_id, now_s) if separate else None
     try:
         r = retime_on_path(
             schedule.scenario,
@@ -1042,7 +1049,8 @@ def retime_vehicle(
         if keep_clear is None:
             raise
         raise InfeasibleError(
-            f"{err} (loiter sites within {required:g} m of the team's tracks left out)",
+            f"{err} (loiter sites within {schedule.scenario.separation_m:g} m of the team's "
+            "tracks left out)",
             vehicle=err.vehicle,
             earliest_s=err.earliest_s,
         ) from None

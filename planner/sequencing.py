@@ -27,6 +27,7 @@ with a score of other timings, cost seconds rather than minutes.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import dataclass
 from typing import Generic, TypeVar
@@ -70,6 +71,7 @@ def sequence_team(
     slack_s: Mapping[str, float],
     alternatives: Callable[[str], Iterable[tuple[VehicleSchedule, T]]],
     repair_rounds: int | None = None,
+    from_s: float = -math.inf,
 ) -> tuple[dict[str, Moved[T]], Separation]:
     """Re-time the vehicles in conflict so that the team keeps ``required_m``.
 
@@ -88,14 +90,17 @@ def sequence_team(
     repair_rounds
         Rounds of local search after the first pass (0: the first pass alone; default
         :data:`REPAIR_ROUNDS`).
+    from_s
+        Separation counts from this time on (a re-plan's start), and only there: what was
+        flown before it is not the timing's to change.
 
     Returns
     -------
     The vehicles moved (by id) and the team's separation as re-timed.
     """
     if len(timed) < 2:
-        return {}, separation(timed, required_m)
-    samples = TeamSamples(timed, required_m)
+        return {}, separation(timed, required_m, from_s=from_s)
+    samples = TeamSamples(timed, required_m, from_s=from_s)
     first = separation(timed, required_m, samples)
     if not first.conflicts:
         return {}, first
@@ -140,7 +145,7 @@ def sequence_team(
         if vid in moved or vid in worst:
             conflict = worst[vid] if vid in worst else moved[vid].conflict
         else:
-            was = was or TeamSamples(timed, required_m)
+            was = was or TeamSamples(timed, required_m, from_s=from_s)
             conflict = was.closest_pair(own[vid])
         moved[vid] = Moved(repaired, made, conflict)
     team = [current[vs.vehicle_id] for vs in timed]

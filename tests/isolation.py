@@ -1,8 +1,10 @@
 """A client load on the service while a flight flies, from a process of its own: oversized
 uploads, large planning jobs started and cancelled, many readers and many stream clients
-(:class:`Load`). What it saw comes back as a :class:`LoadSeen`: every status, the latencies of
-``/v1/health``, every 5xx named. Used by ``tests/service/test_isolation.py`` and
-``bench/bench_isolation.py``."""
+(:class:`Load`). What it saw comes back as a :class:`LoadSeen`: every status, every 5xx named,
+and the latencies of ``/v1/health`` as a monitor sees them: asked every 0.1 s by a process of
+its own, as a load balancer or a supervisor asks (the readers ask it too, in turn with the rest,
+and the time their own crowded process takes to send and read is theirs, kept apart). Used by
+``tests/service/test_isolation.py`` and ``bench/bench_isolation.py``."""
 
 from __future__ import annotations
 
@@ -44,14 +46,18 @@ class LoadSeen:
 
     statuses: Counter[int] = field(default_factory=Counter)
     health_ms: list[float] = field(default_factory=list)
+    """``/v1/health`` answer times (ms) as the monitor saw them."""
+    reader_health_ms: list[float] = field(default_factory=list)
+    """``/v1/health`` answer times (ms) as the readers saw them, their own process's delays
+    within."""
     server_errors: list[str] = field(default_factory=list)
     """Each 5xx (or a request that got no answer): method, path, status, body."""
     streamed: int = 0
     """Messages the stream clients read."""
     cancelled: int = 0
 
-    def percentile_ms(self, q: float) -> float:
-        xs = sorted(self.health_ms)
+    def percentile_ms(self, q: float, *, readers: bool = False) -> float:
+        xs = sorted(self.reader_health_ms if readers else self.health_ms)
         return xs[min(len(xs) - 1, int(q * len(xs)))] if xs else float("nan")
 
 
@@ -139,7 +145,7 @@ async def _reader(c: _Client, flight_id: str, until: float) -> None:
         t0 = time.perf_counter()
         r = await c.request("GET", path)
         if path == "/v1/health" and r is not None and r.status_code == 200:
-            c.seen.health_ms.append((time.perf_counter() - t0) * 1e3)
+            c.seen.reader_health_ms.append((time.perf_counter() - t0) * 1e3)
 
 
 async def _stream(c: _Client, flight_id: str, until: float) -> None:
@@ -180,25 +186,57 @@ def _run(url: str, token: str, flight_id: str, load: Load, out: Any) -> None:
     out.put(asyncio.run(apply(url, token, flight_id, load)))
 
 
+HEALTH_EVERY_S = 0.1
+"""How often (wall s) the monitor asks ``/v1/health``."""
+
+
+def _monitor(url: str, stop: Any, out: Any) -> None:
+    """Ask ``/v1/health`` every :data:`HEALTH_EVERY_S` on one kept connection until ``stop``
+    is set; put the answer times (ms) and any failure."""
+    times: list[float] = []
+    failures: list[str] = []
+    with httpx.Client(base_url=url, timeout=60.0) as client:
+        while not stop.is_set():
+            t0 = time.perf_counter()
+            try:
+                r = client.get("/v1/health")
+            except httpx.HTTPError as err:
+                failures.append(f"GET /v1/health: {type(err).__name__}: {err}")
+            else:
+                if r.status_code == 200:
+                    times.append((time.perf_counter() - t0) * 1e3)
+                else:
+                    failures.append(f"GET /v1/health: {r.status_code} {r.text[:200]}")
+            stop.wait(max(0.0, HEALTH_EVERY_S - (time.perf_counter() - t0)))
+    out.put((times, failures))
+
+
 @contextlib.contextmanager
 def loaded(url: str, token: str, flight_id: str, load: Load) -> Iterator[Any]:
     """The load in a process of its own (spawned) while in the block; ``result()`` of what is
     yielded waits for it to end and gives its :class:`LoadSeen`."""
     ctx = mp.get_context("spawn")
-    out = ctx.Queue()
+    out, heard, stop = ctx.Queue(), ctx.Queue(), ctx.Event()
     proc = ctx.Process(target=_run, args=(url, token, flight_id, load, out), daemon=True)
+    monitor = ctx.Process(target=_monitor, args=(url, stop, heard), daemon=True)
+    monitor.start()
     proc.start()
 
     class _Handle:
         def result(self, timeout_s: float = 600.0) -> LoadSeen:
             seen: LoadSeen = out.get(timeout=timeout_s)
             proc.join(10.0)
+            stop.set()
+            seen.health_ms, failures = heard.get(timeout=60.0)
+            seen.server_errors += failures
             return seen
 
     try:
         yield _Handle()
     finally:
-        if proc.is_alive():
-            proc.join(timeout=1.0)
-        if proc.is_alive():
-            proc.kill()
+        stop.set()
+        for p in (proc, monitor):
+            if p.is_alive():
+                p.join(timeout=1.0)
+            if p.is_alive():
+                p.kill()

@@ -76,7 +76,14 @@ def create_app(settings: Settings | None = None) -> FastAPI:
             log.warning("no TCGCS_TOKENS: an admin token is in %s", path)
         app.state.tokens = TokenTable(tokens)
         store = Store.open(settings.db_url())
-        engine = Engine(store, settings.data_dir, limits=_limits(settings))
+        engine = Engine(
+            store,
+            settings.data_dir,
+            limits=_limits(settings),
+            worker_silence_s=settings.worker_silence_s,
+            worker_answer_s=settings.worker_answer_s,
+            plan_ray=settings.plan_ray,
+        )
         app.state.engine = engine
         for fid in await engine.resume_kept():
             log.warning("flight %s was running when the service stopped: flying it on", fid)
@@ -146,7 +153,8 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     async def metrics(request: Request) -> Response:
         """Prometheus text: links, messages, malformed frames, commands, uploads, arrival
         errors, event-bus drops, flights (an ``observe`` token: it names vehicles' links)."""
-        return Response(metrics_text(request.app.state.engine), media_type="text/plain")
+        watch = getattr(request.app.state, "loop_watch", None)
+        return Response(metrics_text(request.app.state.engine, watch), media_type="text/plain")
 
     return app
 

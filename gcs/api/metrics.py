@@ -3,6 +3,7 @@ frames, commands, uploads, arrival errors, event-bus drops, flights, separation 
 
 from __future__ import annotations
 
+import gc
 from collections import Counter
 from collections.abc import Iterator
 
@@ -11,6 +12,7 @@ from prometheus_client.core import CounterMetricFamily, GaugeMetricFamily, Metri
 from prometheus_client.registry import Collector
 
 from gcs.service.engine import Engine
+from gcs.service.loopwatch import LoopWatch
 
 __all__ = ["metrics_text"]
 
@@ -89,7 +91,30 @@ class _EngineCollector(Collector):
         yield from (commands, uploads, error, drops, separations, least)
 
 
-def metrics_text(engine: Engine) -> bytes:
+class _ProcessCollector(Collector):
+    """The API process's own loop: how long it was held at most (its :class:`LoopWatch`,
+    where the service runs one), and how many objects are kept out of the collector's
+    passes."""
+
+    def __init__(self, watch: LoopWatch | None) -> None:
+        self.watch = watch
+
+    def collect(self) -> Iterator[Metric]:
+        if self.watch is not None:
+            yield GaugeMetricFamily(
+                "tcgcs_api_loop_stall_max_seconds",
+                "the longest the API process's event loop was held (woke late) since it started",
+                value=self.watch.stall_max_s,
+            )
+        yield GaugeMetricFamily(
+            "tcgcs_gc_frozen_objects",
+            "objects of the API process kept out of the garbage collector's passes",
+            value=gc.get_freeze_count(),
+        )
+
+
+def metrics_text(engine: Engine, watch: LoopWatch | None = None) -> bytes:
     registry = CollectorRegistry(auto_describe=False)
     registry.register(_EngineCollector(engine))
+    registry.register(_ProcessCollector(watch))
     return generate_latest(registry)

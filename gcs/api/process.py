@@ -41,11 +41,13 @@ async def running_service(
     tokens: Mapping[str, Sequence[str]],
     *,
     database_url: str | None = None,
+    settings: Mapping[str, str] | None = None,
     ready_within_s: float = 120.0,
     stop_within_s: float = 30.0,
 ) -> AsyncIterator[ServiceProcess]:
     """The service on ``data_dir`` (its SQLite file there unless ``database_url``) with these
-    tokens; interrupted on exit (killed if it has not stopped within ``stop_within_s``).
+    tokens and any other ``settings`` (``TCGCS_*`` variables); interrupted on exit (killed if
+    it has not stopped within ``stop_within_s``).
 
     Raises
     ------
@@ -61,6 +63,7 @@ async def running_service(
     env.pop("TCGCS_DATABASE_URL", None)
     if database_url is not None:
         env["TCGCS_DATABASE_URL"] = database_url
+    env.update(settings or {})
     proc = await asyncio.create_subprocess_exec(
         sys.executable, "-m", "gcs", "serve", "--port", str(port), env=env,
         stdout=asyncio.subprocess.DEVNULL, stderr=asyncio.subprocess.PIPE,

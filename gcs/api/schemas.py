@@ -94,6 +94,11 @@ class AbortIn(_Body):
     mode: Literal["rtl", "loiter"] = "rtl"
 
 
+class PauseIn(_Body):
+    at_s: float | None = Field(default=None, ge=0.0, le=1e7)
+    """Mission time (s) at which the rehearsal waits (default: now)."""
+
+
 class ThreatIn(_Body):
     threat: Threat
     at_s: float | None = Field(default=None, ge=0.0, le=1e7)

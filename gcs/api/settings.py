@@ -53,6 +53,17 @@ class Settings(BaseSettings):
     """Jobs one token may have queued or running; past it, 429 with Retry-After."""
     job_time_limit_s: float = Field(default=900.0, gt=0.0)
     """A planning job running longer (wall s) is stopped and failed."""
+    plan_ray: str | None = Field(default=None, min_length=1)
+    """Where planning jobs finish their vehicles' routes: unset, in the job's own process
+    (and processes it forks, for a large team); ``local``, a Ray each job starts on this
+    machine (loopback only; killed with the job); else a Ray cluster's address to join
+    (``auto``, ``ray://head:10001``). A Ray not reached fails the job with a 503."""
+    worker_silence_s: float = Field(default=15.0, gt=0.0, le=3600.0)
+    """A flight worker that has told the service nothing for this long (wall s; it says the
+    flight's state four times a second) is asked whether it still runs."""
+    worker_answer_s: float = Field(default=10.0, gt=0.0, le=3600.0)
+    """A flight worker asked (``worker_silence_s``) that has not answered within this long
+    (wall s) is hung: it is killed and another flies its flight on from its checkpoint."""
 
     @field_validator("tokens")
     @classmethod

@@ -9,13 +9,15 @@ control loop; its result comes back as :class:`Computed`). Every type here is pl
 
 from __future__ import annotations
 
-from collections.abc import Callable, Mapping
+import dataclasses
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any, Literal
 
 import numpy as np
 
-from gcs.coordination.events import EventKind
+from gcs.coordination.events import EventKind, FlightEvent
+from planner.mission import MissionItem, items_equal
 from planner.plan import Method, World
 from planner.popup import apply_popup
 from planner.retime import retime_vehicle
@@ -120,11 +122,13 @@ class AltitudeCommanded:
 @dataclass(frozen=True)
 class Installed:
     """The outcome of :class:`Upload` (``skipped``: the vehicle had passed the splice
-    waypoint, so it was not sent)."""
+    waypoint, so it was not sent; ``said``: its events were told and kept before a restart,
+    and are not told again)."""
 
     upload: Upload
     error: str | None = None
     skipped: bool = False
+    said: bool = False
 
 
 @dataclass(frozen=True)
@@ -247,6 +251,27 @@ class Upload:
     leave_hold_s: float | None = None
     """Holding: when its new route has it leave its hold point (mission s)."""
 
+    def payload(self) -> dict[str, Any]:
+        """The upload event's payload once the mission is on board."""
+        return {"what": self.what, "items": [dataclasses.asdict(it) for it in self.mission.items]}
+
+    def told_in(self, events: Sequence[FlightEvent]) -> bool:
+        """Whether a flight's ``events`` already tell this upload on board: the last upload
+        they tell of its vehicle (with its items) is this one."""
+        told = next(
+            (
+                e
+                for e in reversed(events)
+                if e.kind is EventKind.UPLOAD
+                and e.vehicle == self.vehicle_id
+                and "items" in e.payload
+            ),
+            None,
+        )
+        if told is None or told.payload.get("what") != self.what:
+            return False
+        return items_equal([MissionItem(**it) for it in told.payload["items"]], self.mission.items)
+
 
 @dataclass(frozen=True)
 class SetMode:
@@ -355,6 +380,9 @@ class PopupJob:
     time_up: Callable[[], bool] | None = None
     """Ends the route search with the best routes so far (the runner's wall-clock budget:
     :attr:`planner.aco.AcoOptions.time_up`)."""
+    separation_up: Callable[[], bool] | None = None
+    """Ends the separation of the re-planned team with what it has separated so far (the
+    runner's wall-clock budget: :func:`planner.replanseparation.separate_replan`)."""
 
     def run(self) -> Any:
         return apply_popup(
@@ -369,6 +397,7 @@ class PopupJob:
             loiter_margin_m_s=self.loiter_margin_m_s,
             time_up=self.time_up,
             others_may_stay=True,
+            separation_up=self.separation_up,
         )
 
 

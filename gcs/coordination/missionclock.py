@@ -162,10 +162,10 @@ class MissionClock:
         """On a pace clock, the simulator's speed-up when it says it (flight s per pace s): the
         rate as the simulator runs it, not as fitted on reports dated when handled (within 3%
         of it on a loaded machine)."""
-        self.held_pace_s: float | None = None
-        """While set, the lock step acknowledges no pace time past it: the simulator waits
-        there (:meth:`hold`, :func:`gcs.service.stubs.follow_lockstep`)."""
+        self._hold_pace_s: float | None = None
         self._holds = 0
+        self._hold_at_utc_s: float | None = None
+        """The team UTC at which the simulator is to wait (:meth:`hold_at`)."""
         self._heard: dict[int, tuple[float, float]] = {}
         """On a pace clock: each vehicle's newest report's boot time (s) and the monotonic
         wall time it was handled at (:meth:`heard`)."""
@@ -212,8 +212,28 @@ class MissionClock:
         if not self.paced:
             return
         if self._holds == 0:
-            self.held_pace_s = self._monotonic()
+            self._hold_pace_s = self._monotonic()
         self._holds += 1
+
+    def hold_at(self, utc_s: float | None) -> None:
+        """On a pace clock: the simulator waits once the team's UTC reaches ``utc_s`` (a
+        rehearsal paused there), until called again with another time or None. Nothing
+        otherwise: real vehicles do not wait."""
+        if utc_s is not None and not math.isfinite(utc_s):
+            raise ValueError(f"utc_s must be a finite UTC, got {utc_s!r}")
+        self._hold_at_utc_s = utc_s if self.paced else None
+
+    @property
+    def held_pace_s(self) -> float | None:
+        """While set, the lock step acknowledges no pace time past it: the simulator waits
+        there (:meth:`hold`, :meth:`hold_at`, :func:`gcs.service.stubs.follow_lockstep`)."""
+        held = self._hold_pace_s
+        at_utc_s = self._hold_at_utc_s
+        if at_utc_s is not None and self._accepted_utc:
+            # The team's UTC is ``anchor + rate m`` at pace time ``m`` (:meth:`_team_at`).
+            at_pace_s = (at_utc_s - self._team_at(0.0)) / self._rate
+            held = at_pace_s if held is None else min(held, at_pace_s)
+        return held
 
     def heard(self, system_id: int, time_boot_s: float, wall_s: float) -> None:
         """On a pace clock: a report of vehicle ``system_id`` stamped ``time_boot_s`` (the
@@ -248,7 +268,7 @@ class MissionClock:
             return
         self._holds -= 1
         if self._holds == 0:
-            self.held_pace_s = None
+            self._hold_pace_s = None
 
     # -- input -------------------------------------------------------------------------------
 

@@ -8,7 +8,6 @@ does this; it holds no state of its own.
 
 from __future__ import annotations
 
-import dataclasses
 import math
 from collections.abc import Callable, Collection
 from dataclasses import replace
@@ -26,7 +25,7 @@ from planner.errors import InfeasibleError
 from planner.mission import MAV_CMD_NAV_WAYPOINT
 from planner.plan import World
 from planner.popup import PopupOutcome, popup_zones
-from planner.retime import can_loiter_after
+from planner.retime import can_loiter_after, clear_of_team
 from planner.scenario import Appearance, Scenario, Threat
 from planner.schedule import Adjustment, Anchor, Schedule, VehicleSchedule
 from planner.schedulefile import PathMission, path_mission, splice_mission
@@ -99,14 +98,17 @@ class MissionChanges:
 
     def _can_loiter_after(self, m: Member, s_m: float) -> bool:
         """Whether loiter turns can be flown on the vehicle's path after ``s_m``: where its
-        loiter job would look for them, clear of the zones in force at its last fix."""
+        loiter job would look for them, clear of the zones in force at its last fix and of
+        the rest of the team's tracks from then on (:class:`act.LoiterJob` keeps them so)."""
+        now_s = m.last_fix_s or 0.0
         return can_loiter_after(
             self.scenario,
             self.scenario.vehicle(m.vehicle_id),
             m.schedule,
             s_m,
-            self.in_force(m.last_fix_s or 0.0),
+            self.in_force(now_s),
             self.world.terrain,
+            clear_of_team(self.current_schedule(still_air=True), m.vehicle_id, now_s),
         )
 
     def _speed_now(self, m: Member) -> float:
@@ -276,22 +278,20 @@ class MissionChanges:
                 )
             )  # fmt: skip
             return
-        out.append(
-            act.Report(
-                EventKind.UPLOAD,
-                f"{up.what}: {len(up.mission.items)} items",
-                m.vehicle_id,
-                payload={
-                    "what": up.what,
-                    "items": [dataclasses.asdict(it) for it in up.mission.items],
-                },
+        if not r.said:
+            out.append(
+                act.Report(
+                    EventKind.UPLOAD,
+                    f"{up.what}: {len(up.mission.items)} items",
+                    m.vehicle_id,
+                    payload=up.payload(),
+                )
             )
-        )
         if up.keep_seq is None and not up.in_flight:
             return  # the initial mission: nothing changes
         self._adopt(m, up, now)
-        for a in up.adjustments:
-            out.append(self._adjustment(a, up.decided_s))
+        if not r.said:
+            out.extend(self._adjustment(a, up.decided_s) for a in up.adjustments)
 
     def _adopt(self, m: Member, up: act.Upload, now: float) -> None:
         """The vehicle flies ``up``'s mission now."""

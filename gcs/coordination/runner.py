@@ -24,8 +24,8 @@ import logging
 import math
 import pickle
 import time
-from collections.abc import Callable, Coroutine, Iterable, Iterator, Mapping, Sequence
-from dataclasses import replace
+from collections.abc import Awaitable, Callable, Coroutine, Iterable, Iterator, Mapping, Sequence
+from dataclasses import dataclass, replace
 from typing import Any
 
 import numpy as np
@@ -127,6 +127,25 @@ REPLAN_SEARCH_SHARE = 0.25
 """A re-plan's route search (the ACO) ends with the best routes so far once this share of the
 planning lead, in wall time, is spent: the lead allows one and a half times the longest
 planning so far (plus 0.3 s), and half of it goes to the uploads."""
+REPLAN_SEPARATION_SHARE = 0.4
+"""Its separation (timing, then altitude layers) ends with what it has separated so far once
+this share of the lead, in wall time, is spent (the search's share included): the rest of the
+half before the uploads is for finishing."""
+
+
+@dataclass(frozen=True)
+class WallDeadline:
+    """True once ``time.perf_counter()`` reaches ``at_s`` (the machine's monotonic clock: the
+    same in a job's own process)."""
+
+    at_s: float
+
+    def __call__(self) -> bool:
+        return time.perf_counter() >= self.at_s
+
+
+async def _in_a_thread(job: act.LoiterJob | act.PopupJob) -> Any:
+    return await asyncio.to_thread(job.run)
 
 
 class InfeasibleRequest(GcsError):
@@ -190,6 +209,10 @@ class FlightRunner:
         """Called with a pickled controller after every change worth keeping (see
         :data:`CHECKPOINT_WALL_S`); :meth:`resume` takes it back."""
         self.resumed = False
+        self.run_job: Callable[[act.LoiterJob | act.PopupJob], Awaitable[Any]] = _in_a_thread
+        """Where planning jobs run (their ``run()``): a thread of this process by default; a
+        flight worker runs them in processes of their own, so that no job holds its event
+        loop (the interpreter's lock) however long it computes."""
         self.upload_results: dict[str, str | None] = {}
         """Per vehicle, after :meth:`upload_all`: None (on board) or why it failed."""
         self._checkpoint_wall_s = -math.inf
@@ -735,14 +758,16 @@ class FlightRunner:
         job = a.job
         if isinstance(job, act.PopupJob) and not self.clock.paced:
             # The route search ends with its best routes so far once a share of the lead's
-            # wall time is spent: the rest is for finishing, re-timing and the uploads (on a
-            # pace clock the simulator waits for the whole search).
+            # wall time is spent, the separation once a larger share is: the rest is for
+            # finishing and the uploads (on a pace clock the simulator waits for the whole
+            # search).
             end_s = t0 + REPLAN_SEARCH_SHARE * job.lead_s / self.clock.rate
-            job = replace(job, time_up=lambda: time.perf_counter() >= end_s)
+            apart_s = t0 + REPLAN_SEPARATION_SHARE * job.lead_s / self.clock.rate
+            job = replace(job, time_up=WallDeadline(end_s), separation_up=WallDeadline(apart_s))
         self.clock.hold()  # a simulator in lock step waits for the plan
         self._computing += self.clock.paced
         try:
-            result = await asyncio.to_thread(job.run)
+            result = await self.run_job(job)
         except Exception as err:
             if not isinstance(err, GcsError | ValueError):
                 log.exception("planning job failed")
@@ -821,7 +846,7 @@ class FlightRunner:
         team = self._team()
         if self.state is FlightState.PLANNED:
             await self.upload_all()
-        if not self.resumed:
+        if team.start_utc_s is None:  # not started before (nor before a restart)
             if start_utc_s is None:
                 start_utc_s = self.clock.now_utc_s() + self.clock.start_lead_s()
             self._dispatch(team.start(start_utc_s))
@@ -1149,7 +1174,7 @@ class FlightRunner:
                 is None
             ):
                 found[vid] = f"holds the mission sent before the restart ({pending.what})"
-                self._feed(act.Installed(pending))
+                self._feed(act.Installed(pending, said=pending.told_in(self.events)))
             else:
                 k = mission_client.held_difference(v.link, v.system_id, m.mission.items, got)
                 found[vid] = f"its mission differs at item {k}; uploading the kept one"

@@ -46,7 +46,9 @@ from gcs.coordination.vertical import Room, VerticalResolution, resolve_vertical
 from gcs.coordination.verticalflight import VerticalFlight, room_ahead
 from gcs.coordination.zoneguard import Exposure, ZoneGuard
 from planner.atmosphere import eas2tas
-from planner.mission import MAV_CMD_DO_CHANGE_SPEED
+from planner.layers import layer_step_m
+from planner.loiterflight import way_out_m
+from planner.mission import MAV_CMD_DO_CHANGE_SPEED, MAV_CMD_NAV_WAYPOINT
 from planner.plan import World
 from planner.popup import popup_zones
 from planner.scenario import Scenario, Threat
@@ -774,8 +776,7 @@ class TeamController(ZoneGuard, TeamTime):
         if self.world is None:
             return None
         d_s = self.scenario.separation_m
-        layers = self.scenario.altitude_layers_m
-        layer_m = cfg.vertical_layer_m or (layers[0] if layers else 0.5 * d_s)
+        layer_m = cfg.vertical_layer_m or layer_step_m(self.scenario)
         rooms: dict[str, Room] = {}
         rates: list[float] = []
         for ahead in (a, b):
@@ -1054,7 +1055,12 @@ class TeamController(ZoneGuard, TeamTime):
         (:meth:`_leave_loiter`) once leaving would not make it early at its minimum speed
         (until then it flies the turns at the speed the route after them asks for); one late
         even leaving now moves the team time now, for the route without the turns, while the
-        others can still follow (for the turns left, when leaving would gain nothing)."""
+        others can still follow (for the turns left, when leaving would gain nothing).
+
+        One late that has flown all of its loiter by the count yet still circles (it lines up
+        with the route later than its entry let the count foresee: one that came to its turns
+        from a hold, off its route) is taken out of them: the way out at the roll limit is
+        never longer than the way round the circle to the same waypoint."""
         if m.leaving_seq is not None:
             return  # being taken out of the turns: timed again once it is
         k = m.loiters_done()
@@ -1079,12 +1085,15 @@ class TeamController(ZoneGuard, TeamTime):
             return
         # Late, or the rest of the turns would need it within the speed reserve of its top
         # speed (no room left for what the way out of them costs). Out of the turns now, it
-        # flies on from where it is: the route from its position located on it (a circle off
-        # the route is left towards the waypoint after).
+        # flies from where it is to the waypoint after them (turning at its roll limit from
+        # the course it has on the circle, then straight), and the route on from there:
+        # timed as from that far back along the route from the waypoint (else from its
+        # position located on the route).
         s = lo.s_m if m.s_m is None else m.s_m
+        way_out = self._way_out(m, fix)
         left = m.controller.decide(
             m.track,
-            s_m=s,
+            s_m=s if way_out is None else max(0.0, way_out),
             now_s=t,
             target_s=m.target_s,
             wind=wind,
@@ -1092,7 +1101,8 @@ class TeamController(ZoneGuard, TeamTime):
             loiters_done=k + 1,
             tas_per_eas=m.tas_per_eas(s),
         )
-        if left.eta_min_s >= d.eta_min_s:
+        circling_on = m.loiter_flown_m >= lo.length_m
+        if left.eta_min_s >= d.eta_min_s and not (circling_on and d.verdict == "late"):
             # Nothing to gain by leaving (its turns are as good as flown): late as anywhere.
             self._apply_decision(m, d, t, out)
             if d.verdict == "late":
@@ -1103,6 +1113,31 @@ class TeamController(ZoneGuard, TeamTime):
             self._leave_loiter(m, d, left, t, out)
         if left.verdict == "late":
             self._late(m, left, t, out)
+
+    def _way_out(self, m: Member, fix: act.Fix) -> float | None:
+        """Where along its route a vehicle taken out of its turns now is, counted back from
+        the waypoint after them by the way there (:func:`planner.loiterflight.way_out_m`);
+        None when that is not known (no course, or no waypoint after the turns)."""
+        seq, e, n = m.last_seq, m.east_m, m.north_m
+        ve, vn = fix.ve_m_s, fix.vn_m_s
+        if seq is None or e is None or n is None or ve is None or vn is None:
+            return None
+        gs_m_s = math.hypot(ve, vn)
+        items, item_s = m.mission.items, m.mission.item_s_m
+        k = next(
+            (
+                k
+                for k in range(seq + 1, len(items))
+                if items[k].command == MAV_CMD_NAV_WAYPOINT and item_s[k] is not None
+            ),
+            None,
+        )
+        if k is None or gs_m_s < 1.0:
+            return None
+        we, wn = self.frame.to_local(items[k].lat_deg, items[k].lon_deg)
+        s_k = item_s[k]
+        assert s_k is not None
+        return s_k - way_out_m(float(we) - e, float(wn) - n, math.atan2(ve, vn), gs_m_s)
 
     def _leave_loiter(
         self, m: Member, d: Decision, left: Decision, t: float, out: list[act.Action]

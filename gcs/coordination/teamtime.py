@@ -104,11 +104,16 @@ class TeamTime:
         """The vehicles other than ``movers`` (the late ones) that a team time of ``new_ref``
         would make early whatever they do, each with the latest team time it can follow."""
         out = []
+        tolerance_s = self.config.tolerance_s
         for other in self.members.values():
             if other.vehicle_id in movers or other.done:
                 continue
+            d = other.last_decision
+            slower_s = math.inf if other.phase == "ground" or d is None else d.eta_max_s
+            if new_ref <= slower_s - other.offset_s + tolerance_s:
+                continue  # it follows (flying slower; room for turns is not looked for)
             follow_s = self.latest_arrival_s(other) - other.offset_s
-            if new_ref > follow_s + self.config.tolerance_s:
+            if new_ref > follow_s + tolerance_s:
                 out.append((other.vehicle_id, follow_s))
         return out
 

@@ -39,6 +39,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from gcs.coordination.resolution import Ahead
+from planner.layers import LAYER_STEPS
 
 FloatArray = NDArray[np.float64]
 
@@ -107,7 +108,7 @@ def resolve_vertical(
     step_s: float = 1.0,
     response_s: float = 5.0,
     release_after_s: float = 10.0,
-    max_layers: int = 3,
+    max_layers: int = LAYER_STEPS,
     neighbours: Mapping[str, Sequence[Ahead]] | None = None,
     fast_rate_m_s: float | None = None,
 ) -> VerticalResolution | None:

@@ -80,11 +80,9 @@ def route_entry_m(
 
 
 def _samples(m: Member, s: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    poses = [m.schedule.path.pose_at(float(x)) for x in s]
-    e = np.array([p.east_m for p in poses])
-    n = np.array([p.north_m for p in poses])
-    alt = np.array([m.schedule.alt_at(float(x)) for x in s])
-    return e, n, alt
+    poses = m.schedule.path.poses_at(s)
+    alt = np.interp(s, m.schedule.wp_s_m, m.schedule.wp_alt_m)
+    return poses[:, 0], poses[:, 1], alt
 
 
 class ZoneGuard(MissionChanges):
@@ -347,7 +345,7 @@ class ZoneGuard(MissionChanges):
                 continue
             if s_k is None or s_k <= after_s:
                 continue
-            e1, n1 = self.frame.to_local(it.x * 1e-7, it.y * 1e-7)
+            e1, n1 = self.frame.to_local(it.lat_deg, it.lon_deg)
             if exp.zone.segment_distance_m(e0, n0, float(e1), float(n1)) > 0.0:
                 seq = k
                 break

@@ -496,7 +496,7 @@ def _resumed(
         raise GcsError(
             f"--resume: {opts.scenario_path} is not the scenario flight {fid} was planned on"
         )
-    events = store.events(fid)
+    events = store.events_to_resume(fid)
     bus = opts.bus or EventBus(first_seq=(events[-1].seq if events else 0) + 1)
     runner = FlightRunner.resume(blob, clock, bus=bus, events=events)
     conns = list(opts.connect)

@@ -26,9 +26,9 @@ from gcs.coordination.events import FlightEvent
 from gcs.coordination.runner import ENDED, FlightState
 from gcs.errors import GcsError
 from gcs.mavlink.signing import SigningConfig
-from gcs.service.ended import FINAL_FILE, EndedFlight, EndedFlights
+from gcs.service.ended import FINAL_FILE, EndedFlight, EndedFlights, keep_final
 from gcs.service.fleet import Fleet, FleetVehicle, VehicleBusy
-from gcs.service.flight import Rehearsal
+from gcs.service.flight import Rehearsal, stop_kept_simulator
 from gcs.service.planning import Limits, Planning
 from gcs.service.scenariotext import (
     Conflict,
@@ -41,8 +41,8 @@ from gcs.service.scenariotext import (
     parse_scenario_text,
 )
 from gcs.service.worker import FlightSpec, VehicleSpec
-from gcs.service.workers import Spawner, WorkerFlight
-from gcs.store.repository import Store
+from gcs.service.workers import FEED_SILENCE_S, RECONNECT_WALL_S, Spawner, WorkerFlight
+from gcs.store.repository import EventWriter, Store
 from planner.scenario import Threat
 
 __all__ = [
@@ -76,14 +76,22 @@ class Engine:
         *,
         config: FlightConfig | None = None,
         limits: Limits | None = None,
+        worker_silence_s: float = FEED_SILENCE_S,
+        worker_answer_s: float = RECONNECT_WALL_S,
+        plan_ray: str | None = None,
     ):
         self.store = store
-        self.workers = Spawner(store.engine.url.render_as_string(hide_password=False))
-        """Starts the flight workers (they find the store by its URL)."""
+        self.workers = Spawner(
+            store.engine.url.render_as_string(hide_password=False),
+            feed_silence_s=worker_silence_s,
+            answer_wall_s=worker_answer_s,
+        )
+        """Starts the flight workers (they find the store by its URL) and says how long one
+        may be silent (:class:`Spawner`)."""
         self.data_dir = data_dir
         self.config = config or FlightConfig()
         self.limits = limits or Limits()
-        self.planning = Planning(store, self.limits, self.config.method)
+        self.planning = Planning(store, self.limits, self.config.method, plan_ray)
         """Scenarios, planning jobs and planned schedules."""
         self.ended = EndedFlights(data_dir / "flights")
         """Flights that ended before this process started (read from their folders)."""
@@ -264,15 +272,26 @@ class Engine:
         for conn in flight.connections.values():
             self._name(conn)
         flight.on_over = self._over
+        flight.keep_told = EventWriter(self.store, flight.id).write
         self.flights[flight.id] = flight
 
     def _over(self, flight: WorkerFlight) -> None:
+        if flight.lost:
+            self._spawn(self._keep_lost(flight))
         conns = sorted(set(flight.connections.values()))
         if flight.simulated:
             # Its simulator vehicles went with their simulator: no longer the service's.
             self.vehicle_ids = {v: c for v, c in self.vehicle_ids.items() if c not in conns}
         else:
             self._spawn(self.fleet.take_back(conns))
+
+    async def _keep_lost(self, flight: WorkerFlight) -> None:
+        """A flight no worker flies on, kept failed (with the events that say so), and its
+        bundled simulator, if any, stopped: a later process shows it failed too."""
+        # Its events as told, the failure's with them (which sets its state in the store).
+        await flight.keep_told_events()
+        await asyncio.to_thread(keep_final, flight.folder, flight.snapshot(), None)
+        await stop_kept_simulator(flight.folder)
 
     # -- restart --------------------------------------------------------------------------------
 
@@ -386,6 +405,16 @@ class Engine:
         result: dict[str, Any] = await self.flight(flight_id).request(
             "abort", vehicle=vehicle, mode=mode
         )
+        return result
+
+    async def pause(self, flight_id: str, at_s: float | None) -> dict[str, Any]:
+        """A rehearsal waits at mission second ``at_s`` (:meth:`Flight.pause`)."""
+        result: dict[str, Any] = await self.flight(flight_id).request("pause", at_s=at_s)
+        return result
+
+    async def resume(self, flight_id: str) -> dict[str, Any]:
+        """A paused rehearsal flies on (:meth:`Flight.resume`)."""
+        result: dict[str, Any] = await self.flight(flight_id).request("resume")
         return result
 
     # -- reading --------------------------------------------------------------------------------

@@ -35,7 +35,9 @@ from gcs.rehearsal.rehearse import RehearsalOptions, flight_record, stub_args
 from gcs.rehearsal.report import write_report
 from gcs.service.ended import keep_final
 from gcs.service.fleet import Fleet, FleetVehicle, VehicleBusy
+from gcs.service.flightjobs import FlightJobs
 from gcs.service.mapview import flight_map
+from gcs.service.pauses import Pauses
 from gcs.service.planning import PlannedSchedule
 from gcs.service.scenariotext import (
     Conflict,
@@ -49,7 +51,14 @@ from gcs.service.stubs import DEFAULT_SPEEDUP, StubProcess, follow_lockstep, sto
 from gcs.store.repository import FlightKeeper, Store
 from planner.scenario import SrtmTerrainSpec, Threat
 
-__all__ = ["COUNTERS_FILE", "LOCKSTEP_FILE", "STUB_PID_FILE", "Flight", "Rehearsal"]
+__all__ = [
+    "COUNTERS_FILE",
+    "LOCKSTEP_FILE",
+    "STUB_PID_FILE",
+    "Flight",
+    "Rehearsal",
+    "stop_kept_simulator",
+]
 
 log = logging.getLogger(__name__)
 
@@ -129,6 +138,13 @@ class Flight:
         self._simulator_stopped = False
         """Its bundled simulator has been stopped (its pid, were it another process's, may
         be another program's by now)."""
+        self.jobs = FlightJobs()
+        """Its planning jobs, each in a process of its own."""
+        runner.run_job = self.jobs.run
+        self.taken_on = asyncio.Event()
+        """Set once its vehicles are found as the flight left them (at once for a new
+        flight; after :meth:`resumed`, once they are reached again and compared)."""
+        self.pauses = Pauses(flight_id, runner.clock, folder)
         self._wall0 = time.perf_counter()
         self._keeper: FlightKeeper | None = FlightKeeper(store, flight_id, runner.bus)
         runner.on_checkpoint = self._keeper.checkpoints.offer
@@ -203,6 +219,7 @@ class Flight:
             connections=conns, rehearsal=rehearsal, stub=stub, pacer=pacer,
         )  # fmt: skip
         flight._bind(held)
+        flight.taken_on.set()
         for vid, h in flight.vehicles.items():
             store.set_vehicle(flight_id, vid, system_id=h.vehicle.system_id)
         if stub is not None:
@@ -217,7 +234,7 @@ class Flight:
         if blob is None:
             return None
         row = store.flight(flight_id)
-        events = store.events(flight_id)
+        events = store.events_to_resume(flight_id)
         bus = EventBus(first_seq=(events[-1].seq if events else 0) + 1)
         clock = MissionClock()
         runner = FlightRunner.resume(blob, clock, bus=bus, events=events)
@@ -246,6 +263,17 @@ class Flight:
         self.runner.bind({vid: h.vehicle for vid, h in self.vehicles.items()})
 
     async def _fly_on(self, sysids: Sequence[int | None]) -> None:
+        try:
+            start_utc_s = await self._take_on(sysids)
+        finally:
+            self.taken_on.set()
+        if start_utc_s is not None:
+            await self._fly(start_utc_s)
+
+    async def _take_on(self, sysids: Sequence[int | None]) -> float | None:
+        """Reach the vehicles again and compare them with the checkpoint: the mission's start
+        to fly on from, or None (not launched: ready again, its vehicles holding their
+        missions, for a launch; or it could not be taken on, and has failed)."""
         runner = self.runner
         ids = [v.id for v in runner.scenario.vehicles]
         try:
@@ -253,16 +281,21 @@ class Flight:
             self._bind(held)
             await self._wait_clock()
             await runner.reconcile()
+            start_utc_s = runner.start_utc_s
+            if start_utc_s is None:  # launched after its last checkpoint, or not launched
+                start_utc_s = (await asyncio.to_thread(self.store.flight, self.id)).start_utc_s
         except (GcsError, TimeoutError, OSError, ValueError) as err:
             runner.fail(f"not resumed after a restart: {err}")
             if self.pacer is not None:
                 self.pacer.cancel()
             await self._stop_writers()
             self.fleet.release(self.id)
+            start_utc_s = None
+        if start_utc_s is None:
             self.task = None
-            return
-        assert runner.start_utc_s is not None
-        await self._fly(runner.start_utc_s)
+        else:
+            self.pauses.launched(start_utc_s)
+        return start_utc_s
 
     # -- views ----------------------------------------------------------------------------------
 
@@ -293,13 +326,22 @@ class Flight:
 
     def _snapshot(self) -> dict[str, Any]:
         snap = self.runner.snapshot()
+        if snap["state"] == FlightState.READY.value and self._uploading():
+            # Ready once kept: a worker that dies before leaves nothing to fly on from.
+            snap["state"] = FlightState.UPLOADING.value
         snap["flight_id"] = self.id
         snap["schedule_id"] = self.schedule.id
         snap["uploads"] = self._uploads()
         snap["record_ready"] = self.final is not None and self.record is not None
+        # Paused or not at the snapshot's own mission time (the simulator moves on meanwhile).
+        launched = self.pauses.start_utc_s is not None and self.runner.start_utc_s is not None
+        snap["pause"] = self.pauses.view(snap["t_s"] if launched else self._mission_s())
         if self.about_worker is not None:
             snap["worker"] = self.about_worker()
         return snap
+
+    def _uploading(self) -> bool:
+        return self.upload_task is not None and not self.upload_task.done()
 
     def _uploads(self) -> dict[str, dict[str, Any]]:
         """Per vehicle, once an upload was asked for: pending, ok, or failed and why (read
@@ -395,6 +437,8 @@ class Flight:
         try:
             await self._wait_clock()
             await self.runner.upload_all()
+            if self._keeper is not None:
+                await self._keeper.checkpoints.kept()
         except GcsError as err:
             log.info("flight %s: upload failed: %s", self.id, err)
 
@@ -407,8 +451,9 @@ class Flight:
         except TimeoutError:
             raise ServiceError(f"flight {self.id}: no SYSTEM_TIME from its vehicles") from None
 
-    def launch(self, start_utc_s: float | None, delay_s: float | None) -> dict[str, Any]:
-        """Start the flight at a UTC (or ``delay_s`` mission seconds from now).
+    async def launch(self, start_utc_s: float | None, delay_s: float | None) -> dict[str, Any]:
+        """Start the flight at a UTC (or ``delay_s`` mission seconds from now); one taken on
+        after a restart once its vehicles are found as it left them.
 
         Raises
         ------
@@ -417,6 +462,7 @@ class Flight:
         InvalidInput
             A start that is not in the future.
         """
+        await self.taken_on.wait()
         runner = self.runner
         if runner.state is not FlightState.READY or self.task is not None:
             raise Conflict(f"flight {self.id} is {runner.state.value}: it cannot be launched")
@@ -427,8 +473,25 @@ class Flight:
         elif not math.isfinite(start_utc_s) or start_utc_s < clock.now_utc_s():
             raise InvalidInput(f"start_utc_s: {start_utc_s!r} is not a UTC in the future")
         self.store.update_flight(self.id, start_utc_s=start_utc_s, team_time_s=runner.team_ref_s)
+        self.pauses.launched(start_utc_s)
         self.task = asyncio.get_running_loop().create_task(self._fly(start_utc_s))
         return {"flight_id": self.id, "start_utc_s": start_utc_s}
+
+    def pause(self, at_s: float | None) -> dict[str, Any]:
+        """A rehearsal in lock step waits at mission second ``at_s`` (None: now) until
+        :meth:`resume` (:class:`~gcs.service.pauses.Pauses`)."""
+        self._running()
+        return self.pauses.add(at_s, self._mission_s())
+
+    def resume(self) -> dict[str, Any]:
+        """A paused rehearsal flies on."""
+        self._running()
+        return self.pauses.resume(self._mission_s())
+
+    def _mission_s(self) -> float | None:
+        """Mission seconds now (None before the launch, or before the clock has synced)."""
+        start, clock = self.pauses.start_utc_s, self.runner.clock
+        return None if start is None or not clock.synced else clock.now_utc_s() - start
 
     def add_threat(self, threat: Threat, at_s: float | None) -> dict[str, Any]:
         self._running()
@@ -509,6 +572,7 @@ class Flight:
         except Exception:
             log.exception("flight %s: its last snapshot was not kept", self.id)
         await self._stop_writers()
+        self.jobs.close()
         self.fleet.release(self.id)
         if self.pacer is not None:
             self.pacer.cancel()
@@ -551,10 +615,7 @@ class Flight:
         if self.stub is not None:
             await self.stub.stop()
             return
-        pid_file = self.folder / STUB_PID_FILE
-        if pid_file.exists():
-            with contextlib.suppress(ValueError, OSError):
-                await stop_pid(int(pid_file.read_text()))
+        await stop_kept_simulator(self.folder)
 
     async def _stop_writers(self) -> None:
         self.runner.on_checkpoint = None
@@ -577,7 +638,15 @@ class Flight:
         if self.upload_task is not None and not self.upload_task.done():
             self.upload_task.cancel()
         await self._stop_writers()
+        self.jobs.close()
         await self._stop_simulator()
+
+
+async def stop_kept_simulator(folder: Path) -> None:
+    """Stop the bundled simulator a process started for the flight of ``folder`` (its pid
+    kept beside the flight's files), if there is one."""
+    with contextlib.suppress(ValueError, OSError):
+        await stop_pid(int((folder / STUB_PID_FILE).read_text()))
 
 
 def _options(

@@ -13,6 +13,7 @@ import numpy as np
 
 from gcs.service.processjobs import Progress
 from gcs.service.scenariotext import InvalidInput, parse_scenario_text
+from planner.backend import RayBackend
 from planner.errors import InfeasibleError, PlannerError
 from planner.plan import Method, World, build_world, plan
 from planner.retime import build_schedule, check_feasible
@@ -34,7 +35,8 @@ PRELOAD = ("gcs.service.planjobs",)
 
 Planned = tuple[str, bytes] | tuple[str, str, float | None, str | None] | tuple[str, str]
 """``("ok", kept)`` (:func:`keep_schedule`'s bytes), ``("infeasible", message, earliest_s,
-vehicle)`` or ``("invalid", message)``."""
+vehicle)``, ``("invalid", message)`` or ``("unavailable", message)`` (the Ray it was to plan
+on could not be reached)."""
 SCHEDULE_FORMAT = "tcgcs-schedule/1"
 Parsed = tuple[str, Scenario] | tuple[str, str, list[Mapping[str, Any]]]
 """``("ok", scenario)`` or ``("invalid", message, errors)``."""
@@ -51,13 +53,32 @@ def parse(progress: Progress, body: str, media_type: str) -> Parsed:
         return "invalid", "scenario: nested too deeply to read", []
 
 
-def plan_schedule(progress: Progress, scenario: Scenario, seed: int, method: Method) -> Planned:
-    """Plan and schedule; an infeasible request names the earliest time and the vehicle."""
+def plan_schedule(
+    progress: Progress, scenario: Scenario, seed: int, method: Method, ray: str | None = None
+) -> Planned:
+    """Plan and schedule; an infeasible request names the earliest time and the vehicle.
+
+    ``ray``: where the vehicles' routes are finished (:mod:`planner.backend`): None, here (and
+    in forked processes for a large team); ``"local"``, a Ray started here for the job (its
+    processes are the job's, killed with it); else the address of a Ray cluster to join."""
     progress(0.05, "building the world")
     world = build_world(scenario)
+    backend: RayBackend | None = None
+    if ray is not None:
+        progress(0.1, "starting Ray" if ray == "local" else f"joining Ray at {ray}")
+        try:
+            backend = RayBackend(None if ray == "local" else ray)
+        except Exception as err:
+            return "unavailable", f"planning on Ray ({ray}): not reached ({err})"
     try:
-        progress(0.2, "planning routes")
-        p = plan(scenario, method=method, rng=np.random.default_rng(seed), world=world)
+        progress(0.2, "planning routes" if backend is None else "planning routes on Ray")
+        p = plan(
+            scenario,
+            method=method,
+            rng=np.random.default_rng(seed),
+            world=world,
+            backend=backend,
+        )
         progress(0.8, "timing")
         schedule = build_schedule(scenario, p, world=world)
         progress(0.95, "checking feasibility")
@@ -66,6 +87,9 @@ def plan_schedule(progress: Progress, scenario: Scenario, seed: int, method: Met
         return "infeasible", f"infeasible: {err}", err.earliest_s, err.vehicle
     except (PlannerError, ValueError) as err:
         return "invalid", str(err)
+    finally:
+        if backend is not None:
+            backend.close()
     progress(0.99, "keeping")
     return "ok", keep_schedule(scenario, schedule, world)
 

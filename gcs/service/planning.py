@@ -20,7 +20,13 @@ from typing import Any, Literal
 
 from gcs.service import planjobs
 from gcs.service.mapview import terrain_png
-from gcs.service.processjobs import JobCancelled, JobFailed, JobTimedOut, ProcessJobs
+from gcs.service.processjobs import (
+    JOB_NICENESS,
+    JobCancelled,
+    JobFailed,
+    JobTimedOut,
+    ProcessJobs,
+)
 from gcs.service.scenariotext import (
     InvalidInput,
     NotFound,
@@ -129,12 +135,16 @@ class PlannedSchedule:
 class Planning:
     """The service's scenarios, planning jobs and planned schedules."""
 
-    def __init__(self, store: Store, limits: Limits, method: str) -> None:
-        """``method``: the planner's route search for every schedule (``aco``, ...)."""
+    def __init__(self, store: Store, limits: Limits, method: str, ray: str | None = None) -> None:
+        """``method``: the planner's route search for every schedule (``aco``, ...); ``ray``:
+        where the jobs finish the routes (:func:`~gcs.service.planjobs.plan_schedule`)."""
         self.store = store
         self.limits = limits
         self.method = method
-        self.work = ProcessJobs(limits.jobs_running, preload=planjobs.PRELOAD)
+        self.ray = ray
+        self.work = ProcessJobs(
+            limits.jobs_running, preload=planjobs.PRELOAD, niceness=JOB_NICENESS
+        )
         self.jobs: dict[str, Job] = {}
         self.schedules: dict[str, PlannedSchedule] = {}
         self._scenarios: dict[str, Scenario] = {}
@@ -263,6 +273,7 @@ class Planning:
                 scenario,
                 seed,
                 self.method,
+                self.ray,
                 time_limit_s=self.limits.job_time_limit_s,
                 on_start=started,
                 on_progress=progress,
@@ -286,6 +297,9 @@ class Planning:
                 }
             elif planned[0] == "invalid":
                 job.state, job.error = "failed", {"status": 422, "detail": planned[1]}
+            elif planned[0] == "unavailable":
+                log.error("schedule job %s: %s", job.id, planned[1])
+                job.state, job.error = "failed", {"status": 503, "detail": planned[1]}
             else:
                 blob = planned[1]
                 assert isinstance(blob, bytes)

@@ -51,7 +51,9 @@ class JobFailed(Exception):
 class ProcessJobs:
     """Calls run one per OS process, at most ``max_running`` at once."""
 
-    def __init__(self, max_running: int, *, preload: Sequence[str] = ()) -> None:
+    def __init__(self, max_running: int, *, preload: Sequence[str] = (), niceness: int = 0) -> None:
+        self.niceness = niceness
+        """How much lower a job's scheduling priority is than this process's (``nice``)."""
         self._ctx = multiprocessing.get_context("forkserver")
         self._ctx.set_forkserver_preload(list(preload))
         self._slots = asyncio.Semaphore(max(1, max_running))
@@ -94,7 +96,9 @@ class ProcessJobs:
                 raise JobCancelled(key)
             loop = asyncio.get_running_loop()
             parent, child = self._ctx.Pipe(duplex=False)
-            proc = self._ctx.Process(target=_child, args=(child, fn, args), name=f"tcgcs-job-{key}")
+            proc = self._ctx.Process(
+                target=_child, args=(child, self.niceness, fn, args), name=f"tcgcs-job-{key}"
+            )
             self._running[key] = proc
             started = loop.run_in_executor(self._readers, proc.start)
             try:
@@ -181,14 +185,15 @@ def _kill_group(pgid: int) -> None:
         os.killpg(pgid, signal.SIGKILL)
 
 
-def _child(conn: Connection, fn: Callable[..., Any], args: tuple[Any, ...]) -> None:
+def _child(conn: Connection, niceness: int, fn: Callable[..., Any], args: tuple[Any, ...]) -> None:
     """The job's process: a group of its own (so that a kill takes any worker processes it
-    starts too), at a lower priority than the flights' workers (:data:`JOB_NICENESS`: a
-    flight's control loop is served first when the cores are busy), the function, its result
-    sent back."""
+    starts too), at ``niceness`` (the service's jobs at :data:`JOB_NICENESS`: a flight's
+    control loop is served first when the cores are busy), the function, its result sent
+    back."""
     os.setpgid(0, 0)
-    with contextlib.suppress(OSError):
-        os.nice(JOB_NICENESS)
+    if niceness:
+        with contextlib.suppress(OSError):
+            os.nice(niceness)
 
     def progress(fraction: float, stage: str) -> None:
         conn.send(("progress", fraction, stage))

@@ -33,7 +33,6 @@ import os
 import signal
 import sys
 import tempfile
-import time
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import asdict, dataclass
 from pathlib import Path
@@ -41,10 +40,13 @@ from typing import Any
 
 from pydantic import TypeAdapter
 
+from gcs.coordination.runner import ENDED
 from gcs.errors import GcsError
 from gcs.mavlink.signing import SigningConfig
 from gcs.service.fleet import Fleet
 from gcs.service.flight import Flight, Rehearsal
+from gcs.service.flightjobs import start_server
+from gcs.service.loopwatch import LoopWatch, freeze_start_up
 from gcs.service.planning import kept_planned
 from gcs.service.scenariotext import (
     Conflict,
@@ -168,34 +170,6 @@ def error_of(doc: Mapping[str, Any]) -> ServiceError:
     return _ERRORS.get(str(doc.get("type")), ServiceError)(message)
 
 
-# -- the loop's own watch -------------------------------------------------------------------------
-
-
-class LoopWatch:
-    """How late the event loop turns: a task asks to wake every ``period_s`` and keeps the
-    longest delay past that (:attr:`stall_max_s`, wall s), the worker's own measure of how long
-    its control loop was held."""
-
-    def __init__(self, period_s: float = 0.01) -> None:
-        self.period_s = period_s
-        self.stall_max_s = 0.0
-        self._task: asyncio.Task[None] | None = None
-
-    def start(self) -> None:
-        self._task = asyncio.get_running_loop().create_task(self._run())
-
-    async def _run(self) -> None:
-        while True:
-            t0 = time.perf_counter()
-            await asyncio.sleep(self.period_s)
-            late = time.perf_counter() - t0 - self.period_s
-            self.stall_max_s = max(self.stall_max_s, late)
-
-    def stop(self) -> None:
-        if self._task is not None:
-            self._task.cancel()
-
-
 # -- the worker -----------------------------------------------------------------------------------
 
 
@@ -204,7 +178,7 @@ class Worker:
 
     def __init__(self, flight: Flight) -> None:
         self.flight = flight
-        self.watch = LoopWatch()
+        self.watch = LoopWatch(counting=lambda: flight.runner.state not in ENDED)
         self.ended = asyncio.Event()
         self.stopping = False
         self._changed = asyncio.Event()
@@ -285,6 +259,8 @@ class Worker:
                 float(args["arrival_s"]), args.get("version")
             ),
             "abort": lambda: f.abort(args.get("vehicle"), str(args.get("mode", "rtl"))),
+            "pause": lambda: f.pause(args.get("at_s")),
+            "resume": f.resume,
             "stop": self.stop,
         }
         command = commands.get(op)
@@ -415,6 +391,11 @@ async def _main(folder: Path, db_url: str, resume: bool) -> int:
             except (GcsError, OSError, TimeoutError, ValueError) as err:
                 _say({"error": {"type": "ServiceError", "message": str(err)}})
                 return 1
+            # What the flight starts with (the modules, its world and schedule, its links)
+            # lives as long as it does: kept out of the collector's passes, a full pass over
+            # the objects it makes in flight is short (one over all of them held the loop
+            # up to 100 ms on a busy machine).
+            freeze_start_up()
             await Worker(flight).run(folder)
             if flight.task is not None and not flight.task.done() and not flight.over:
                 # Stopped with live vehicles in the air: the next worker flies them on.
@@ -438,6 +419,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         '{"folder", "db", "resume"} (exit 0 at the end of stdin)',
     )
     args = ap.parse_args(argv)
+    start_server()  # the flight's planning jobs' (loaded while nothing waits for it)
     if args.standby:
         line = sys.stdin.readline()
         if not line.strip():

@@ -25,12 +25,12 @@ import os
 import signal
 import sys
 import time
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
 from gcs.coordination.bus import EventBus
-from gcs.coordination.events import FlightEvent
+from gcs.coordination.events import EventKind, FlightEvent
 from gcs.coordination.runner import ENDED, FlightState
 from gcs.service.ended import FINAL_FILE
 from gcs.service.scenariotext import Conflict, NotFound, ServiceError
@@ -48,10 +48,12 @@ RESTART_WINDOW_S = 60.0
 """A worker that died is started again at most :data:`RESTARTS` times in this many wall s."""
 FEED_SILENCE_S = 15.0
 """A worker's feed says the flight's state every 0.25 s of wall time: silent this long (wall
-s), it is taken as broken (the worker is asked, and killed if it does not answer)."""
+s), it is taken as broken (the worker is asked, and killed if it does not answer). The
+default of :attr:`Spawner.feed_silence_s` (setting ``TCGCS_WORKER_SILENCE_S``)."""
 RECONNECT_WALL_S = 10.0
 """How long (wall s) a worker that still runs may take to answer again after its feed broke
-before it is killed and replaced."""
+before it is killed and replaced. The default of :attr:`Spawner.answer_wall_s` (setting
+``TCGCS_WORKER_ANSWER_S``)."""
 MAP_WALL_S = 1.0
 """The map is asked of a flight's worker at most this often (wall s)."""
 REQUEST_WALL_S = 30.0
@@ -83,6 +85,13 @@ class WorkerFlight:
         self.final: tuple[dict[str, Any], dict[str, Any] | None] | None = None
         """Once it is over: its last snapshot and map, as the worker kept them."""
         self.restarts: list[float] = []
+        self.not_flown_on = "no reason given"
+        """Why no worker flew the flight on after its own died (said with the failure)."""
+        self.keep_told: Callable[[Sequence[FlightEvent]], object] | None = None
+        """Keeps events in the store (as the worker's own writer does): those the worker told
+        and may not have kept when it died are kept before another takes the flight on."""
+        self.lost = False
+        """No worker flies it on: it has failed (said by two events on its bus)."""
         self._state: dict[str, Any] = {}
         self._told = 0
         self._take_state(ready)
@@ -231,12 +240,13 @@ class WorkerFlight:
                     # Its feed broke but it runs: follow it again if it answers; one that
                     # does not is killed before another is started (never two workers on
                     # one flight's vehicles).
-                    if await self._answers_within(RECONNECT_WALL_S):
+                    if await self._answers_within(self.spawner.answer_wall_s):
                         continue
                     log.error("flight %s: its worker (pid %d) stopped answering: killed",
                               self.id, self.pid)  # fmt: skip
                     self.kill()
                 if not await self._restart():
+                    self._lose()
                     break
         finally:
             self._end()
@@ -268,7 +278,8 @@ class WorkerFlight:
             req = {"op": "follow", "args": {"after_seq": self.bus.last_seq}}
             writer.write(json.dumps(req).encode() + b"\n")
             await writer.drain()
-            while line := await asyncio.wait_for(reader.readline(), FEED_SILENCE_S):
+            silence_s = self.spawner.feed_silence_s
+            while line := await asyncio.wait_for(reader.readline(), silence_s):
                 msg = json.loads(line)
                 kind = msg.get("type")
                 if kind == "event":
@@ -303,7 +314,8 @@ class WorkerFlight:
         now = time.monotonic()
         self.restarts = [t for t in self.restarts if now - t < RESTART_WINDOW_S]
         if len(self.restarts) >= RESTARTS:
-            log.error("flight %s: its worker died %d times in a minute", self.id, RESTARTS)
+            self.not_flown_on = f"its worker died {RESTARTS} times in a minute"
+            log.error("flight %s: %s", self.id, self.not_flown_on)
             return False
         self.restarts.append(now)
         await self._wait_gone(5.0)
@@ -312,9 +324,11 @@ class WorkerFlight:
             await self._wait_gone(5.0)
         log.warning("flight %s: its worker (pid %d) died; flying on from its checkpoint",
                     self.id, self.pid)  # fmt: skip
+        await self.keep_told_events()
         try:
             self.proc, ready = await self.spawner.spawn(self.folder, True)
         except ServiceError as err:
+            self.not_flown_on = str(err)
             log.error("flight %s: not flown on: %s", self.id, err)
             return False
         self.pid = int(ready["pid"])
@@ -326,6 +340,38 @@ class WorkerFlight:
                         self.id, kept + 1, self.bus.last_seq)  # fmt: skip
             self.bus.rebase(kept)
         return True
+
+    async def keep_told_events(self) -> None:
+        """Keep every event the worker told (the store skips those it kept itself): a worker
+        that takes the flight on numbers its events on from them."""
+        if self.keep_told is None:
+            return
+        try:
+            await asyncio.to_thread(self.keep_told, self.bus.since(0))
+        except Exception:  # the store unreachable: the events not kept are lost, as said
+            log.exception("flight %s: the events its worker told were not kept", self.id)
+
+    def _lose(self) -> None:
+        """No worker flies the flight on (no checkpoint to fly on from, or it died too
+        often): the flight has failed, and says so (events for its streams, and :attr:`lost`
+        for the service to keep them)."""
+        snap = dict(self._state["snapshot"])
+        was = snap.get("state")
+        why = (
+            f"its worker (pid {self.pid}) died and no other could fly it on "
+            f"(it was {was}; {self.not_flown_on}): the flight has failed; its vehicles fly "
+            "what they hold"
+        )
+        log.error("flight %s: %s", self.id, why)
+        snap["state"] = FlightState.FAILED.value
+        self._state = {**self._state, "snapshot": snap}
+        t_s = float(snap.get("t_s") or 0.0)
+        for kind, payload in (
+            (EventKind.FLIGHT, {"state": FlightState.FAILED.value, "was": was}),
+            (EventKind.ALARM, {"why": "flight worker lost"}),
+        ):
+            self.bus.publish(FlightEvent(time.time(), t_s, None, kind, why, payload=payload))
+        self.lost = True
 
     def _end(self) -> None:
         doc = self._kept_final()
@@ -378,8 +424,19 @@ class Spawner:
     loaded (``--standby``): a flight created, or a worker that died replaced, then waits for
     no Python start-up (over a second here). Close it with the service (:meth:`close`)."""
 
-    def __init__(self, db_url: str) -> None:
+    def __init__(
+        self,
+        db_url: str,
+        *,
+        feed_silence_s: float = FEED_SILENCE_S,
+        answer_wall_s: float = RECONNECT_WALL_S,
+    ) -> None:
         self.db_url = db_url
+        self.feed_silence_s = feed_silence_s
+        """A worker's feed silent this long (wall s) is taken as broken."""
+        self.answer_wall_s = answer_wall_s
+        """A worker whose feed broke but which still runs is killed and replaced when it
+        has not answered within this long (wall s): a hung worker."""
         self._spare: asyncio.subprocess.Process | None = None
         self._warming: asyncio.Task[None] | None = None
 
@@ -438,11 +495,11 @@ class Spawner:
         )  # fmt: skip
 
     async def close(self) -> None:
-        """The spare ends (its stdin closed)."""
+        """The spare ends (its stdin closed): one being started is waited for first (a start
+        cancelled midway would leave its process's pipes to be closed after the event loop)."""
         if self._warming is not None:
-            self._warming.cancel()
-            with contextlib.suppress(BaseException):
-                await self._warming
+            with contextlib.suppress(Exception):
+                await asyncio.wait_for(asyncio.shield(self._warming), 30.0)
         spare, self._spare = self._spare, None
         if spare is not None and spare.returncode is None:
             assert spare.stdin is not None

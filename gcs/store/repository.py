@@ -469,6 +469,24 @@ class Store:
                 for r in session.scalars(query)
             ]
 
+    def events_to_resume(self, flight_id: str) -> list[FlightEvent]:
+        """A flight's events as a flight taken on from its checkpoint reads them: each
+        vehicle's last upload event carries its mission items again (kept apart, in the
+        uploads table), so that a mission it told of and the checkpoint still had pending is
+        adopted without being told again."""
+        events = self.events(flight_id)
+        last: dict[str, int] = {}
+        for i, e in enumerate(events):
+            if e.kind is EventKind.UPLOAD and e.vehicle is not None and "what" in e.payload:
+                last[e.vehicle] = i
+        for vid, i in last.items():
+            items = self.last_upload(flight_id, vid)
+            if items is not None:
+                e = events[i]
+                payload = {**e.payload, "items": [_item_json(it) for it in items]}
+                events[i] = dataclasses.replace(e, payload=payload)
+        return events
+
     # -- uploads ------------------------------------------------------------------------------
 
     def record_upload(
@@ -513,32 +531,63 @@ class Store:
 
 class CheckpointWriter:
     """Keeps a flight's newest checkpoint in the store from a worker thread: the control loop
-    hands it over and goes on; a checkpoint superseded before it was written is skipped."""
+    hands it over and goes on; a checkpoint superseded before it was written is skipped.
 
-    def __init__(self, store: Store, flight_id: str) -> None:
+    With ``bus`` and ``events`` (its :class:`EventWriter`), a checkpoint is written only once
+    every event the bus had published when it was offered is kept: a process that dies
+    between the two never leaves a checkpoint ahead of its events (a mission on board whose
+    upload no kept event says, and that a flight resumed from it would not say again)."""
+
+    def __init__(
+        self,
+        store: Store,
+        flight_id: str,
+        *,
+        bus: EventBus | None = None,
+        events: EventWriter | None = None,
+    ) -> None:
         self.store = store
         self.flight_id = flight_id
         self.written = 0
-        self._latest: bytes | None = None
+        self._bus = bus
+        self._events = events
+        self._latest: tuple[bytes, int] | None = None
         self._closing = False
         self._wake = asyncio.Event()
+        self._idle = asyncio.Event()
+        self._idle.set()
         self._task = asyncio.get_running_loop().create_task(self._run())
 
     def offer(self, blob: bytes) -> None:
-        self._latest = blob
+        self._latest = blob, 0 if self._bus is None else self._bus.last_seq
+        self._idle.clear()
         self._wake.set()
+
+    async def kept(self) -> None:
+        """Until the newest checkpoint offered is written (or the writer has stopped)."""
+        idle = asyncio.ensure_future(self._idle.wait())
+        try:
+            await asyncio.wait([idle, self._task], return_when=asyncio.FIRST_COMPLETED)
+        finally:
+            idle.cancel()
 
     async def _run(self) -> None:
         while not self._closing:
             await self._wake.wait()
             self._wake.clear()
             await self._flush()
+            if self._latest is None:
+                self._idle.set()
 
     async def _flush(self) -> None:
-        blob, self._latest = self._latest, None
-        if blob is not None:
-            await asyncio.to_thread(self.store.save_checkpoint, self.flight_id, blob)
-            self.written += 1
+        latest, self._latest = self._latest, None
+        if latest is None:
+            return
+        blob, seq = latest
+        if self._events is not None:
+            await self._events.kept_through(seq)
+        await asyncio.to_thread(self.store.save_checkpoint, self.flight_id, blob)
+        self.written += 1
 
     async def close(self) -> None:
         """Write what is pending, then stop."""
@@ -555,10 +604,9 @@ class FlightKeeper:
 
     def __init__(self, store: Store, flight_id: str, bus: EventBus) -> None:
         self.events = bus.subscribe(maxsize=1_000_000, after_seq=0)
-        self.checkpoints = CheckpointWriter(store, flight_id)
-        self._writer = asyncio.get_running_loop().create_task(
-            EventWriter(store, flight_id).run(self.events)
-        )
+        writer = EventWriter(store, flight_id)
+        self.checkpoints = CheckpointWriter(store, flight_id, bus=bus, events=writer)
+        self._writer = asyncio.get_running_loop().create_task(writer.run(self.events))
 
     async def close(self) -> None:
         """The pending checkpoint and every queued event written, then stop."""
@@ -576,17 +624,38 @@ class EventWriter:
         self.flight_id = flight_id
         self.batch = batch
         self.written = 0
+        self.kept_seq = 0
+        """The last event kept (its seq)."""
+        self._ended = False
+        self._kept = asyncio.Condition()
 
     async def run(self, events: Subscription) -> None:
         """Until the subscription is closed and drained."""
-        while (first := await events.get()) is not None:
-            pending = [first]
-            while len(pending) < self.batch and (more := events.get_nowait()) is not None:
-                pending.append(more)
-            self.written += await asyncio.to_thread(self._write, pending)
+        try:
+            while (first := await events.get()) is not None:
+                pending = [first]
+                while len(pending) < self.batch and (more := events.get_nowait()) is not None:
+                    pending.append(more)
+                self.written += await asyncio.to_thread(self.write, pending)
+                await self._said(pending[-1].seq)
+        finally:
+            self._ended = True
+            await self._said(self.kept_seq)
 
-    def _write(self, events: list[FlightEvent]) -> int:
-        """Keep the events; an upload event's mission items go to the uploads table."""
+    async def _said(self, seq: int) -> None:
+        async with self._kept:
+            self.kept_seq = seq
+            self._kept.notify_all()
+
+    async def kept_through(self, seq: int) -> None:
+        """Until every event up to ``seq`` is kept (or the writer has stopped)."""
+        async with self._kept:
+            await self._kept.wait_for(lambda: self.kept_seq >= seq or self._ended)
+
+    def write(self, events: Sequence[FlightEvent]) -> int:
+        """Keep the events (one already kept is not written again) and what they change in
+        the flight's row; an upload event's mission items go to the uploads table. Returns
+        how many were new."""
         kept = []
         for e in events:
             items = e.payload.get("items") if e.kind is EventKind.UPLOAD else None

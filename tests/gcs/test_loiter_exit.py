@@ -19,6 +19,7 @@ from gcs.coordination.routetrack import LoiterSpec
 from gcs.coordination.team import TeamController
 from planner.mission import MAV_CMD_NAV_LOITER_TURNS
 from tests.gcs.test_team import _early, fix, of, on_loiter_circle, reports
+from tests.planner.test_loiterflight import _flown_out_m
 
 SETTLED = 40
 """Fixes round the circle (2 s apart) before a test's own."""
@@ -153,16 +154,22 @@ def test_a_vehicle_not_taken_out_of_its_turns_says_so_and_is_asked_again(
     assert again.seq == k + 1
 
 
-def test_a_vehicle_whose_turns_are_as_good_as_flown_is_not_taken_out_of_them(
-    team: TeamController,
+@pytest.mark.parametrize("short_m", [100.0, 0.0], ids=["100 m left", "all flown"])
+def test_a_late_vehicle_whose_turns_are_as_good_as_flown(
+    team: TeamController, short_m: float
 ) -> None:
-    """Late, with all of its loiter flown by the coordinator's count and the vehicle on the
-    circle behind its entry point: leaving would gain nothing (it would fly the route from
-    there), so it stays in the turns and the team time moves for what is left."""
+    """Late, with its loiter flown by the coordinator's count but ``short_m`` (less what it
+    flies to the fix) and the vehicle on the circle behind its entry point. With some turns
+    left leaving would gain nothing (it would fly the route from there): it stays in the
+    turns and the team time moves for what is left. With all of them flown it still circles,
+    lining up with the route later than its count foresaw (as after a hold, when it came to
+    them off its route), and staying gains nothing either: the way out at the roll limit is
+    never longer than the way round the circle. So it is taken out of them, and the team
+    time moves for the way out."""
     vid = "UAV3"
-    m, lo, _, t1, on_circle = _in_turns(team, vid)
+    m, lo, k, t1, on_circle = _in_turns(team, vid)
     i = SETTLED + 1
-    m.loiter_flown_m = lo.length_m
+    m.loiter_flown_m = lo.length_m - short_m
     p = m.schedule.path.pose_at(lo.s_m)
     e = lo.centre_east_m - lo.radius_m * math.sin(p.heading_rad)
     n = lo.centre_north_m - lo.radius_m * math.cos(p.heading_rad)
@@ -171,9 +178,15 @@ def test_a_vehicle_whose_turns_are_as_good_as_flown_is_not_taken_out_of_them(
     t = t1 + 2.0 * i
     _retarget(team, t + 60.0)
     out = team.handle(behind, t)
-    assert of(out, act.LeaveLoiter) == [] and m.in_loiter()
     (moved,) = reports(out, EventKind.ARRIVAL)
     assert moved.vehicle == vid and "cannot arrive before" in moved.reason
+    if short_m > 0.0:
+        assert of(out, act.LeaveLoiter) == [] and m.in_loiter()
+        return
+    (leave,) = of(out, act.LeaveLoiter)
+    assert leave.seq == k + 1 and m.leaving_seq == k + 1
+    (said,) = [r for r in reports(out, EventKind.LOITER) if r.payload["action"] == "leave"]
+    assert "late even at" in said.reason, said.reason
 
 
 def test_a_vehicle_its_turns_would_leave_without_a_speed_reserve_is_taken_out_of_them(
@@ -281,3 +294,49 @@ def test_a_vehicle_in_its_turns_is_timed_to_a_splice_at_its_true_airspeed_not_on
     assert 0.0 < left_m < lo.length_m
     expected = t + (left_m + s_k - m.s_m) / tas_m_s
     assert MissionChanges._reaches_s(m, t, s_k, speed) == pytest.approx(expected, abs=1e-6)
+
+
+def test_a_vehicle_taken_out_of_its_turns_flying_against_its_route_is_timed_with_the_turn_back(
+    team: TeamController,
+) -> None:
+    """Taken out of its turns on the far side of the circle, flying against its route: it
+    turns round towards the waypoint after the turns (at its roll limit) and flies straight
+    at it before it flies the route on, and is timed so. Timed as if it flew the route on
+    from the point its position is located at, it was late by what the way out costs, found
+    out a few seconds at a time after it left the turns (the team time moved four times, too
+    late for the others to follow)."""
+    vid = "UAV3"
+    m, lo, k, t1, on_circle = _in_turns(team, vid)
+    assert [x.s_m for x in m.track.loiters] == [lo.s_m]  # the route after it has no turns
+    i = SETTLED + 1
+    t = t1 + 2.0 * i
+    course = m.schedule.path.pose_at(lo.s_m).heading_rad + math.pi
+    gs = on_circle(i).groundspeed_m_s
+    assert gs is not None
+    back = dataclasses.replace(
+        on_circle(i),
+        ve_m_s=gs * math.sin(course),
+        vn_m_s=gs * math.cos(course),
+        heading_deg=math.degrees(course) % 360.0,
+    )
+    _retarget(team, t + 30.0)  # far too soon for anything: out of the turns at once
+    m.next_decision_s = -math.inf
+    out = team.handle(back, t)
+    assert of(out, act.LeaveLoiter)
+    # The way out flown step by step to the waypoint after the turns, then the route from
+    # it, at top speed (still air, its true airspeed there).
+    w = next(j for j in range(k + 1, len(m.mission.items)) if m.mission.items[j].command == 16)
+    item = m.mission.items[w]
+    we, wn = team.frame.to_local(item.lat_deg, item.lon_deg)
+    e, n = team.frame.to_local(back.lat_deg, back.lon_deg)
+    way_m = _flown_out_m(float(we - e), float(wn - n), course, gs)
+    s_w = m.mission.item_s_m[w]
+    assert s_w is not None and s_w > lo.s_m
+    v_max = m.limits.airspeed_max_m_s * m.tas_per_eas(s_w)
+    expected_s = t + (way_m + m.track.length_m - s_w) / v_max
+    d = m.last_decision
+    assert d is not None and d.verdict == "late"
+    assert d.eta_min_s == pytest.approx(expected_s, abs=0.5), (d.eta_min_s, expected_s)
+    # More than timing it from where it is located on the route would say: the turn back.
+    located_s, _ = m.track.locate(float(e), float(n), lo.s_m)
+    assert d.eta_min_s > t + (m.track.length_m - located_s) / v_max + 5.0

@@ -26,14 +26,25 @@ from sitl_stub.lockstep import Lockstep
 PAPER = Path(__file__).resolve().parents[2] / "scenarios" / "paper_three_uav.yaml"
 
 
-async def test_a_held_clock_acknowledges_nothing_past_the_hold_and_a_release_lets_it_on(
-    tmp_path: Path,
-) -> None:
+@contextlib.asynccontextmanager
+async def _paced(tmp_path: Path) -> AsyncIterator[tuple[Lockstep, MissionClock]]:
+    """A simulator's lock step at 200x (lead 1 s) and a mission clock following it."""
     path = tmp_path / "pace"
     sim = Lockstep(path, create=True, speedup=200.0, lead_s=1.0)
     clock = MissionClock()
     pacer = follow_lockstep(path, clock)
     try:
+        yield sim, clock
+    finally:
+        pacer.cancel()
+        await asyncio.gather(pacer, return_exceptions=True)
+        sim.close()
+
+
+async def test_a_held_clock_acknowledges_nothing_past_the_hold_and_a_release_lets_it_on(
+    tmp_path: Path,
+) -> None:
+    async with _paced(tmp_path) as (sim, clock):
         sim.publish(100.0)  # the simulator has flown 100 s
         await asyncio.sleep(0.02)
         assert sim.acknowledged_s() * 200.0 == 100.0
@@ -51,10 +62,35 @@ async def test_a_held_clock_acknowledges_nothing_past_the_hold_and_a_release_let
         await asyncio.sleep(0.02)
         assert clock.held_pace_s is None
         assert sim.acknowledged_s() * 200.0 == pytest.approx(100.5)
-    finally:
-        pacer.cancel()
-        await asyncio.gather(pacer, return_exceptions=True)
-        sim.close()
+
+
+async def test_a_clock_held_at_a_utc_stops_the_simulator_there_until_let_go(
+    tmp_path: Path,
+) -> None:
+    """A rehearsal paused at a mission time (:meth:`MissionClock.hold_at`): the lock step
+    acknowledges pace time up to the one at which the team's UTC reaches it, and no further,
+    until let go; a planning job's hold inside it holds it where it is."""
+    utc0 = 1.7e9
+    async with _paced(tmp_path) as (sim, clock):
+        for flown_s in (100.0, 120.0):  # the vehicle's UTC at 200 flight s per pace s
+            sim.publish(flown_s)
+            clock.observe(1, utc0 + flown_s, flown_s, flown_s / 200.0)
+        clock.hold_at(utc0 + 150.0)
+        assert clock.held_pace_s == pytest.approx(150.0 / 200.0)
+        sim.publish(149.0)
+        await asyncio.sleep(0.02)
+        assert sim.acknowledged_s() * 200.0 == pytest.approx(149.0)
+        sim.publish(151.0)  # the simulator's lead took it past the pause
+        await asyncio.sleep(0.02)
+        assert sim.acknowledged_s() * 200.0 == pytest.approx(150.0)
+        assert clock.now_utc_s() == pytest.approx(utc0 + 151.0)
+        clock.hold()
+        clock.release()
+        assert clock.held_pace_s == pytest.approx(150.0 / 200.0)  # still paused
+        clock.hold_at(None)
+        await asyncio.sleep(0.02)
+        assert clock.held_pace_s is None
+        assert sim.acknowledged_s() * 200.0 == pytest.approx(151.0)
 
 
 def test_off_a_pace_clock_a_hold_is_nothing() -> None:
@@ -63,6 +99,11 @@ def test_off_a_pace_clock_a_hold_is_nothing() -> None:
     assert clock.held_pace_s is None
     clock.release()
     assert clock.held_pace_s is None
+    clock.observe(1, 1.7e9, 0.0, 0.0)
+    clock.hold_at(1.7e9 + 10.0)
+    assert clock.held_pace_s is None
+    with pytest.raises(ValueError, match="utc_s"):
+        clock.hold_at(float("nan"))
 
 
 class _SlowUpload:

@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import asyncio
 import math
+import threading
 from collections.abc import Iterator
 from pathlib import Path
 
@@ -174,6 +175,35 @@ async def test_the_newest_checkpoint_is_kept_and_a_state_event_moves_the_rows(
     assert f.state == "running" and f.vehicles["UAV1"][0] == "on_route"
     with pytest.raises(StoreNotFound):
         store.checkpoint("nope")
+
+
+async def test_a_checkpoint_is_kept_before_kept_returns_however_slow_the_database(
+    store: Store, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """:meth:`CheckpointWriter.kept` (what a service flight waits for before it says it is
+    ready) returns only once the newest checkpoint offered is in the store."""
+    sid = store.save_scenario(SCENARIO, name="demo")
+    fid = store.create_flight(sid, {"UAV1": "tcp:127.0.0.1:5760"})
+    gate = threading.Event()
+    save = store.save_checkpoint
+
+    def held_save(flight_id: str, blob: bytes) -> None:
+        gate.wait()
+        save(flight_id, blob)
+
+    monkeypatch.setattr(store, "save_checkpoint", held_save)
+    writer = CheckpointWriter(store, fid)
+    await writer.kept()  # nothing offered: at once
+    writer.offer(b"first")
+    writer.offer(b"ready")
+    kept = asyncio.ensure_future(writer.kept())
+    for _ in range(20):
+        await asyncio.sleep(0)
+    assert not kept.done() and store.checkpoint(fid) is None
+    gate.set()
+    await kept
+    assert store.checkpoint(fid) == b"ready"
+    await writer.close()
 
 
 def test_a_database_at_the_first_revision_is_brought_up_to_date(tmp_path: Path) -> None:

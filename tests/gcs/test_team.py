@@ -21,12 +21,13 @@ from scipy.integrate import quad
 
 from gcs.coordination import actions as act
 from gcs.coordination.config import FlightConfig
-from gcs.coordination.events import EventKind
+from gcs.coordination.events import EventKind, FlightEvent
 from gcs.coordination.member import Member, VehicleState
 from gcs.coordination.routetrack import LoiterSpec
 from gcs.coordination.separation import Position, SeparationWatch
 from gcs.coordination.team import TeamController, TeamTimeRefused
 from gcs.errors import GcsError
+from gcs.store.repository import EventWriter, Store
 from planner.flightpath import FlightPath
 from planner.mission import (
     MAV_CMD_DO_CHANGE_SPEED,
@@ -41,6 +42,7 @@ from planner.schedule import Event, Schedule
 from planner.schedulefile import PathMission
 from planner.threats import build_threats
 from tests.gcs.conftest import START_UTC
+from tests.planner.test_loiterflight import _flown_out_m
 
 
 def of(actions: Sequence[act.Action], kind: type) -> list:  # type: ignore[type-arg]
@@ -338,6 +340,46 @@ def test_an_early_vehicle_gets_the_fewest_loiter_turns_that_absorb_its_surplus(
     assert m.mission is up.mission and m.schedule is vs
     assert reports(out, EventKind.LOITER)
     assert not m.busy_mission
+
+
+@pytest.mark.parametrize("told", [True, False], ids=["told", "not told"])
+def test_an_upload_told_before_a_restart_is_adopted_without_telling_it_again(
+    team: TeamController, store_url: str, told: bool
+) -> None:
+    """A worker told an upload (its event kept, its items in the uploads table) and died
+    before the next checkpoint: the one taking the flight on reads the kept events back
+    (``events_to_resume``), finds the pending upload told, and adopts it telling nothing
+    twice. One not told yet is told."""
+    vid = "UAV3"
+    m = team.members[vid]
+    t0, _, job = _early(team, vid)
+    (up,) = of(team.handle(act.Computed(job, job.run()), t0 + 1), act.Upload)
+    assert team.pending[vid] is up
+    items = [dataclasses.asdict(it) for it in m.mission.items]
+    initial = FlightEvent(
+        START_UTC, 0.0, vid, EventKind.UPLOAD, "initial mission", seq=1,
+        payload={"what": "initial mission", "items": items},
+    )  # fmt: skip
+    failed = FlightEvent(START_UTC + 1, 1.0, "UAV1", EventKind.UPLOAD, "upload failed", seq=3)
+    said = FlightEvent(
+        START_UTC + t0 + 1, t0 + 1, vid, EventKind.UPLOAD, up.what, seq=2, payload=up.payload()
+    )
+    store = Store.open(store_url)
+    try:
+        fid = store.create_flight(store.save_scenario("name: t\nvehicles: []\n", name="t"), {})
+        writer = EventWriter(store, fid)
+        writer.write([initial, said, failed] if told else [initial, failed])
+        kept = store.events(fid)
+        assert all("items" not in e.payload for e in kept)  # kept apart, in the uploads table
+        events = store.events_to_resume(fid)
+    finally:
+        store.close()
+    assert up.told_in(events) is told
+    assert not up.told_in(kept)  # without its items, no upload is known for the one told
+    out = team.handle(act.Installed(up, said=up.told_in(events)), t0 + 2)
+    assert m.mission is up.mission and vid not in team.pending and not m.busy_mission
+    ups = [r for r in of(out, act.Report) if r.kind is EventKind.UPLOAD]
+    assert len(ups) == (0 if told else 1), ups
 
 
 def test_a_loiter_upload_that_fails_keeps_the_old_mission_and_says_so(team: TeamController) -> None:
@@ -1345,20 +1387,32 @@ def test_a_vehicle_in_its_loiter_turns_is_timed_and_a_late_one_leaves_them_and_m
     (moved,) = reports(out, EventKind.ARRIVAL)
     assert moved.vehicle == vid and "cannot arrive before" in moved.reason
     # Where it moves to, worked out here: from fix 101 (t2 + 2 s), out of the turns, the
-    # route from the point of it nearest the fix (found here by sampling the path every
-    # 0.1 m), at the top equivalent airspeed in still air, plus the late margin (the
-    # config's, or 2 % of the time still to fly if that is less). The controller times the
-    # route at one true airspeed per equivalent: the harmonic mean of the ISA ratio along
-    # it, integrated here by scipy over the route's own altitude profile with the ISA worked
-    # out here (:func:`_isa_tas_per_eas`).
+    # way out to the waypoint after them (flown step by step from the fix's course:
+    # :func:`tests.planner.test_loiterflight._flown_out_m`) and the route on from it, at the
+    # top equivalent airspeed in still air, plus the late margin (the config's, or 2 % of
+    # the time still to fly if that is less): as from that far back along the route from
+    # the waypoint. The controller times the route at one true airspeed per equivalent: the
+    # harmonic mean of the ISA ratio along it, integrated here by scipy over the route's own
+    # altitude profile with the ISA worked out here (:func:`_isa_tas_per_eas`).
     v_max = m.limits.airspeed_max_m_s
     t_fix = t2 + 2.0
     here = on_circle(101)
     he, hn = team.frame.to_local(here.lat_deg, here.lon_deg)
-    near = np.arange(max(lo.s_m - 3_000.0, 0.0), min(lo.s_m + 3_000.0, m.track.length_m), 0.1)
-    poses = [m.schedule.path.pose_at(float(x)) for x in near]
-    gap = [math.hypot(p.east_m - float(he), p.north_m - float(hn)) for p in poses]
-    s_fix = float(near[int(np.argmin(gap))])
+    w = next(
+        j for j in range(k_loiter + 1, len(m.mission.items)) if m.mission.items[j].command == 16
+    )
+    item = m.mission.items[w]
+    we, wn = team.frame.to_local(item.lat_deg, item.lon_deg)
+    assert here.ve_m_s is not None and here.vn_m_s is not None
+    way_m = _flown_out_m(
+        float(we - he),
+        float(wn - hn),
+        math.atan2(here.ve_m_s, here.vn_m_s),
+        math.hypot(here.ve_m_s, here.vn_m_s),
+    )
+    s_w = m.mission.item_s_m[w]
+    assert s_w is not None
+    s_fix = s_w - way_m
     s_wp, alt_wp = np.asarray(m.schedule.wp_s_m), np.asarray(m.schedule.wp_alt_m)
     end_m = m.track.length_m
     route_per_eas_s = quad(
@@ -1370,7 +1424,8 @@ def test_a_vehicle_in_its_loiter_turns_is_timed_and_a_late_one_leaves_them_and_m
     )[0]
     eta_s = t_fix + route_per_eas_s / v_max
     margin_s = min(team.config.late_margin_s, 0.02 * (eta_s - t_fix))
-    # 10 ms: the integral against the route's 50 m table of the ratio and the 0.1 m search.
+    # 10 ms: the integral against the route's 50 m table of the ratio, and the way out's
+    # steps.
     assert moved.value == pytest.approx(eta_s - m.offset_s + margin_s, abs=0.01)
     (cmd,) = of(out, act.CommandSpeed)
     assert cmd.airspeed_m_s == m.limits.airspeed_max_m_s

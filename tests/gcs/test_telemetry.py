@@ -515,6 +515,15 @@ async def test_loopback_state_matches_stub_true_state() -> None:
         ) as team,
         Link.open(f"tcp:127.0.0.1:{team.ports[0]}", system_id=255, component_id=190) as link,
     ):
+        # The truth at every simulator step: the speeds the reducer averages over a second
+        # are compared with the truth's over the same second (it accelerates as it climbs).
+        flown: list[tuple[float, float, float]] = []  # (time s, ground speed m/s, course rad)
+
+        def sample() -> None:
+            t = team.vehicles[0].true_state
+            flown.append((t.time_s, t.groundspeed_m_s, t.course_rad))
+
+        team.server.add_step_listener(sample)
         clock = asyncio.create_task(team.server.run())
         reducer = TelemetryReducer(1)
         remove = link.add_listener(reducer)
@@ -552,11 +561,17 @@ async def test_loopback_state_matches_stub_true_state() -> None:
         # wind: the stub reports where it comes FROM
         assert s.wind_from_deg == pytest.approx(250.0, abs=1.0)
         assert s.wind_speed_m_s == pytest.approx(5.0, abs=0.2)
-        # speed estimates on the vehicle's clock against the true ground speed
-        assert s.track_speed_m_s(1.0) == pytest.approx(truth.groundspeed_m_s, abs=1.0)
+        # speed estimates on the vehicle's clock against the true ground speed over the same
+        # second of the vehicle's time (the fixes' last second)
+        end_s = s.position_time_boot_s
+        second = [(v, c) for t, v, c in flown if end_s - 1.0 <= t <= end_s]
+        assert len(second) >= 5, (end_s, flown[-3:])
+        true_speed = sum(v for v, _ in second) / len(second)
+        assert s.track_speed_m_s(1.0) == pytest.approx(true_speed, abs=1.0)
         course_deg = math.degrees(truth.course_rad)
         along = s.groundspeed_along_track_m_s(1.0, course_deg)
-        assert along == pytest.approx(truth.groundspeed_m_s, abs=1.0)
+        true_along = sum(v * math.cos(c - truth.course_rad) for v, c in second) / len(second)
+        assert along == pytest.approx(true_along, abs=1.0)
         # vehicle UTC as the last SYSTEM_TIME said it (sent once a simulated second): within
         # one period of the simulator's
         assert s.utc_rx_s is not None

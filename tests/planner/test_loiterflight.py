@@ -12,7 +12,7 @@ from hypothesis import strategies as st
 
 from planner.dubins import Pose
 from planner.flightpath import straight
-from planner.loiterflight import LINED_UP_RAD, loiter_flight
+from planner.loiterflight import LINED_UP_RAD, loiter_flight, way_out_m
 from planner.retime import _tangent_centre, find_loiter_site
 from planner.scenario import parse_scenario
 from tests.planner.conftest import small_scenario
@@ -120,3 +120,31 @@ def test_a_buffer_behind_the_allowed_stretch_is_timed_as_the_loiter_is_flown() -
     assert site.detour_m > 2.0 * d + 4.0 * R
     # Counted from where the route meets the circle.
     assert site.entry == pytest.approx((20000.0, 21000.0 + R))
+
+
+def _flown_out_m(de: float, dn: float, course: float, gs: float) -> float:
+    """The way out flown step by step: turning at the roll limit's rate towards the
+    waypoint (the shorter way round) until headed at it, then straight on to it."""
+    rho = gs**2 / (9.80665 * math.tan(math.radians(45.0)))
+    step = 0.05
+    e = n = flown = 0.0
+    while math.hypot(de - e, dn - n) > step:
+        off = math.remainder(math.atan2(de - e, dn - n) - course, 2.0 * math.pi)
+        course += math.copysign(min(abs(off), step / rho), off)
+        e, n = e + step * math.sin(course), n + step * math.cos(course)
+        flown += step
+        assert flown < 10_000.0
+    return flown + math.hypot(de - e, dn - n)
+
+
+@given(
+    st.floats(min_value=0.0, max_value=2.0 * math.pi),
+    st.floats(min_value=400.0, max_value=2_000.0),
+    st.floats(min_value=0.0, max_value=2.0 * math.pi),
+    st.floats(min_value=14.0, max_value=30.0),
+)
+def test_the_way_out_of_the_turns_is_the_turn_at_the_roll_limit_then_the_line(
+    bearing: float, distance_m: float, course: float, gs: float
+) -> None:
+    de, dn = distance_m * math.sin(bearing), distance_m * math.cos(bearing)
+    assert way_out_m(de, dn, course, gs) == pytest.approx(_flown_out_m(de, dn, course, gs), abs=1.0)

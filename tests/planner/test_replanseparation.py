@@ -1,20 +1,21 @@
 """A re-plan is deconflicted in 4-D before it is installed (:mod:`planner.replanseparation`).
 
-Thirty vehicles converge on a target from a ring (:func:`tests.teams.ring_team`, 300 m
-apart at their goals' arc); a forbidden disc appears across the northernmost routes 11 km out,
-and R00, R01 and R29 are routed round it. R29's route round the disc's west side runs along
-R28's, and re-timed for the same arrival the pair would come within about 230 m (d_s 300 m).
+Thirty or sixty vehicles converge on a target from a ring (:func:`tests.teams.ring_team`); a
+forbidden disc appears across the routes where they bunch, and the vehicles it touches are
+routed round it, some along their neighbours' routes. The scenario names no altitude layers:
+the re-plan times the re-routed apart, then lifts onto the in-flight resolution's layers
+(half ``d_s`` and its multiples), and says what is left.
 
 Each verdict is the test's own: every schedule is sampled here, second by second from the
 re-plan's start, at its position along its path (:meth:`VehicleSchedule.state_at`) and the
 altitude its profile has there, and every pair's least 3-D distance taken from those samples,
-not from :mod:`planner.deconflict`.
+not from :mod:`planner.deconflict`. The same re-plan with no time left to separate (same
+routes, same seed) is the reference: what the separation changed is measured against it.
 """
 
 from __future__ import annotations
 
 import itertools
-import math
 from typing import Any
 
 import numpy as np
@@ -34,12 +35,19 @@ STEP_S = 0.25
 between samples."""
 
 
-def _flown(data: dict[str, Any]) -> tuple[Schedule, PopupOutcome]:
+def _flown(
+    data: dict[str, Any],
+    centre_m: tuple[float, float] = (30_000.0, 41_000.0),
+    radius_m: float = 2_500.0,
+    at_s: float = AT_S,
+    seed: int = 0,
+    separate: bool = True,
+) -> tuple[Schedule, PopupOutcome]:
     data["threats"].append(
         {
             "kind": "radar", "id": "POP", "forbidden": True,
-            "center": {"east_m": 30_000.0, "north_m": 41_000.0}, "radius_m": 2_500.0,
-            "appears": {"at_s": AT_S},
+            "center": {"east_m": centre_m[0], "north_m": centre_m[1]}, "radius_m": radius_m,
+            "appears": {"at_s": at_s},
         }
     )  # fmt: skip
     scenario = parse_scenario(data)
@@ -47,8 +55,8 @@ def _flown(data: dict[str, Any]) -> tuple[Schedule, PopupOutcome]:
     schedule = build_schedule(scenario, plan(scenario, rng=np.random.default_rng(0), world=world))
     (zone,) = popup_zones(build_threats(scenario))
     outcome = apply_popup(
-        schedule, zone, at_s=AT_S, world=world, threats=active(world.threats, AT_S),
-        rng=np.random.default_rng(0),
+        schedule, zone, at_s=at_s, world=world, threats=active(world.threats, at_s),
+        rng=np.random.default_rng(seed), separation_up=None if separate else lambda: True,
     )  # fmt: skip
     return schedule, outcome
 
@@ -83,27 +91,19 @@ def _closest_pairs(schedule: Schedule, from_s: float) -> dict[tuple[str, str], t
 
 
 @pytest.fixture(scope="module")
-def without_layers() -> tuple[Schedule, PopupOutcome]:
-    return _flown(ring_team(30))
+def out_of_time() -> tuple[Schedule, PopupOutcome]:
+    return _flown(ring_team(30), separate=False)
 
 
-@pytest.fixture(scope="module")
-def with_layers() -> tuple[Schedule, PopupOutcome]:
-    data = ring_team(30)
-    data["altitude_layers_m"] = [150.0, 300.0]
-    return _flown(data)
-
-
-def test_a_re_plan_no_layer_can_separate_is_alarmed_with_the_pair_the_time_and_the_distance(
-    without_layers: tuple[Schedule, PopupOutcome],
+def test_a_re_plan_left_unseparated_is_alarmed_with_the_pair_the_time_and_the_distance(
+    out_of_time: tuple[Schedule, PopupOutcome],
 ) -> None:
-    _, outcome = without_layers
+    """No wall time left to separate the re-plan: every pair under d_s is said at the
+    re-plan's start, before anything is installed."""
+    _, outcome = out_of_time
     required = outcome.schedule.scenario.separation_m
-    under = {
-        pair: seen
-        for pair, seen in _closest_pairs(outcome.schedule, AT_S).items()
-        if seen[0] < required - 2.0 * STEP_S * 60.0
-    }
+    found = _closest_pairs(outcome.schedule, AT_S)
+    under = {pair: seen for pair, seen in found.items() if seen[0] < required - TOL_M}
     assert under, "the re-plan puts no pair under d_s: nothing to show"
     alarms = [e for e in outcome.events if e.kind == "alarm"]
     conflicts = [e for e in outcome.events if e.kind == "conflict" and "pair" in e.payload]
@@ -114,55 +114,91 @@ def test_a_re_plan_no_layer_can_separate_is_alarmed_with_the_pair_the_time_and_t
         e = said[pair]
         assert e.payload["distance_m"] == pytest.approx(distance_m, abs=5.0)
         assert e.payload["at_s"] == pytest.approx(at_s, abs=2.0)
-        assert f"{e.payload['distance_m']:.0f} m" in e.text and "no altitude layers" in e.text
+        assert f"{e.payload['distance_m']:.0f} m" in e.text and "time ran out" in e.text
         assert e.time_s == AT_S  # said at the re-plan, before anything is installed
     assert {tuple(sorted(e.payload["pair"])) for e in conflicts} == set(said)
     # And nothing is alarmed that the test does not find close.
-    found = _closest_pairs(outcome.schedule, AT_S)
     for pair in said:
         assert found[pair][0] < required, (pair, found[pair])
 
 
-def test_a_re_plan_is_separated_on_an_altitude_layer_past_the_splice_and_keeps_its_slots(
-    with_layers: tuple[Schedule, PopupOutcome],
-    without_layers: tuple[Schedule, PopupOutcome],
+TOL_M = 15.0
+"""The test's own sampling (:data:`STEP_S`) finds a closest approach up to 15 m too far."""
+
+BUNCHED = {
+    "30, wide disc": (30, (30_000.0, 40_000.0), 4_500.0, 40.0),
+    "30, late disc": (30, (30_000.0, 39_000.0), 2_500.0, 95.0),
+    "60": (60, (30_000.0, 38_000.0), 2_000.0, 95.0),
+}
+"""Teams and pop-up zones across the routes where they bunch: ``(vehicles, centre (east,
+north) m, radius m, appearing at s)``."""
+
+
+@pytest.fixture(scope="module", params=sorted(BUNCHED))
+def bunched(
+    request: pytest.FixtureRequest,
+) -> tuple[str, PopupOutcome, PopupOutcome]:
+    n, centre_m, radius_m, at_s = BUNCHED[request.param]
+    args = {"centre_m": centre_m, "radius_m": radius_m, "at_s": at_s, "seed": 1}
+    _, separated = _flown(ring_team(n), **args)
+    _, reference = _flown(ring_team(n), separate=False, **args)
+    return request.param, separated, reference
+
+
+def test_a_re_plan_across_a_bunch_keeps_d_s_in_3d_from_its_start_or_says_the_pair(
+    bunched: tuple[str, PopupOutcome, PopupOutcome],
 ) -> None:
-    _, outcome = with_layers
-    _, flat = without_layers
+    """Every pair keeps d_s from the re-plan's start on by the test's own samples, or is
+    alarmed with the pair, the time and the distance found here; fewer pairs are left than
+    the unseparated re-plan has, and none for thirty vehicles."""
+    name, outcome, reference = bunched
+    at_s = BUNCHED[name][3]
+    required = outcome.schedule.scenario.separation_m
+    found = _closest_pairs(outcome.schedule, at_s)
+    said = {tuple(sorted(e.payload["pair"])): e for e in outcome.events if e.kind == "alarm"}
+    for pair, (distance_m, when_s) in found.items():
+        if distance_m >= required - TOL_M:
+            continue
+        assert pair in said, (pair, distance_m, when_s)
+        e = said[pair]
+        assert e.payload["distance_m"] == pytest.approx(distance_m, abs=TOL_M)
+        assert e.payload["at_s"] == pytest.approx(when_s, abs=2.0)
+        assert e.time_s == at_s
+    before = {p for p, (d, _) in _closest_pairs(reference.schedule, at_s).items() if d < required}
+    assert len(said) < len(before), (sorted(said), sorted(before))
+    if BUNCHED[name][0] == 30:
+        assert not said, [e.text for e in said.values()]
+    done = [e for e in outcome.events if e.payload.get("resolution") in ("timing", "altitude")]
+    assert done, [e.text for e in outcome.events]
+
+
+def test_a_separated_re_plan_keeps_every_slot_and_flies_within_its_altitude_limits(
+    bunched: tuple[str, PopupOutcome, PopupOutcome],
+) -> None:
+    """Every vehicle arrives at its slot as the unseparated re-plan has it; on the same path,
+    never lower than that profile (the terrain clearance only gains), never above its
+    ceiling nor a layer's height above the profile, and as it was up to where it is at the
+    re-plan's start."""
+    name, outcome, reference = bunched
+    at_s = BUNCHED[name][3]
     scenario = outcome.schedule.scenario
-    required = scenario.separation_m
-    assert not [e for e in outcome.events if e.kind == "alarm"], [e.text for e in outcome.events]
-    closest = _closest_pairs(outcome.schedule, AT_S)
-    worst = min(closest.items(), key=lambda kv: kv[1][0])
-    assert worst[1][0] >= required - 15.0, worst  # to the test's own sampling (15 m)
-    lifts = [e for e in outcome.events if e.payload.get("resolution") == "altitude"]
-    assert lifts, [e.text for e in outcome.events]
-    for e in lifts:
-        vid = e.payload["pair"][0]
-        v = scenario.vehicle(vid)
-        up = outcome.schedule.vehicle(vid)
-        level = flat.schedule.vehicle(vid)  # the same routes, no layer (same seed)
-        assert up.path.length_m == pytest.approx(level.path.length_m)
-        s = np.linspace(0.0, up.path.length_m, 4001)
-        z_up = np.interp(s, up.wp_s_m, up.wp_alt_m)
-        z_level = np.interp(s, level.wp_s_m, level.wp_alt_m)
-        # Never lower than its profile (terrain clearance only gains), never above its
-        # ceiling, at most the layers' highest above it, and as it was up to where it is at
-        # the re-plan's start (what it flies before its new mission is not changed).
-        assert (z_up >= z_level - 1e-6).all()
-        assert (z_up <= v.alt_max_m + 1e-6).all()
-        assert float((z_up - z_level).max()) <= max(scenario.altitude_layers_m) + 1e-6
-        assert float((z_up - z_level).max()) > 100.0
-        s_start = up.state_at(AT_S)[1]
-        assert np.allclose(z_up[s <= s_start], z_level[s <= s_start])
-        # Still on its slot: the team's arrival time.
-        assert up.arrival_s == pytest.approx(level.arrival_s, abs=0.5)
-        assert outcome.schedule.required_arrival_s is not None
-        assert up.arrival_s == pytest.approx(outcome.schedule.required_arrival_s, abs=0.5)
-    # The others as they were.
-    lifted = {e.payload["pair"][0] for e in lifts}
+    ground_m = float(scenario.terrain.elevation_m)  # flat
+    highest_m = 1.5 * scenario.separation_m  # three layers of half d_s
     for vs in outcome.schedule.vehicles:
-        if vs.vehicle_id not in lifted:
-            other = flat.schedule.vehicle(vs.vehicle_id)
-            assert np.array_equal(vs.wp_alt_m, other.wp_alt_m)
-            assert math.isclose(vs.arrival_s, other.arrival_s, abs_tol=1e-6)
+        ref = reference.schedule.vehicle(vs.vehicle_id)
+        v = scenario.vehicle(vs.vehicle_id)
+        assert vs.arrival_s == pytest.approx(ref.arrival_s, abs=0.05), vs.vehicle_id
+        assert vs.path.length_m == pytest.approx(ref.path.length_m)
+        s = np.linspace(0.0, vs.path.length_m, 4001)
+        z = np.interp(s, vs.wp_s_m, vs.wp_alt_m)
+        z_ref = np.interp(s, ref.wp_s_m, ref.wp_alt_m)
+        assert (z >= z_ref - 1e-6).all(), vs.vehicle_id
+        assert (z <= v.alt_max_m + 1e-6).all(), vs.vehicle_id
+        assert float((z - z_ref).max()) <= highest_m + 1e-6, vs.vehicle_id
+        s_start = ref.state_at(at_s)[1]
+        ahead = s >= max(s_start, vs.climb_s_m)
+        assert (z[ahead] >= ground_m + v.clearance_m - 1e-6).all(), vs.vehicle_id
+        assert np.allclose(z[s <= s_start], z_ref[s <= s_start]), vs.vehicle_id
+        # Where it is in the air before the re-plan's start is not changed.
+        t_s = np.arange(vs.takeoff_s, at_s, 1.0)
+        assert np.allclose(_track(vs, t_s), _track(ref, t_s), equal_nan=True), vs.vehicle_id

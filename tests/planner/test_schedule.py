@@ -20,8 +20,10 @@ from planner.popup import replay_popups
 from planner.retime import (
     WINDOW_MARGIN_S,
     build_schedule,
+    can_loiter_after,
     check_arrival,
     check_feasible,
+    clear_of_team,
     retime_vehicle,
 )
 from planner.scenario import load_scenario, parse_scenario
@@ -478,3 +480,37 @@ def test_no_turns_on_the_path_where_a_threat_covers_it() -> None:
             s, "A", now_s=1_000.0, s_m=s0, speed_m_s=20.0, target_s=target, threats=wide,
             terrain=world.terrain,
         )  # fmt: skip
+
+
+def test_where_loiter_turns_fit_is_judged_as_the_loiter_job_puts_them(
+    paper: tuple[Schedule, Schedule],
+) -> None:
+    """How late a vehicle could still arrive, for a move of the team time, depends on whether
+    loiter turns fit ahead of it (:func:`can_loiter_after`): judged with the same keep-clear
+    check the loiter job (:func:`retime_vehicle` with ``separate``) puts its circles by, the
+    two agree along every path; with a check that refuses every circle, no turns fit (a move
+    of the team time was once accepted that the loiter job then could not follow: it left out
+    the sites near the team's tracks, the judgement did not)."""
+    before, _ = paper
+    scenario = before.scenario
+    world = build_world(scenario)
+    for vs in before.vehicles:
+        v = scenario.vehicle(vs.vehicle_id)
+        for f in np.linspace(0.05, 0.95, 7):
+            now_s = vs.climb_end_s + f * (vs.arrival_s - vs.climb_end_s)
+            _, s_m, _ = vs.state_at(now_s)
+            clear = clear_of_team(before, vs.vehicle_id, now_s)
+            fits = can_loiter_after(scenario, v, vs, s_m, [], world.terrain, clear)
+            try:
+                retime_vehicle(
+                    before, vs.vehicle_id, now_s=now_s, s_m=s_m, speed_m_s=v.cruise_m_s,
+                    target_s=vs.arrival_s + 300.0, threats=[], terrain=world.terrain,
+                    separate=True,
+                )  # fmt: skip
+                flown = True
+            except InfeasibleError:
+                flown = False
+            assert fits == flown, (vs.vehicle_id, f, fits, flown)
+            assert not can_loiter_after(
+                scenario, v, vs, s_m, [], world.terrain, lambda e, n, r: False
+            )

@@ -173,6 +173,34 @@ def test_the_planner_bench_teams_are_separated_with_their_approach_points_shared
             check_feasible(s)
 
 
+def test_a_pair_that_met_before_a_re_plans_start_is_not_timed_again() -> None:
+    """Timed for a requested time, A and B cross the middle together. From a start after
+    they have met, the timing sees no conflict and asks for no other timing; from a start
+    before it, it does."""
+    scenario = parse_scenario(_crossing())
+    first = build_schedule(scenario, plan(scenario, "astar"))
+    earliest = float(first.team_window.earliest_s) if first.team_window else math.nan
+    asked = parse_scenario(_crossing(required_s=math.ceil(earliest)))
+    a, b = build_schedule(asked, plan(asked, "astar")).vehicles
+    met = pair_separation(a, b, step_s=0.1)
+    assert met.distance_m < 300.0
+    asked_for: list[str] = []
+
+    def alternatives(vid: str) -> list[tuple[Any, None]]:
+        asked_for.append(vid)
+        return []
+
+    slack = {"A": 60.0, "B": 60.0}
+    moved, sep = sequencing.sequence_team(
+        [a, b], 300.0, slack_s=slack, alternatives=alternatives, from_s=met.time_s + 120.0
+    )
+    assert not moved and not sep.conflicts and not asked_for
+    moved, sep = sequencing.sequence_team(
+        [a, b], 300.0, slack_s=slack, alternatives=alternatives, from_s=met.time_s - 120.0
+    )
+    assert [(p.a, p.b) for p in sep.conflicts] == [("A", "B")] and asked_for
+
+
 def _separated_only_with(
     monkeypatch: pytest.MonkeyPatch,
     scenario: Scenario,

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
-from collections.abc import AsyncIterator
+from collections.abc import AsyncIterator, Mapping
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -30,8 +30,12 @@ class Service:
 
 
 @contextlib.asynccontextmanager
-async def serve(data_dir: Path, database_url: str | None = None) -> AsyncIterator[Service]:
-    async with running_service(data_dir, {TOKEN: ["admin"]}, database_url=database_url) as svc:
+async def serve(
+    data_dir: Path, database_url: str | None = None, settings: Mapping[str, str] | None = None
+) -> AsyncIterator[Service]:
+    async with running_service(
+        data_dir, {TOKEN: ["admin"]}, database_url=database_url, settings=settings
+    ) as svc:
         yield Service(svc.url, data_dir, svc.proc)
     assert b"Traceback" not in svc.stderr, svc.stderr.decode()[-3000:]
 

@@ -16,6 +16,8 @@ import json
 import os
 import pickle
 import signal
+import sqlite3
+import time
 from collections import Counter
 from pathlib import Path
 from typing import Any
@@ -33,6 +35,7 @@ from tests.service.test_flights_http import (
     _all_events,
     _flight,
     _ok,
+    _taken_on,
     _until,
     truth_log,
 )
@@ -69,6 +72,21 @@ CHECKPOINT_WITHIN_S = 200.0
 has said in its checkpoint (a team-time move is checkpointed at once)."""
 
 
+def _gone_within(pid: int, wall_s: float) -> bool:
+    """Process ``pid`` has exited (or is a zombie its parent has not reaped) within
+    ``wall_s``."""
+    deadline = time.monotonic() + wall_s
+    while time.monotonic() < deadline:
+        try:
+            stat = Path(f"/proc/{pid}/stat").read_text()
+        except OSError:
+            return True
+        if stat.rsplit(")", 1)[1].split()[0] == "Z":
+            return True
+        time.sleep(0.05)
+    return False
+
+
 def _stop_orphans(data: Path) -> None:
     """The simulators and flight workers a killed service started (they outlive it) are
     stopped whatever the test found."""
@@ -77,20 +95,31 @@ def _stop_orphans(data: Path) -> None:
             os.kill(int(pid_file.read_text()), signal.SIGINT)
 
 
-async def test_a_killed_flight_worker_is_flown_on_from_its_checkpoint(tmp_path: Path) -> None:
-    """The flight's worker killed (SIGKILL) after the re-plan: the service starts another on
-    its checkpoint, which finds the vehicles (flown on by the simulator, :data:`AWAY_S` of
-    flight past the kill) holding their missions and flies them home."""
+HUNG_WORKER = {"TCGCS_WORKER_SILENCE_S": "2", "TCGCS_WORKER_ANSWER_S": "2"}
+"""The service's watch on its workers in these tests: a worker that says nothing for 2 s of
+wall time, and does not answer within 2 s more, is hung (a healthy one says the flight's state
+four times a second; one slowed by a busy machine and asked answers, and is followed again)."""
+
+
+@pytest.mark.parametrize("how", [signal.SIGKILL, signal.SIGSTOP], ids=["killed", "hung"])
+async def test_a_killed_or_hung_flight_worker_is_flown_on_from_its_checkpoint(
+    tmp_path: Path, how: signal.Signals
+) -> None:
+    """The flight's worker killed (SIGKILL) or hung (SIGSTOP: alive, silent) after the
+    re-plan: the service starts another on its checkpoint (the hung one killed first: never two
+    on one flight's vehicles), which finds the vehicles (flown on by the simulator,
+    :data:`AWAY_S` of flight past the signal) holding their missions and flies them home."""
     data = tmp_path / "data"
     try:
-        async with serve(data) as svc, svc.client() as client:
+        async with serve(data, settings=HUNG_WORKER) as svc, svc.client() as client:
             fid, said, said_seq, before = await _past_the_replan(client, data)
             pid = _ok(await client.get(f"/v1/flights/{fid}"))["worker"]["pid"]
-            os.kill(pid, signal.SIGKILL)
+            os.kill(pid, how)
             away = asyncio.create_task(hold_while_away(data / "flights" / fid / "pace", AWAY_S))
             try:
-                while _ok(await client.get(f"/v1/flights/{fid}"))["worker"]["pid"] == pid:
-                    await asyncio.sleep(0.05)
+                await _taken_on(client, fid, pid)
+                gone = await asyncio.to_thread(_gone_within, pid, 5.0)
+                assert gone, f"the old worker (pid {pid}) still runs beside the new one"
                 await _flown_on(client, svc, fid, said, said_seq, before, restarted=True)
             finally:
                 away.cancel()
@@ -248,13 +277,13 @@ async def _flown_on(
         "completed", "failed", "aborted",
     ):  # fmt: skip
         await asyncio.sleep(0.2)
-    assert snap["state"] == "completed", snap
     while (r := await client.get(f"/v1/flights/{fid}/record")).status_code == 404:
         await asyncio.sleep(0.2)
     record: dict[str, Any] = _ok(r)
     after = await _all_events(client, fid)
-    truth = truth_log(second, fid)
     print(story(after, limit=200))  # shown when the test fails
+    assert snap["state"] == "completed", (snap["state"], snap.get("state_reason"))
+    truth = truth_log(second, fid)
     # The team time: the wind and the pop-up moved it later by no more than they can
     # (tests.paperbounds), and the resumed flight carried it (and its version) on to the
     # end, moving it little.
@@ -299,3 +328,105 @@ async def _flown_on(
         assert v["auto_mode_changes"] == 1 + resumes[ids], (ids, v, resumes)
         assert v["mission_uploads"] == uploads[ids], (ids, v, uploads)
         assert v["mission_downloads"] >= 1 + restarted, (ids, v)
+
+
+async def test_a_worker_killed_before_the_launch_leaves_its_flight_ready_to_launch(
+    tmp_path: Path,
+) -> None:
+    """A worker killed with its flight uploaded but not launched: another takes it on from its
+    checkpoint, finds each vehicle holding its mission (nothing sent again), and the flight,
+    ready again, is launched and flown home on its slots."""
+    data = tmp_path / "data"
+    try:
+        async with serve(data) as svc, svc.client() as client:
+            fid, _ = await _flight(client, {"speedup": 200.0, "seed": 5}, scenario_name="compact")
+            pid = _ok(await client.get(f"/v1/flights/{fid}"))["worker"]["pid"]
+            os.kill(pid, signal.SIGKILL)
+            snap = await _taken_on(client, fid, pid)
+            assert snap["state"] == "ready", snap["state"]
+            _ok(await client.post(f"/v1/flights/{fid}/launch", json={}), 202)
+            while (snap := _ok(await client.get(f"/v1/flights/{fid}")))["state"] not in (
+                "completed", "failed", "aborted",
+            ):  # fmt: skip
+                await asyncio.sleep(0.2)
+            assert snap["state"] == "completed", snap["state"]
+            while (r := await client.get(f"/v1/flights/{fid}/record")).status_code == 404:
+                await asyncio.sleep(0.2)
+            record = _ok(r)
+            events = await _all_events(client, fid)
+        print(story(events, limit=200))  # shown when the test fails
+        found = [e for e in events if e["kind"] == "flight" and e["reason"].startswith("resumed")]
+        assert len(found) == 3 and all("holds the" in e["reason"] for e in found), found
+        assert_flown(
+            record,
+            truth_log(svc, fid),
+            tolerance_s=ARRIVAL_TOLERANCE_S,
+            team_shift_max_s=team_time_move_max_s(scenario_name="compact"),
+            together_min_s=TOGETHER_MIN_S,
+        )
+        # The simulator's counters: one arm each; every mission it accepted is one the flight
+        # said it uploaded, and none between the restart and the launch (none sent again).
+        doc = json.loads((data / "flights" / fid / "counters.json").read_text())
+        uploads = Counter(e["vehicle"] for e in events if e["kind"] == "upload")
+        running = next(e["seq"] for e in events if e["payload"].get("state") == "running")
+        assert not [
+            e for e in events if e["kind"] == "upload" and found[0]["seq"] < e["seq"] < running
+        ]
+        for v, vid in zip(doc["vehicles"], ("UAV1", "UAV2", "UAV3"), strict=True):
+            assert v["arms"] == 1 and v["mission_uploads"] == uploads[vid], (vid, v, uploads)
+            assert v["mission_downloads"] >= 1, v
+    finally:
+        _stop_orphans(data)
+
+
+async def test_a_flight_no_worker_can_fly_on_fails_and_says_so(tmp_path: Path) -> None:
+    """A worker killed when its flight's checkpoint is gone (nothing to fly on from): the
+    flight fails, said by a ``flight`` event and an alarm, and kept so (a service started
+    again shows it failed); its simulator is stopped; a launch is refused."""
+    data = tmp_path / "data"
+    try:
+        async with serve(data) as svc, svc.client() as client:
+            fid, _ = await _flight(client, {"speedup": 200.0, "seed": 5}, scenario_name="compact")
+            pid = _ok(await client.get(f"/v1/flights/{fid}"))["worker"]["pid"]
+            stub_pid = int((data / "flights" / fid / "stub.pid").read_text())
+            # Stopped (it writes no checkpoint again) when it holds no lock on the store.
+            await asyncio.to_thread(_stop_and_drop_checkpoint, pid, data, fid)
+            os.kill(pid, signal.SIGKILL)
+            while (snap := _ok(await client.get(f"/v1/flights/{fid}")))["state"] == "ready":
+                await asyncio.sleep(0.05)
+            assert snap["state"] == "failed", snap["state"]
+            refused = await client.post(f"/v1/flights/{fid}/launch", json={})
+            assert refused.status_code == 409, refused.text
+            assert await asyncio.to_thread(_gone_within, stub_pid, 30.0), "its simulator runs on"
+            while len(events := await _all_events(client, fid)) < 2 or (
+                events[-1]["kind"] != "alarm"
+            ):
+                await asyncio.sleep(0.05)
+        said = events[-2:]
+        assert [e["kind"] for e in said] == ["flight", "alarm"], said
+        assert said[0]["payload"] == {"state": "failed", "was": "ready"}, said
+        assert f"worker (pid {pid}) died" in said[1]["reason"], said
+        assert "no checkpoint to fly on from" in said[1]["reason"], said  # why, said too
+        async with serve(data) as again, again.client() as client:
+            assert _ok(await client.get(f"/v1/flights/{fid}"))["state"] == "failed"
+            assert (await _all_events(client, fid))[-2:] == said
+    finally:
+        _stop_orphans(data)
+
+
+def _stop_and_drop_checkpoint(pid: int, data: Path, fid: str) -> None:
+    """Stop the worker ``pid`` (SIGSTOP) and drop the flight's checkpoint from the service's
+    store (SQLite). Stopped in the middle of a write, it holds the store's lock until it runs
+    again: it is let go on a little and stopped again."""
+    for _ in range(100):
+        os.kill(pid, signal.SIGSTOP)
+        try:
+            with contextlib.closing(sqlite3.connect(data / "tcgcs.db", timeout=0.5)) as db, db:
+                db.execute("update flights set checkpoint = null where id = ?", (fid,))
+            return
+        except sqlite3.OperationalError as err:
+            if "locked" not in str(err):
+                raise
+            os.kill(pid, signal.SIGCONT)
+            time.sleep(0.1)
+    raise AssertionError(f"the worker (pid {pid}) always held the store's lock")

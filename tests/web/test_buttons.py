@@ -16,7 +16,7 @@ from tests.web.conftest import Console
 
 pytestmark = pytest.mark.slow  # one flight planned and uploaded: a few seconds of wall time
 
-BUTTONS = "['upload', 'launch', 'abort-all', 'team-time-move']"
+BUTTONS = "['upload', 'launch', 'abort-all', 'team-time-move', 'pause']"
 DISABLED = f"{BUTTONS}.map(id => document.getElementById(id).disabled)"
 
 
@@ -34,15 +34,32 @@ async def test_the_flight_buttons_wait_for_the_open_flights_snapshot(console: Co
 
     await page.route(f"**/v1/flights/{fid}", hold)
     await c.open(f"/ui/?flight={fid}")
-    assert await c.js(DISABLED) == [True] * 4  # before signing in
+    assert await c.js(DISABLED) == [True] * 5  # before signing in
     await c.login()
     await asyncio.wait_for(asked.wait(), timeout=30.0)
     await c.until("() => !document.getElementById('console').hidden")
-    assert await c.js(DISABLED) == [True] * 4  # signed in, the flight's snapshot not yet read
+    assert await c.js(DISABLED) == [True] * 5  # signed in, the flight's snapshot not yet read
     await page.click("#launch", force=True)  # a press on the disabled button sends nothing
     assert not await c.js("document.getElementById('confirm').open")
 
     release.set()
     await c.until("() => !document.getElementById('launch').disabled")
-    assert await c.js(DISABLED) == [True, False, True, False]  # ready: launch, or move the time
+    # Ready: launch, move the time, or pause (a rehearsal in lock step).
+    assert await c.js(DISABLED) == [True, False, True, False, False]
     assert await c.text("#flight-title") == f"flight {fid}"
+
+    # Pause before the launch: the rehearsal waits at its start, the button says Resume, and
+    # a press on it flies the flight on.
+    await page.click("#pause")
+    await c.until("() => tcgcs.state.pause && tcgcs.state.pause.at_s.length === 1")
+    assert await c.text("#flight-note") == "paused: the simulator waits here until resumed"
+    await page.click("#launch")
+    await c.confirm()
+    await c.until("() => document.getElementById('pause').textContent === 'Resume'")
+    async with c.service.client() as client:
+        snap = (await client.get(f"/v1/flights/{fid}")).json()
+    assert snap["pause"]["paused"] and 0.0 <= snap["t_s"] <= 3.0, snap["pause"]
+    await page.click("#pause")
+    await c.until("() => document.getElementById('pause').textContent === 'Pause'")
+    assert await c.text("#flight-note") == "resumed: the flight flies on"
+    await c.until("() => tcgcs.state.telemetry && tcgcs.state.telemetry.t_s > 20")

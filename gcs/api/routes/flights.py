@@ -1,5 +1,6 @@
-"""Flights: create, upload, launch, steer (threats, team time, abort), read (snapshot, events,
-record, report) and the live stream (WebSocket, or SSE with ``Accept: text/event-stream``)."""
+"""Flights: create, upload, launch, steer (threats, team time, abort, a rehearsal's pauses),
+read (snapshot, events, record, report) and the live stream (WebSocket, or SSE with ``Accept:
+text/event-stream``)."""
 
 from __future__ import annotations
 
@@ -14,7 +15,15 @@ from starlette.websockets import WebSocketDisconnect
 
 from gcs.api.auth import grants, require
 from gcs.api.routes.common import ERRORS, engine_of
-from gcs.api.schemas import AbortIn, FlightIn, LaunchIn, TeamTimeIn, TeamTimeOut, ThreatIn
+from gcs.api.schemas import (
+    AbortIn,
+    FlightIn,
+    LaunchIn,
+    PauseIn,
+    TeamTimeIn,
+    TeamTimeOut,
+    ThreatIn,
+)
 from gcs.service.ended import EndedFlight
 from gcs.service.engine import Engine, InvalidInput, NotFound, PreconditionFailed, Rehearsal
 
@@ -79,6 +88,23 @@ async def abort(flight_id: str, request: Request, body: AbortIn | None = None) -
     """Abort one vehicle (or all): RTL or LOITER; per vehicle None or why not."""
     body = body or AbortIn()
     return await engine_of(request).abort(flight_id, body.vehicle, body.mode)
+
+
+@router.post("/flights/{flight_id}/pause", dependencies=operate)
+async def pause(flight_id: str, request: Request, body: PauseIn | None = None) -> dict[str, Any]:
+    """A rehearsal in lock step waits at mission second ``at_s`` (default: now), before the
+    launch too, until resumed: its simulator holds its vehicles where they are, and the
+    flight is steered as ever meanwhile. 409: real vehicles (or a simulator on the wall
+    clock) cannot wait, or ``at_s`` has passed. The snapshot's ``pause`` says whether it
+    waits and the pauses to come."""
+    body = body or PauseIn()
+    return await engine_of(request).pause(flight_id, body.at_s)
+
+
+@router.post("/flights/{flight_id}/resume", dependencies=operate)
+async def resume(flight_id: str, request: Request) -> dict[str, Any]:
+    """A paused rehearsal flies on (its later pauses stay); 409 when it is not paused."""
+    return await engine_of(request).resume(flight_id)
 
 
 @router.post("/flights/{flight_id}/threats", status_code=201, dependencies=operate)
@@ -224,6 +250,7 @@ def _telemetry(snap: dict[str, Any]) -> dict[str, Any]:
         "state": snap["state"],
         "team_time_s": snap["team_time_s"],
         "team_time_version": snap["team_time_version"],
+        "pause": snap.get("pause"),
         "vehicles": [{k: v.get(k) for k in keys} for v in snap["vehicles"]],
     }
 

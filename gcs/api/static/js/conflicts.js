@@ -26,6 +26,10 @@ export function separationOf(ev) {
     if (p.resolution === "altitude") {
       return { ...base, kind: "resolved", a, b, action: `altitude +${p.height_m} m`, until_s: until };
     }
+    if (p.resolution === "timing") {
+      const shift = Number(p.shift_s ?? 0);
+      return { ...base, kind: "resolved", a, b, action: `timing ${shift >= 0 ? "+" : ""}${shift} s`, until_s: until };
+    }
     return { ...base, kind: "unresolved", a, b, action: "alarm", until_s: until };
   }
   if (p.other === undefined || !ev.vehicle) return null;

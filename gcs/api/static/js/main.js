@@ -32,6 +32,7 @@ const state = {
   teamTimeS: null,
   teamTimeVersion: null,
   startUtcS: null,
+  pause: null, // the snapshot's: pausable, paused, the pauses to come
   scenarioId: null,
   terrainUrl: null,
   ended: false,
@@ -251,6 +252,7 @@ function applySnapshot(snap) {
   state.teamTimeS = snap.team_time_s;
   state.teamTimeVersion = snap.team_time_version;
   state.startUtcS = snap.start_utc_s;
+  state.pause = snap.pause || null;
   mergeVehicles(snap.vehicles);
   mapView.setVehicles(snap.vehicles);
   if (!clock.samples.length && snap.start_utc_s !== null) clock.observe(snap.t_s, performance.now());
@@ -355,6 +357,10 @@ function onMessage(type, data, received) {
     state.flightState = data.state;
     state.teamTimeS = data.team_time_s;
     if (data.team_time_version !== undefined) state.teamTimeVersion = data.team_time_version;
+    if (data.pause && JSON.stringify(data.pause) !== JSON.stringify(state.pause)) {
+      state.pause = data.pause;
+      updateButtons();
+    }
     clock.observe(data.t_s, received);
     mergeVehicles(data.vehicles);
     mapView.setVehicles(data.vehicles);
@@ -406,6 +412,9 @@ function updateButtons() {
   $("upload").disabled = !open || s !== "planned";
   $("launch").disabled = !open || s !== "ready";
   $("abort-all").disabled = !open || !RUNNING.has(s);
+  const pause = state.pause;
+  $("pause").disabled = !open || !s || OVER.has(s) || !(pause && pause.pausable);
+  $("pause").textContent = pause && pause.paused ? "Resume" : "Pause";
   $("team-time-move").disabled = !open || OVER.has(s) || !s;
 }
 
@@ -523,6 +532,19 @@ $("launch").addEventListener("click", async () => {
   await act("flight-error", $("launch"), async () => {
     const out = await api.post(flightPath("launch"), {}, { what: "launch" });
     say("flight-note", `launched: the mission starts at UTC ${new Date(out.start_utc_s * 1000).toISOString()}`);
+    refreshSnapshot();
+  });
+});
+
+$("pause").addEventListener("click", async () => {
+  const resume = Boolean(state.pause && state.pause.paused);
+  await act("flight-error", $("pause"), async () => {
+    const out = resume
+      ? await api.post(flightPath("resume"), undefined, { what: "resume" })
+      : await api.post(flightPath("pause"), {}, { what: "pause" });
+    state.pause = out;
+    say("flight-note", resume ? "resumed: the flight flies on" : "paused: the simulator waits here until resumed");
+    updateButtons();
     refreshSnapshot();
   });
 });

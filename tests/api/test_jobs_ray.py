@@ -1,0 +1,118 @@
+"""Planning jobs on Ray (``TCGCS_PLAN_RAY``): with ``local`` each schedule job starts a Ray on
+this machine and finishes its vehicles' routes there, giving the schedule the job gives
+without Ray for the same seed; a cancelled job takes its Ray with it."""
+
+from __future__ import annotations
+
+import asyncio
+import os
+import time
+from pathlib import Path
+from typing import Any
+
+import httpx
+import numpy as np
+import pytest
+
+from gcs.service import planjobs
+from planner.scenario import load_scenario
+from tests.api.conftest import PAPER, app_with, auth, running
+from tests.procs import goes
+from tests.teams import ring_team
+
+# One Ray at a time on the machine: with the planner's Ray tests, on one worker under -n.
+pytestmark = [pytest.mark.slow, pytest.mark.xdist_group("ray")]
+
+
+def _ray_processes() -> set[int]:
+    """Live processes of a Ray (its workers name themselves ``ray::...``; its services run
+    from Ray's package)."""
+    found = set()
+    for d in Path("/proc").iterdir():
+        if not d.name.isdigit():
+            continue
+        try:
+            state = (d / "stat").read_text().rsplit(")", 1)[1].split()[0]
+            cmd = (d / "cmdline").read_bytes().replace(b"\0", b" ")
+        except OSError:
+            continue
+        if state != "Z" and (cmd.startswith(b"ray::") or b"/site-packages/ray/" in cmd):
+            found.add(int(d.name))
+    return found
+
+
+async def test_a_schedule_planned_on_a_local_ray_is_the_one_planned_without_it(
+    tmp_path: Path,
+) -> None:
+    # Without Ray, in this process: the job's own function, for the same seed.
+    planned = planjobs.plan_schedule(lambda *_: None, load_scenario(PAPER), 1, "aco")
+    assert planned[0] == "ok"
+    blob = planned[1]
+    assert isinstance(blob, bytes)
+    _, here, _ = planjobs.kept_schedule(blob)
+    app = app_with(tmp_path, plan_ray="local")
+    async for client in running(app):
+        r = await client.post(
+            "/v1/scenarios",
+            content=PAPER.read_bytes(),
+            headers=auth("plan") | {"content-type": "application/yaml"},
+        )
+        assert r.status_code == 201, r.text
+        body = {"scenario_id": r.json()["id"], "seed": 1}
+        r = await client.post("/v1/schedules", json=body, headers=auth("plan"))
+        assert r.status_code == 202, r.text
+        stages: set[str] = set()
+        while (job := await _job(client, r.json()["id"]))["state"] in ("queued", "running"):
+            stages.add(job["stage"])
+            await asyncio.sleep(0.02)
+        assert job["state"] == "succeeded", job
+        # It went through Ray (the stages it said as it went, as many as were polled).
+        assert stages & {"starting Ray", "planning routes on Ray"}, stages
+        on_ray = app.state.engine.planning.schedules[job["result"]["id"]].schedule
+    assert on_ray.required_arrival_s == here.required_arrival_s
+    for a, b in zip(on_ray.vehicles, here.vehicles, strict=True):
+        assert (a.vehicle_id, a.takeoff_s, a.arrival_s) == (b.vehicle_id, b.takeoff_s, b.arrival_s)
+        np.testing.assert_array_equal(a.path.cumulative_m(), b.path.cumulative_m())
+
+
+async def test_a_cancelled_job_planning_on_ray_takes_its_ray_with_it(tmp_path: Path) -> None:
+    before = _ray_processes()
+    app = app_with(tmp_path, plan_ray="local")
+    async for client in running(app):
+        r = await client.post(
+            "/v1/scenarios",
+            json=ring_team(1000),
+            headers=auth("plan"),
+        )
+        assert r.status_code == 201, r.text
+        r = await client.post(
+            "/v1/schedules", json={"scenario_id": r.json()["id"]}, headers=auth("plan")
+        )
+        # Once its Ray runs: its stage says so, and its processes are up.
+        while (job := await _job(client, r.json()["id"]))["stage"] != "planning routes on Ray":
+            assert job["state"] in ("queued", "running"), job
+            await asyncio.sleep(0.02)
+        assert _ray_processes() - before
+        pid = app.state.engine.planning.work.running_pid(job["id"])
+        assert pid is not None and pid != os.getpid()
+        r = await client.delete(f"/v1/jobs/{job['id']}", headers=auth("plan"))
+        assert r.status_code == 200 and r.json()["state"] == "cancelled", r.text
+        assert goes(pid)
+        assert goes_all(before)
+
+
+async def _job(client: httpx.AsyncClient, job_id: str) -> dict[str, Any]:
+    r = await client.get(f"/v1/jobs/{job_id}", headers=auth())
+    assert r.status_code == 200, r.text
+    job: dict[str, Any] = r.json()
+    return job
+
+
+def goes_all(before: set[int], within_s: float = 10.0) -> bool:
+    """Whether every Ray process not running ``before`` has exited within ``within_s``."""
+    deadline = time.monotonic() + within_s
+    while _ray_processes() - before:
+        if time.monotonic() > deadline:
+            return False
+        time.sleep(0.05)
+    return True
