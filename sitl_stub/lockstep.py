@@ -40,7 +40,9 @@ planning thread holding the interpreter) is still waited for, short enough that 
 whose ground station died goes on within seconds."""
 DEFAULT_LEAD_S = 1.0
 """How far (flight seconds) the simulator may run ahead of what the ground station has seen."""
-_SIZE = 40
+LOCKSTEP_BYTES = 40
+"""The size of a lock-step file."""
+_SIZE = LOCKSTEP_BYTES
 _PACE, _ACK, _ACK_WALL, _SPEEDUP, _LEAD = range(5)
 
 

@@ -83,6 +83,8 @@ def create_app(settings: Settings | None = None) -> FastAPI:
             worker_silence_s=settings.worker_silence_s,
             worker_answer_s=settings.worker_answer_s,
             plan_ray=settings.plan_ray,
+            spare_worker=settings.spare_worker,
+            lockstep_dir=settings.lockstep_dir,
         )
         app.state.engine = engine
         for fid in await engine.resume_kept():

@@ -81,6 +81,14 @@ class FlightIn(_Body):
         default=None, description="scenario vehicle id -> registered vehicle id"
     )
     rehearsal: RehearsalIn | None = None
+    lockstep: str | None = Field(
+        default=None,
+        min_length=1,
+        max_length=4096,
+        description="with vehicles on a simulator started apart: its lock-step file "
+        "(sitl_stub --lockstep, in the service's TCGCS_LOCKSTEP_DIR); the simulator then waits "
+        "for the flight's worker, as a rehearsal's own does",
+    )
 
 
 class LaunchIn(_Body):

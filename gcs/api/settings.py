@@ -65,6 +65,15 @@ class Settings(BaseSettings):
     """A flight worker asked (``worker_silence_s``) that has not answered within this long
     (wall s) is hung: it is killed and another flies its flight on from its checkpoint."""
 
+    lockstep_dir: Path | None = None
+    """A folder whose simulators' lock-step files (``sitl_stub --lockstep``) a flight on
+    registered vehicles may join (``lockstep`` of ``POST /v1/flights``: a rehearsal on
+    simulators started apart, which wait for the flight's worker); unset: none may."""
+    spare_worker: bool = True
+    """Keep one flight worker started and loaded ahead of the next flight (or of a worker
+    that dies): it takes its flight in a fifth of a second instead of the Python start-up
+    (over a second). Off, each worker starts when it is needed and no process waits idle."""
+
     @field_validator("tokens")
     @classmethod
     def _scopes_known(cls, tokens: dict[str, list[str]]) -> dict[str, list[str]]:

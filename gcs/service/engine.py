@@ -16,6 +16,7 @@ from __future__ import annotations
 import asyncio
 import json
 import logging
+import math
 import uuid
 from collections.abc import Mapping
 from pathlib import Path
@@ -44,6 +45,7 @@ from gcs.service.worker import FlightSpec, VehicleSpec
 from gcs.service.workers import FEED_SILENCE_S, RECONNECT_WALL_S, Spawner, WorkerFlight
 from gcs.store.repository import EventWriter, Store
 from planner.scenario import Threat
+from sitl_stub.lockstep import LOCKSTEP_BYTES, Lockstep
 
 __all__ = [
     "Conflict",
@@ -79,16 +81,21 @@ class Engine:
         worker_silence_s: float = FEED_SILENCE_S,
         worker_answer_s: float = RECONNECT_WALL_S,
         plan_ray: str | None = None,
+        spare_worker: bool = True,
+        lockstep_dir: Path | None = None,
     ):
         self.store = store
         self.workers = Spawner(
             store.engine.url.render_as_string(hide_password=False),
             feed_silence_s=worker_silence_s,
             answer_wall_s=worker_answer_s,
+            spare=spare_worker,
         )
         """Starts the flight workers (they find the store by its URL) and says how long one
         may be silent (:class:`Spawner`)."""
         self.data_dir = data_dir
+        self.lockstep_dir = lockstep_dir
+        """Where the lock-step files a flight on registered vehicles may join lie."""
         self.config = config or FlightConfig()
         self.limits = limits or Limits()
         self.planning = Planning(store, self.limits, self.config.method, plan_ray)
@@ -214,11 +221,36 @@ class Engine:
 
     # -- flights --------------------------------------------------------------------------------
 
+    def _pace_file(self, lockstep: str, registered: bool) -> str:
+        """The lock-step file a flight on registered vehicles joins, checked."""
+        if not registered:
+            raise InvalidInput("lockstep: only with vehicles (a rehearsal keeps its own)")
+        if self.lockstep_dir is None:
+            raise InvalidInput("lockstep: this service joins no simulator (no TCGCS_LOCKSTEP_DIR)")
+        path = Path(lockstep).resolve()
+        if not path.is_relative_to(self.lockstep_dir.resolve()):
+            raise InvalidInput(f"lockstep: {lockstep} is not in TCGCS_LOCKSTEP_DIR")
+        try:
+            if not path.is_file() or path.stat().st_size != LOCKSTEP_BYTES:
+                raise ValueError(f"not a file of {LOCKSTEP_BYTES} bytes")
+            pace = Lockstep(path)
+        except (OSError, ValueError) as err:
+            raise InvalidInput(f"lockstep: {lockstep}: not a lock-step file ({err})") from None
+        try:
+            fields = (pace.speedup, pace.lead_s, pace.pace_s() + 1.0)
+            if not all(math.isfinite(x) and x > 0.0 for x in fields):
+                raise InvalidInput(f"lockstep: {lockstep}: not a lock-step file (its clock)")
+        finally:
+            pace.close()
+        return str(path)
+
     async def create_flight(
         self,
         schedule_id: str,
         vehicles: Mapping[str, str] | None,
         rehearsal: Rehearsal | None,
+        *,
+        lockstep: str | None = None,
     ) -> WorkerFlight:
         """A flight of ``schedule_id`` on registered vehicles (scenario vehicle -> vehicle
         id), or, with ``rehearsal`` and no vehicles, on bundled simulator vehicles started for
@@ -232,8 +264,10 @@ class Engine:
         Conflict
             A vehicle is already in a flight (named, with that flight).
         InvalidInput
-            A scenario vehicle without a vehicle, or one named that the scenario lacks.
+            A scenario vehicle without a vehicle, or one named that the scenario lacks; a
+            ``lockstep`` without vehicles, outside :attr:`lockstep_dir` or not a lock-step file.
         """
+        pace = None if lockstep is None else self._pace_file(lockstep, vehicles is not None)
         entry = await self.planning.planned(schedule_id)
         ids = [v.id for v in entry.scenario.vehicles]
         lent: list[str] = []
@@ -259,7 +293,7 @@ class Engine:
         elif rehearsal is None:
             raise InvalidInput("a flight needs vehicles, or rehearsal options for stubs")
         folder = self.data_dir / "flights" / fid
-        FlightSpec(fid, schedule_id, specs, rehearsal).write(folder)
+        FlightSpec(fid, schedule_id, specs, rehearsal, pace).write(folder)
         try:
             flight = await WorkerFlight.start(folder, self.workers)
         except BaseException:

@@ -162,11 +162,14 @@ class Flight:
         store: Store,
         fleet: Fleet,
         folder: Path,
+        lockstep: Path | None = None,
     ) -> Flight:
         """A flight of ``entry`` on the vehicles at ``vehicles`` (``(connection, system
         id)`` per scenario vehicle, in its order), or with ``rehearsal`` and no vehicles on
         bundled simulator vehicles started for it (on the ground at each start, nose along
-        its path); its vehicles claimed and its row in the store.
+        its path); its vehicles claimed and its row in the store. ``lockstep``: the vehicles'
+        simulator's lock-step file, joined (and linked from the folder: a worker that takes the
+        flight on joins it again).
 
         Raises
         ------
@@ -202,6 +205,12 @@ class Flight:
             if rehearsal.lockstep:
                 pacer = follow_lockstep(pace, clock, runner.unwatched)
             vehicles = [(c, k) for k, c in enumerate(stub.connections, start=1)]
+        elif lockstep is not None:
+            folder.mkdir(parents=True, exist_ok=True)
+            with contextlib.suppress(FileNotFoundError):
+                (folder / LOCKSTEP_FILE).unlink()
+            (folder / LOCKSTEP_FILE).symlink_to(lockstep)
+            pacer = follow_lockstep(lockstep, clock, runner.unwatched)
         conns = {vid: conn for vid, (conn, _) in zip(ids, vehicles, strict=True)}
         try:
             held = await fleet.claim(list(conns.values()), flight_id, [s for _, s in vehicles])
@@ -246,7 +255,7 @@ class Flight:
         )  # fmt: skip
         conns = {vid: str(v[1]) for vid, v in row.vehicles.items()}
         pacer = None
-        if (folder / LOCKSTEP_FILE).exists():  # its bundled simulator, still flying
+        if (folder / LOCKSTEP_FILE).exists():  # its simulator, still flying
             with contextlib.suppress(OSError, ValueError):
                 pacer = follow_lockstep(folder / LOCKSTEP_FILE, clock, runner.unwatched)
         flight = cls(

@@ -111,6 +111,8 @@ class FlightSpec:
     vehicles: tuple[VehicleSpec, ...] | None = None
     """Per scenario vehicle in its order; None: bundled simulator vehicles (:attr:`rehearsal`)."""
     rehearsal: Rehearsal | None = None
+    lockstep: str | None = None
+    """With :attr:`vehicles`: the lock-step file of the simulator they are on, joined."""
 
     def write(self, folder: Path) -> None:
         """Into ``folder`` (readable by its owner only: it may hold signing keys)."""
@@ -130,6 +132,7 @@ class FlightSpec:
             doc["schedule_id"],
             None if vehicles is None else tuple(VehicleSpec(**v) for v in vehicles),
             None if rehearsal is None else Rehearsal(**rehearsal),
+            doc.get("lockstep"),
         )
 
 
@@ -375,8 +378,9 @@ async def _flight(folder: Path, store: Store, fleet: Fleet, resume: bool) -> Fli
                 fleet.signing[v.connection] = SigningConfig.from_hex(v.signing_key)
         vehicles = [(v.connection, v.system_id) for v in spec.vehicles]
     return await Flight.create(
-        spec.flight_id, entry, vehicles, spec.rehearsal, store=store, fleet=fleet, folder=folder
-    )
+        spec.flight_id, entry, vehicles, spec.rehearsal, store=store, fleet=fleet, folder=folder,
+        lockstep=None if spec.lockstep is None else Path(spec.lockstep),
+    )  # fmt: skip
 
 
 async def _main(folder: Path, db_url: str, resume: bool) -> int:

@@ -430,8 +430,11 @@ class Spawner:
         *,
         feed_silence_s: float = FEED_SILENCE_S,
         answer_wall_s: float = RECONNECT_WALL_S,
+        spare: bool = True,
     ) -> None:
         self.db_url = db_url
+        self.spare = spare
+        """Keep one worker started ahead (else each starts when it is needed)."""
         self.feed_silence_s = feed_silence_s
         """A worker's feed silent this long (wall s) is taken as broken."""
         self.answer_wall_s = answer_wall_s
@@ -484,6 +487,8 @@ class Spawner:
 
     def _warm(self) -> None:
         """Start the next spare (in the background)."""
+        if not self.spare:
+            return
         if self._spare is None and (self._warming is None or self._warming.done()):
             self._warming = asyncio.get_running_loop().create_task(self._start_spare())
 

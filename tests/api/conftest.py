@@ -41,7 +41,8 @@ def auth(scope: str = "admin") -> dict[str, str]:
 
 def settings_for(data_dir: Path, database_url: str | None, *, tokens: bool = True) -> Settings:
     table = {token: [scope] for scope, token in TOKENS.items()} if tokens else {}
-    return Settings(data_dir=data_dir, database_url=database_url, tokens=table)
+    # No spare flight worker kept loaded: these tests kill none, and each would start one.
+    return Settings(data_dir=data_dir, database_url=database_url, tokens=table, spare_worker=False)
 
 
 @pytest.fixture

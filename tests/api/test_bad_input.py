@@ -8,6 +8,7 @@ from __future__ import annotations
 import asyncio
 import json
 import re
+from pathlib import Path
 from typing import Any
 
 import httpx
@@ -18,7 +19,8 @@ from sqlalchemy import func, select
 
 from gcs.service.engine import Engine
 from gcs.store.models import Base
-from tests.api.conftest import PAPER, auth, problem
+from sitl_stub.lockstep import Lockstep
+from tests.api.conftest import PAPER, app_with, auth, problem, running
 
 YAML = {**auth("plan"), "Content-Type": "application/yaml"}
 JSON = {**auth("plan"), "Content-Type": "application/json"}
@@ -480,3 +482,41 @@ async def test_a_body_nested_too_deeply_is_422(
     assert problem(r, 422)["detail"].startswith(said)
     assert not [rec for rec in caplog.records if rec.levelname in ("ERROR", "CRITICAL")]
     assert (await client.get("/v1/health")).status_code == 200
+
+
+async def test_a_lockstep_file_is_joined_only_from_the_folder_the_service_names(
+    tmp_path: Path,
+) -> None:
+    """``lockstep`` of ``POST /v1/flights`` (a flight on registered vehicles joining their
+    simulator's lock step): a 422 naming the field and why without vehicles, when the service
+    names no folder (``TCGCS_LOCKSTEP_DIR``), for a path outside it (``..`` included), and for
+    a file that is not a simulator's lock-step file; no flight is made and the file is left
+    as it was."""
+    sim = tmp_path / "sim"
+    sim.mkdir()
+    pace, outside = sim / "pace", tmp_path / "pace"
+    for path in (pace, outside):
+        Lockstep(path, create=True, speedup=200.0).close()
+    (sim / "notes.txt").write_text("not a pace file, but longer than one\n" * 2)
+    (sim / "zeros").write_bytes(bytes(40))
+    kept = pace.read_bytes()
+    registered = {"vehicles": {"UAV1": "v1"}}
+    cases = [
+        (None, {**registered, "lockstep": str(pace)}, "no TCGCS_LOCKSTEP_DIR"),
+        (sim, {"rehearsal": {}, "lockstep": str(pace)}, "only with vehicles"),
+        (sim, {**registered, "lockstep": str(outside)}, "is not in TCGCS_LOCKSTEP_DIR"),
+        (sim, {**registered, "lockstep": f"{sim}/../pace"}, "is not in TCGCS_LOCKSTEP_DIR"),
+        (sim, {**registered, "lockstep": str(sim / "notes.txt")}, "not a lock-step file"),
+        (sim, {**registered, "lockstep": str(sim / "zeros")}, "not a lock-step file"),
+        (sim, {**registered, "lockstep": str(sim / "missing")}, "not a lock-step file"),
+    ]
+    for folder, body, why in cases:
+        async for client in running(app_with(tmp_path / str(folder).replace("/", "_"),
+                                             lockstep_dir=folder)):  # fmt: skip
+            r = await client.post(
+                "/v1/flights", json={"schedule_id": "s", **body}, headers=auth("operate")
+            )
+            detail = problem(r, 422)["detail"]
+            assert "lockstep" in detail and why in detail, (body, detail)
+            assert (await client.get("/v1/flights", headers=auth("observe"))).json() == []
+    assert pace.read_bytes() == kept

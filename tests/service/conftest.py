@@ -23,6 +23,20 @@ class Service:
     data_dir: Path
     proc: asyncio.subprocess.Process
 
+    def spare_workers(self) -> list[int]:
+        """The pids of the flight workers it keeps loaded, waiting for a flight (its children
+        run as ``gcs.service.worker --standby``)."""
+        found = []
+        for stat in Path("/proc").glob("[0-9]*/stat"):
+            try:
+                ppid = int(stat.read_text().rsplit(")", 1)[1].split()[1])
+                argv = (stat.parent / "cmdline").read_bytes().split(b"\0")
+            except (OSError, IndexError, ValueError):
+                continue  # gone meanwhile
+            if ppid == self.proc.pid and b"--standby" in argv:
+                found.append(int(stat.parent.name))
+        return found
+
     def client(self, token: str = TOKEN) -> httpx.AsyncClient:
         return httpx.AsyncClient(
             base_url=self.url, headers={"Authorization": f"Bearer {token}"}, timeout=60.0
@@ -31,10 +45,18 @@ class Service:
 
 @contextlib.asynccontextmanager
 async def serve(
-    data_dir: Path, database_url: str | None = None, settings: Mapping[str, str] | None = None
+    data_dir: Path,
+    database_url: str | None = None,
+    settings: Mapping[str, str] | None = None,
+    *,
+    spare_worker: bool = False,
 ) -> AsyncIterator[Service]:
+    """``gcs serve`` on ``data_dir``; without the spare flight worker it keeps loaded by
+    default (``spare_worker``: the tests that kill a worker keep it, as an operator would; the
+    others would start one process more each and never use it)."""
+    env = {"TCGCS_SPARE_WORKER": str(spare_worker).lower(), **(settings or {})}
     async with running_service(
-        data_dir, {TOKEN: ["admin"]}, database_url=database_url, settings=settings
+        data_dir, {TOKEN: ["admin"]}, database_url=database_url, settings=env
     ) as svc:
         yield Service(svc.url, data_dir, svc.proc)
     assert b"Traceback" not in svc.stderr, svc.stderr.decode()[-3000:]
@@ -43,4 +65,12 @@ async def serve(
 @pytest.fixture
 async def service(tmp_path: Path) -> AsyncIterator[Service]:
     async with serve(tmp_path / "data") as s:
+        yield s
+
+
+@pytest.fixture
+async def spare_service(tmp_path: Path) -> AsyncIterator[Service]:
+    """The service keeping its spare flight worker loaded (its default): for the tests that
+    kill a worker."""
+    async with serve(tmp_path / "data", spare_worker=True) as s:
         yield s

@@ -286,6 +286,7 @@ async def test_paper_flight_over_http_with_a_no_fly_zone_a_later_team_time_and_f
         interrupted = await resumed
         record = _ok(await client.get(f"/v1/flights/{fid}/record"))
         events = await _all_events(client, fid)
+        assert service.spare_workers() == []  # TCGCS_SPARE_WORKER=false: none kept loaded
 
     # The team time: the wind and the pop-up moved it later by no more than they can
     # (tests.paperbounds), the operator by 120 s (or as late as it could), and nothing after

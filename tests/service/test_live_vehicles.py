@@ -3,9 +3,11 @@ the test starts on its own (as an operator's autopilots are), flown through the 
 flight's worker takes their links over (the service closes its own) and gives them back when
 the flight ends; every arrival is judged by the simulator's truth log.
 
-The simulator runs on the wall clock (as real vehicles do, no lock step) at 40x, the paper's
+The simulator, started apart at 200x, keeps a lock-step file that the flight joins
+(``lockstep`` in ``POST /v1/flights``, from the service's ``TCGCS_LOCKSTEP_DIR``): it waits for
+the flight's worker, so a busy machine slows the flight instead of making it late. The paper's
 team drawn at a quarter of its size (:func:`tests.teams.compact_paper`): some 1,450 s of
-flight, under a minute of wall time."""
+flight."""
 
 from __future__ import annotations
 
@@ -16,30 +18,37 @@ from typing import Any
 import pytest
 import yaml
 
+from sitl_stub.lockstep import Lockstep
 from tests.gcs.conftest import start_stub
-from tests.service.conftest import Service
+from tests.service.conftest import serve
 from tests.service.test_flights_http import _ok, _scheduled
 from tests.sitl_stub.conftest import free_port_base
 from tests.teams import compact_paper
 from tests.verdict import assert_flown
 
-pytestmark = pytest.mark.slow  # some 60 s of wall time
+pytestmark = pytest.mark.slow  # some 30 s of wall time
 
-SPEEDUP = 40.0
+SPEEDUP = 200.0
 TOLERANCE_S = 1.0
-"""The issue's bound for a flight on the wall clock."""
+"""The bound for a flight on registered vehicles."""
 
 
 async def test_registered_vehicles_are_flown_by_the_flight_worker_and_given_back(
-    service: Service, tmp_path: Path
+    tmp_path: Path,
 ) -> None:
     scenario = tmp_path / "scenario.yaml"
     scenario.write_text(yaml.safe_dump(compact_paper(), sort_keys=False))
     truth = tmp_path / "truth.jsonl"
+    pace = tmp_path / "sim" / "pace"
+    pace.parent.mkdir()
     base = free_port_base(3)
-    stub = await start_stub(scenario, base, truth, speedup=SPEEDUP)
+    stub = await start_stub(scenario, base, truth, "--lockstep", str(pace), speedup=SPEEDUP)
+    settings = {"TCGCS_LOCKSTEP_DIR": str(pace.parent)}
     try:
-        async with service.client() as client:
+        async with (
+            serve(tmp_path / "data", settings=settings) as service,
+            service.client() as client,
+        ):
             ids = []
             for i in range(3):
                 conn = f"tcp:127.0.0.1:{base + 10 * i}"
@@ -51,6 +60,7 @@ async def test_registered_vehicles_are_flown_by_the_flight_worker_and_given_back
             body = {
                 "schedule_id": job["result"]["id"],
                 "vehicles": dict(zip(names, ids, strict=True)),
+                "lockstep": str(pace),
             }
             fid = _ok(await client.post("/v1/flights", json=body), 201)["flight_id"]
             # In the flight: shown as its worker sees them.
@@ -78,6 +88,14 @@ async def test_registered_vehicles_are_flown_by_the_flight_worker_and_given_back
                     ):
                         break
                     await asyncio.sleep(0.2)
+        # The flight's worker kept the lock step: it acknowledged the flight to its end.
+        joined = Lockstep(pace)
+        try:
+            assert joined.acknowledged_s() * SPEEDUP > record["required_arrival_s"], (
+                joined.acknowledged_s(), record["required_arrival_s"],
+            )  # fmt: skip
+        finally:
+            joined.close()
     finally:
         stub.terminate()
         await stub.wait()

@@ -48,14 +48,14 @@ async def test_a_paused_rehearsal_waits_where_asked_until_resumed(service: Servi
 
 
 async def test_a_paused_flight_whose_worker_died_is_paused_again_by_the_next(
-    service: Service,
+    spare_service: Service,
 ) -> None:
     """Paused, with a later pause asked for, when its worker is killed: the worker that takes
     the flight on from its checkpoint keeps both, holds the flight (where its simulator had
     got to: the simulator flies on only once no ground station has acknowledged it for
     seconds), and flies on when resumed, to its later pause."""
     later_s = PAUSE_AT_S + 150.0
-    async with service.client() as client:
+    async with spare_service.client() as client:
         fid, _ = await _flight(client, {"speedup": 200.0, "seed": 4}, scenario_name="compact")
         for at_s in (PAUSE_AT_S, later_s):
             _ok(await client.post(f"/v1/flights/{fid}/pause", json={"at_s": at_s}))

@@ -111,13 +111,19 @@ async def test_a_killed_or_hung_flight_worker_is_flown_on_from_its_checkpoint(
     :data:`AWAY_S` of flight past the signal) holding their missions and flies them home."""
     data = tmp_path / "data"
     try:
-        async with serve(data, settings=HUNG_WORKER) as svc, svc.client() as client:
+        async with (
+            serve(data, settings=HUNG_WORKER, spare_worker=True) as svc,
+            svc.client() as client,
+        ):
             fid, said, said_seq, before = await _past_the_replan(client, data)
             pid = _ok(await client.get(f"/v1/flights/{fid}"))["worker"]["pid"]
+            spare = svc.spare_workers()
+            assert len(spare) == 1, spare  # started when the flight's worker was
             os.kill(pid, how)
             away = asyncio.create_task(hold_while_away(data / "flights" / fid / "pace", AWAY_S))
             try:
-                await _taken_on(client, fid, pid)
+                taken = await _taken_on(client, fid, pid)
+                assert taken["worker"]["pid"] == spare[0], (taken["worker"], spare)
                 gone = await asyncio.to_thread(_gone_within, pid, 5.0)
                 assert gone, f"the old worker (pid {pid}) still runs beside the new one"
                 await _flown_on(client, svc, fid, said, said_seq, before, restarted=True)
@@ -338,7 +344,7 @@ async def test_a_worker_killed_before_the_launch_leaves_its_flight_ready_to_laun
     ready again, is launched and flown home on its slots."""
     data = tmp_path / "data"
     try:
-        async with serve(data) as svc, svc.client() as client:
+        async with serve(data, spare_worker=True) as svc, svc.client() as client:
             fid, _ = await _flight(client, {"speedup": 200.0, "seed": 5}, scenario_name="compact")
             pid = _ok(await client.get(f"/v1/flights/{fid}"))["worker"]["pid"]
             os.kill(pid, signal.SIGKILL)
@@ -385,7 +391,7 @@ async def test_a_flight_no_worker_can_fly_on_fails_and_says_so(tmp_path: Path) -
     again shows it failed); its simulator is stopped; a launch is refused."""
     data = tmp_path / "data"
     try:
-        async with serve(data) as svc, svc.client() as client:
+        async with serve(data, spare_worker=True) as svc, svc.client() as client:
             fid, _ = await _flight(client, {"speedup": 200.0, "seed": 5}, scenario_name="compact")
             pid = _ok(await client.get(f"/v1/flights/{fid}"))["worker"]["pid"]
             stub_pid = int((data / "flights" / fid / "stub.pid").read_text())

@@ -44,7 +44,9 @@ async def create_flight(body: FlightIn, request: Request) -> dict[str, Any]:
     if r is not None:
         rehearsal = Rehearsal(r.speedup, r.wind_m_s, r.wind_from_deg, r.loss, r.seed, r.lockstep)
     engine = engine_of(request)
-    flight = await engine.create_flight(body.schedule_id, body.vehicles, rehearsal)
+    flight = await engine.create_flight(
+        body.schedule_id, body.vehicles, rehearsal, lockstep=body.lockstep
+    )
     return engine.snapshot(flight.id)
 
 
