@@ -17,7 +17,6 @@ from typing import Literal
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy.ndimage import map_coordinates
 
 from planner.aco import AcoOptions, solve_aco
 from planner.backend import Backend, LocalBackend
@@ -282,8 +281,25 @@ def _grid_field(cmap: CostMap, values: FloatArray, pts: FloatArray) -> FloatArra
     g = cmap.grid
     i = (pts[:, 0] - g.min_east_m) / g.resolution_m
     j = (pts[:, 1] - g.min_north_m) / g.resolution_m
-    field = values.reshape(g.n_north, g.n_east)
-    return np.asarray(map_coordinates(field, [j, i], order=1, mode="nearest"), dtype=np.float64)
+    return bilinear(values.reshape(g.n_north, g.n_east), j, i)
+
+
+def bilinear(field: FloatArray, j: FloatArray, i: FloatArray) -> FloatArray:
+    """``field`` (rows ``j``, columns ``i``) interpolated bilinearly at fractional indices,
+    which are held to the field's edges outside it (an order-1 spline with its edge values
+    repeated: ``scipy.ndimage.map_coordinates(field, [j, i], order=1, mode="nearest")``,
+    without the second of imports that module costs every process that plans)."""
+    n_j, n_i = field.shape
+    j = np.clip(np.asarray(j, dtype=np.float64), 0.0, n_j - 1.0)
+    i = np.clip(np.asarray(i, dtype=np.float64), 0.0, n_i - 1.0)
+    j0 = np.minimum(j.astype(np.int64), max(n_j - 2, 0))
+    i0 = np.minimum(i.astype(np.int64), max(n_i - 2, 0))
+    j1 = np.minimum(j0 + 1, n_j - 1)
+    i1 = np.minimum(i0 + 1, n_i - 1)
+    fj, fi = j - j0, i - i0
+    top = field[j0, i0] * (1.0 - fi) + field[j0, i1] * fi
+    bottom = field[j1, i0] * (1.0 - fi) + field[j1, i1] * fi
+    return np.asarray(top * (1.0 - fj) + bottom * fj, dtype=np.float64)
 
 
 FIRST_CHORD_BATCH = 4

@@ -172,3 +172,29 @@ def test_plans_never_enter_forbidden_zones_nor_lose_clearance(
         assert (chord_alt - chord_ground).min() >= v.clearance_m - 5.0
         assert route.profile.alt_m.max() <= v.alt_max_m + 1e-6
         assert route.profile.max_gradient <= v.climb_gradient + 1e-6
+
+
+@settings(max_examples=200, deadline=None)
+@given(
+    shape=st.tuples(st.integers(1, 6), st.integers(1, 6)),
+    seed=st.integers(0, 2**32 - 1),
+    spread=st.floats(0.0, 3.0),
+)
+def test_the_bilinear_field_is_scipys_order_one_spline_held_at_the_edges(
+    shape: tuple[int, int], seed: int, spread: float
+) -> None:
+    """:func:`planner.plan.bilinear` against ``scipy.ndimage.map_coordinates`` (order 1,
+    ``mode="nearest"``), on fields of one row or column too, at points inside, on the edges
+    and up to ``spread`` cells outside."""
+    from scipy.ndimage import map_coordinates
+
+    from planner.plan import bilinear
+
+    rng = np.random.default_rng(seed)
+    field = rng.normal(0.0, 100.0, shape)
+    n = 64
+    j = rng.uniform(-spread, shape[0] - 1 + spread, n)
+    i = rng.uniform(-spread, shape[1] - 1 + spread, n)
+    j[:4], i[:4] = [0, shape[0] - 1, 0, shape[0] - 1], [0, 0, shape[1] - 1, shape[1] - 1]
+    want = map_coordinates(field, [j, i], order=1, mode="nearest")
+    np.testing.assert_allclose(bilinear(field, j, i), want, rtol=1e-12, atol=1e-9)
