@@ -11,8 +11,9 @@ $(PY):
 	$(PYTHON) -m venv $(VENV)
 
 # pip compiles what it installs on one core; compileall does it on every core (half the time
-# here), leaving out the MAVLink dialects nobody loads and the packages' own tests.
-NOT_COMPILED := /pymavlink/dialects/v[12]0/(?!ardupilotmega|common|minimal|__init__)|/tests?/
+# here), leaving out the MAVLink dialects nobody loads, the packages' own tests, the parts of
+# Ray nothing here starts and the installers (they compile what they import when they run).
+NOT_COMPILED := /pymavlink/dialects/v[12]0/(?!ardupilotmega|common|minimal|__init__)|/tests?/|/ray/(rllib|data|serve|tune|train)/|/site-packages/(pip|setuptools|fontTools)/
 $(STAMP): pyproject.toml | $(PY)
 	$(PY) -m pip install --quiet --no-compile -e '.[dev]'
 	$(PY) -m compileall -q -j 0 -x '$(NOT_COMPILED)' $$($(PY) -c 'import sysconfig; print(sysconfig.get_path("purelib"))') > /dev/null
