@@ -21,6 +21,7 @@ from typing import Any
 import fastapi.routing
 import httpx
 import pytest
+import pytest_asyncio
 import uvicorn
 import websockets
 from fastapi import FastAPI
@@ -95,6 +96,21 @@ READS = [
 SOCKETS = [e for e in ENDPOINTS if e.method == "WS"]
 
 
+SHARED = pytest.mark.asyncio(loop_scope="module")
+"""The mark of the tests on the module's one app (:func:`client`): they run in its loop."""
+
+
+@pytest_asyncio.fixture(scope="module", loop_scope="module")
+async def client(tmp_path_factory: pytest.TempPathFactory) -> AsyncIterator[httpx.AsyncClient]:
+    """One app for the module's token checks (they keep nothing: every write is refused or
+    invalid), so its routes are built once rather than for each check."""
+    folder = tmp_path_factory.mktemp("auth")
+    async for c in running(
+        create_app(settings_for(folder / "data", f"sqlite:///{folder / 'tcgcs.db'}"))
+    ):
+        yield c
+
+
 def test_routes_listed() -> None:
     """The listing sees the routes of the included routers (so the checks below run on them)."""
     names = {str(e) for e in ENDPOINTS}
@@ -112,6 +128,7 @@ def _unauthorized(r: httpx.Response) -> None:
 
 
 @pytest.mark.parametrize("endpoint", WRITES, ids=str)
+@SHARED
 async def test_write_needs_a_token_with_its_scope(
     client: httpx.AsyncClient, endpoint: Endpoint
 ) -> None:
@@ -134,6 +151,7 @@ async def test_write_needs_a_token_with_its_scope(
 
 
 @pytest.mark.parametrize("endpoint", READS, ids=str)
+@SHARED
 async def test_read_needs_a_token(client: httpx.AsyncClient, endpoint: Endpoint) -> None:
     _unauthorized(await client.get(endpoint.path))
     _unauthorized(await client.get(endpoint.path, headers={"Authorization": "Bearer nope"}))
@@ -141,6 +159,7 @@ async def test_read_needs_a_token(client: httpx.AsyncClient, endpoint: Endpoint)
     assert r.status_code not in (401, 403), (endpoint, r.status_code, r.text)
 
 
+@SHARED
 async def test_open_routes_need_none(client: httpx.AsyncClient) -> None:
     for path in sorted(OPEN):
         r = await client.get(path)
@@ -251,6 +270,7 @@ def _leaks(text: str) -> list[str]:
     return [s for s, t in TOKENS.items() if t in text or t[-12:] in text]
 
 
+@SHARED
 async def test_tokens_never_in_responses_or_logs(
     client: httpx.AsyncClient, caplog: pytest.LogCaptureFixture
 ) -> None:
@@ -318,6 +338,7 @@ def test_token_table_compares_whole_tokens(monkeypatch: pytest.MonkeyPatch) -> N
     assert all(isinstance(a, bytes) and isinstance(b, bytes) for a, b in calls)
 
 
+@SHARED
 async def test_token_prefix_refused(client: httpx.AsyncClient) -> None:
     admin = TOKENS["admin"]
     for wrong in (admin[:-1], admin[: len(admin) // 2], admin[:1], admin + admin[-1]):
@@ -331,6 +352,7 @@ async def test_token_prefix_refused(client: httpx.AsyncClient) -> None:
 
 
 @pytest.mark.parametrize("endpoint", READS, ids=str)
+@SHARED
 async def test_plan_and_operate_tokens_read_too(
     client: httpx.AsyncClient, endpoint: Endpoint
 ) -> None:
@@ -339,6 +361,7 @@ async def test_plan_and_operate_tokens_read_too(
         assert r.status_code not in (401, 403), (scope, endpoint, r.status_code, r.text)
 
 
+@SHARED
 async def test_metrics_need_a_token(client: httpx.AsyncClient) -> None:
     _unauthorized(await client.get("/metrics"))
     for scope in ("observe", "plan", "operate", "admin"):
@@ -356,6 +379,7 @@ def _secured(r: httpx.Response) -> None:
     assert "http" not in policy and "unsafe" not in policy, policy
 
 
+@SHARED
 async def test_every_response_carries_the_security_headers(client: httpx.AsyncClient) -> None:
     """Every route, answered or refused, the console's files, a 404 and a 413 alike."""
     for endpoint in [e for e in ENDPOINTS if e.method != "WS"]:
