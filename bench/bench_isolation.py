@@ -16,7 +16,8 @@ every 0.1 s from a process of its own sees them (and, apart, as the readers saw 
 crowded process's own delays within), and every 5xx.
 
 Targets: every arrival within +/-1 s; the worker's longest stall <= 50 ms; ``/v1/health`` p99
-<= 50 ms; no 5xx.
+<= 50 ms; no 5xx. The service's settings come from the environment (``TCGCS_WORKER_NICE=-5``:
+the flight's worker ahead of the service and of the load, where the privilege allows).
 
     python bench/bench_isolation.py [--speedup 20] [--readers 200] [--read-s 60] [--json OUT]
 """
@@ -98,6 +99,7 @@ def main() -> int:
         "state": snap["state"],
         "arrival_errors_s": errors,
         "worker_loop_stall_max_ms": snap.get("worker", {}).get("loop_stall_max_ms"),
+        "worker_nice": snap.get("worker", {}).get("nice"),
         "worker_loop_holds_over_50_ms": held[-20:],
         "api_loop_stall_max_ms": _api_stall_ms(metrics),
         "health_p50_ms": round(seen.percentile_ms(0.50), 1),

@@ -85,6 +85,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
             plan_ray=settings.plan_ray,
             spare_worker=settings.spare_worker,
             lockstep_dir=settings.lockstep_dir,
+            worker_nice=settings.worker_nice,
         )
         app.state.engine = engine
         for fid in await engine.resume_kept():

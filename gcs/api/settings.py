@@ -69,6 +69,11 @@ class Settings(BaseSettings):
     """A folder whose simulators' lock-step files (``sitl_stub --lockstep``) a flight on
     registered vehicles may join (``lockstep`` of ``POST /v1/flights``: a rehearsal on
     simulators started apart, which wait for the flight's worker); unset: none may."""
+    worker_nice: int | None = Field(default=None, ge=-20, le=19)
+    """The flight workers' scheduling priority (``nice``; their planning jobs run at it too):
+    below the service's own (0) puts flights ahead of the API and of anything else on the
+    machine, and needs the privilege to raise a priority (CAP_SYS_NICE; refused, a worker
+    says so in its log and runs at the service's). Unset: the service's."""
     spare_worker: bool = True
     """Keep one flight worker started and loaded ahead of the next flight (or of a worker
     that dies): it takes its flight in a fifth of a second instead of the Python start-up

@@ -83,6 +83,7 @@ class Engine:
         plan_ray: str | None = None,
         spare_worker: bool = True,
         lockstep_dir: Path | None = None,
+        worker_nice: int | None = None,
     ):
         self.store = store
         self.workers = Spawner(
@@ -90,6 +91,7 @@ class Engine:
             feed_silence_s=worker_silence_s,
             answer_wall_s=worker_answer_s,
             spare=spare_worker,
+            nice=worker_nice,
         )
         """Starts the flight workers (they find the store by its URL) and says how long one
         may be silent (:class:`Spawner`)."""

@@ -431,10 +431,13 @@ class Spawner:
         feed_silence_s: float = FEED_SILENCE_S,
         answer_wall_s: float = RECONNECT_WALL_S,
         spare: bool = True,
+        nice: int | None = None,
     ) -> None:
         self.db_url = db_url
         self.spare = spare
         """Keep one worker started ahead (else each starts when it is needed)."""
+        self.nice = nice
+        """The workers' scheduling priority (None: this process's)."""
         self.feed_silence_s = feed_silence_s
         """A worker's feed silent this long (wall s) is taken as broken."""
         self.answer_wall_s = answer_wall_s
@@ -461,6 +464,7 @@ class Spawner:
                 proc = None  # it died waiting: start one the slow way
         if proc is None:
             args = [sys.executable, "-m", WORKER, str(folder), "--db", self.db_url]
+            args += self._nice_args()
             if resume:
                 args.append("--resume")
             with (folder / LOG_FILE).open("ab") as errors:
@@ -472,9 +476,16 @@ class Spawner:
                     start_new_session=True,  # a signal to the service's group is not its
                 )
         try:
-            return proc, await _ready(proc, folder)
+            ready = await _ready(proc, folder)
         finally:
             self._warm()
+        nice = ready.get("snapshot", {}).get("worker", {}).get("nice")
+        if self.nice is not None and nice != self.nice:
+            log.warning(
+                "flight %s: its worker runs at priority %s, not %s (CAP_SYS_NICE?)",
+                folder.name, nice, self.nice,
+            )  # fmt: skip
+        return proc, ready
 
     async def _take_spare(self) -> asyncio.subprocess.Process | None:
         if self._warming is not None:
@@ -494,10 +505,13 @@ class Spawner:
 
     async def _start_spare(self) -> None:
         self._spare = await asyncio.create_subprocess_exec(
-            sys.executable, "-m", WORKER, "--standby",
+            sys.executable, "-m", WORKER, "--standby", *self._nice_args(),
             stdin=asyncio.subprocess.PIPE, stdout=asyncio.subprocess.PIPE,
             stderr=asyncio.subprocess.DEVNULL, start_new_session=True,
         )  # fmt: skip
+
+    def _nice_args(self) -> list[str]:
+        return [] if self.nice is None else ["--nice", str(self.nice)]
 
     async def close(self) -> None:
         """The spare ends (its stdin closed): one being started is waited for first (a start

@@ -17,6 +17,8 @@ import os
 import pickle
 import signal
 import sqlite3
+import subprocess
+import sys
 import time
 from collections import Counter
 from pathlib import Path
@@ -99,6 +101,19 @@ HUNG_WORKER = {"TCGCS_WORKER_SILENCE_S": "2", "TCGCS_WORKER_ANSWER_S": "2"}
 """The service's watch on its workers in these tests: a worker that says nothing for 2 s of
 wall time, and does not answer within 2 s more, is hung (a healthy one says the flight's state
 four times a second; one slowed by a busy machine and asked answers, and is followed again)."""
+WORKER_NICE = -2
+"""The workers' priority asked for (``TCGCS_WORKER_NICE``) where a test checks it."""
+
+
+def _may_raise_priority() -> bool:
+    """Whether a process of this user may run ahead of the default priority (CAP_SYS_NICE)."""
+    probe = subprocess.run([sys.executable, "-c", "import os; os.nice(-1)"], check=False)
+    return probe.returncode == 0
+
+
+def _nice_of(pid: int) -> int:
+    """A process's ``nice``, read by the kernel's account (/proc/PID/stat, field 19)."""
+    return int(Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[16])
 
 
 @pytest.mark.parametrize("how", [signal.SIGKILL, signal.SIGSTOP], ids=["killed", "hung"])
@@ -110,15 +125,22 @@ async def test_a_killed_or_hung_flight_worker_is_flown_on_from_its_checkpoint(
     on one flight's vehicles), which finds the vehicles (flown on by the simulator,
     :data:`AWAY_S` of flight past the signal) holding their missions and flies them home."""
     data = tmp_path / "data"
+    settings = {**HUNG_WORKER, "TCGCS_WORKER_NICE": str(WORKER_NICE)}
     try:
         async with (
-            serve(data, settings=HUNG_WORKER, spare_worker=True) as svc,
+            serve(data, settings=settings, spare_worker=True) as svc,
             svc.client() as client,
         ):
             fid, said, said_seq, before = await _past_the_replan(client, data)
-            pid = _ok(await client.get(f"/v1/flights/{fid}"))["worker"]["pid"]
+            worker = _ok(await client.get(f"/v1/flights/{fid}"))["worker"]
+            pid = worker["pid"]
             spare = svc.spare_workers()
             assert len(spare) == 1, spare  # started when the flight's worker was
+            # TCGCS_WORKER_NICE: the workers (the spare too) ahead of the service, where the
+            # privilege allows (else they say so and run at the service's).
+            nice = WORKER_NICE if _may_raise_priority() else _nice_of(svc.proc.pid)
+            assert worker["nice"] == _nice_of(pid) == _nice_of(spare[0]) == nice, worker
+            assert _nice_of(svc.proc.pid) == os.getpriority(os.PRIO_PROCESS, 0)
             os.kill(pid, how)
             away = asyncio.create_task(hold_while_away(data / "flights" / fid / "pace", AWAY_S))
             try:
