@@ -96,16 +96,6 @@ class MissionChanges:
                 return k
         return None
 
-    def _loiter_keep_seq(self, m: Member) -> int | None:
-        """The waypoint a loiter job splices its turns after: the first :attr:`loiter_lead_s`
-        ahead, or when there is none (a short route, or a long lead on a fast rehearsal) the
-        first the shortest lead allows, rather than no turns at all."""
-        gs = max(m.groundspeed_m_s, 10.0)
-        keep = self._keep_seq(m, gs * self.loiter_lead_s)
-        if keep is None and self.loiter_lead_s > self.config.min_lead_s:
-            keep = self._keep_seq(m, gs * self.config.min_lead_s)
-        return keep
-
     def _can_loiter_after(self, m: Member, s_m: float) -> bool:
         """Whether loiter turns can be flown on the vehicle's path after ``s_m``: where its
         loiter job would look for them, clear of the zones in force at its last fix and of
@@ -128,7 +118,11 @@ class MissionChanges:
         self, m: Member, d: Decision, t: float, s: float, wind: Wind, out: list[act.Action]
     ) -> None:
         gs = max(m.groundspeed_m_s, 10.0)
-        keep = self._loiter_keep_seq(m)
+        keep = self._keep_seq(m, gs * self.loiter_lead_s)
+        if keep is None and self.loiter_lead_s > self.config.min_lead_s:
+            # Nothing that far ahead (a short route, or a long lead on a fast rehearsal):
+            # the nearest waypoint the shortest lead allows, rather than no turns at all.
+            keep = self._keep_seq(m, gs * self.config.min_lead_s)
         if keep is None:
             out.append(
                 act.Report(

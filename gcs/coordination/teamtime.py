@@ -82,10 +82,6 @@ class TeamTime:
         """The first route waypoint at least ``lead_m`` ahead (the re-planning part's)."""
         raise NotImplementedError
 
-    def _loiter_keep_seq(self, m: Member) -> int | None:
-        """The waypoint a loiter job would splice its turns after (the re-planning part's)."""
-        raise NotImplementedError
-
     def _can_loiter_after(self, m: Member, s_m: float) -> bool:
         """Whether loiter turns can be flown on the vehicle's path after ``s_m`` (the
         re-planning part's)."""
@@ -94,11 +90,12 @@ class TeamTime:
     def latest_arrival_s(self, m: Member) -> float:
         """The latest a vehicle still flying to its slot can arrive (mission s): unbounded on
         the ground (its takeoff moves) or while loiter turns can still be spliced in ahead of
-        it (room for them after the waypoint its loiter job would splice them after), else its
+        it (a waypoint the shortest lead ahead, and room for the turns after it), else its
         ETA at its minimum speed from its last decision."""
         if m.phase == "ground" or m.last_decision is None:
             return math.inf
-        keep = self._loiter_keep_seq(m)
+        gs_m_s = max(m.groundspeed_m_s, 10.0)
+        keep = self._keep_seq(m, gs_m_s * self.config.min_lead_s)
         if keep is not None and self._can_loiter_after(m, m.mission.item_s_m[keep] or 0.0):
             return math.inf
         return m.last_decision.eta_max_s

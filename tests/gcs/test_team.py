@@ -476,10 +476,9 @@ def test_the_latest_a_vehicle_can_arrive_counts_loiter_turns_only_where_they_fit
     team: TeamController,
 ) -> None:
     """How late UAV3 could still arrive, for a move of the team time: without bound while
-    its buffer is ahead (turns spliced in after the waypoint its loiter job would splice them
-    after: the loiter lead ahead); on its last stretch, with that waypoint ahead but under 2 km
-    of path after it (no room for turns: a loiter starts 1 km clear of either end), its
-    arrival at its minimum speed."""
+    its buffer is ahead (turns spliced in after a waypoint the shortest lead ahead); on its
+    last stretch, with a waypoint that far ahead but under 2 km of path after it (no room
+    for turns: a loiter starts 1 km clear of either end), its arrival at its minimum speed."""
     vid = "UAV3"
     m = team.members[vid]
     airborne(team, vid, m.takeoff_s)
@@ -490,9 +489,8 @@ def test_the_latest_a_vehicle_can_arrive_counts_loiter_turns_only_where_they_fit
     length_m = m.track.length_m
     s1, t1 = length_m - 2_700.0, t0 + 10.0
     team.handle(fix(team, vid, s1, t1, 20.0), t1)
-    keep = team._loiter_keep_seq(m)
+    keep = team._keep_seq(m, max(m.groundspeed_m_s, 10.0) * FlightConfig().min_lead_s)
     assert keep is not None
-    assert keep == team._keep_seq(m, max(m.groundspeed_m_s, 10.0) * team.loiter_lead_s)
     s_keep = m.mission.item_s_m[keep]
     assert s_keep is not None and length_m - s_keep < 2_000.0
     assert m.last_decision is not None
