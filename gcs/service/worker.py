@@ -190,6 +190,8 @@ class Worker:
         """States told so far: each numbered, so that an older one read late is not taken."""
         self._figures: tuple[int, dict[str, Any]] | None = None
         """The flight's figures and the last event they count (they change with events only)."""
+        self.nice = os.getpriority(os.PRIO_PROCESS, 0)
+        """Its scheduling priority (set, if asked, before the flight was given it)."""
         flight.on_over = lambda _: self.ended.set()
         flight.about_worker = self.about
 
@@ -198,7 +200,7 @@ class Worker:
         was held (ms of wall time)."""
         return {
             "pid": os.getpid(),
-            "nice": os.getpriority(os.PRIO_PROCESS, 0),
+            "nice": self.nice,
             "loop_stall_max_ms": round(self.watch.stall_max_s * 1e3, 3),
         }
 

@@ -17,6 +17,12 @@ from gcs.api.process import running_service
 TOKEN = "service-test-admin-token"
 
 
+def proc_stat(pid: int) -> list[str]:
+    """A process's fields in /proc/PID/stat after its name (the kernel's field 3 on: state,
+    ppid, ... nice is the 17th here)."""
+    return Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
+
+
 @dataclass
 class Service:
     url: str
@@ -27,14 +33,14 @@ class Service:
         """The pids of the flight workers it keeps loaded, waiting for a flight (its children
         run as ``gcs.service.worker --standby``)."""
         found = []
-        for stat in Path("/proc").glob("[0-9]*/stat"):
+        for proc in Path("/proc").glob("[0-9]*"):
             try:
-                ppid = int(stat.read_text().rsplit(")", 1)[1].split()[1])
-                argv = (stat.parent / "cmdline").read_bytes().split(b"\0")
+                ppid = int(proc_stat(int(proc.name))[1])
+                argv = (proc / "cmdline").read_bytes().split(b"\0")
             except (OSError, IndexError, ValueError):
                 continue  # gone meanwhile
             if ppid == self.proc.pid and b"--standby" in argv:
-                found.append(int(stat.parent.name))
+                found.append(int(proc.name))
         return found
 
     def client(self, token: str = TOKEN) -> httpx.AsyncClient:

@@ -31,7 +31,7 @@ from gcs.store.repository import Store
 from tests.flightstory import story
 from tests.gcs.conftest import hold_while_away
 from tests.paperbounds import team_time_move_max_s
-from tests.service.conftest import serve
+from tests.service.conftest import proc_stat, serve
 from tests.service.test_flights_http import (
     ARRIVAL_TOLERANCE_S,
     _all_events,
@@ -113,7 +113,7 @@ def _may_raise_priority() -> bool:
 
 def _nice_of(pid: int) -> int:
     """A process's ``nice``, read by the kernel's account (/proc/PID/stat, field 19)."""
-    return int(Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[16])
+    return int(proc_stat(pid)[16])
 
 
 @pytest.mark.parametrize("how", [signal.SIGKILL, signal.SIGSTOP], ids=["killed", "hung"])
