@@ -114,15 +114,28 @@ class MissionChanges:
     def _speed_now(self, m: Member) -> float:
         return float(m.level_m_s or self.scenario.vehicle(m.vehicle_id).cruise_m_s)
 
+    def _loiter_keep_seq(self, m: Member) -> int | None:
+        """The waypoint to splice loiter turns after: the first the loiter lead allows, or,
+        with nothing that far ahead (a short route, a long lead on a fast rehearsal) or no
+        room for turns after it, the nearest the shortest lead allows and with room after
+        it, as :meth:`latest_arrival_s` looks when it lets the team time move later."""
+        gs = max(m.groundspeed_m_s, 10.0)
+        far = self._keep_seq(m, gs * self.loiter_lead_s)
+        if self.loiter_lead_s <= self.config.min_lead_s:
+            return far
+        near = self._keep_seq(m, gs * self.config.min_lead_s)
+        if far is None or near is None or near == far:
+            return near if far is None else far
+        s_far = m.mission.item_s_m[far] or 0.0
+        if self._can_loiter_after(m, s_far):
+            return far
+        return near if self._can_loiter_after(m, m.mission.item_s_m[near] or 0.0) else far
+
     def _loiter(
         self, m: Member, d: Decision, t: float, s: float, wind: Wind, out: list[act.Action]
     ) -> None:
         gs = max(m.groundspeed_m_s, 10.0)
-        keep = self._keep_seq(m, gs * self.loiter_lead_s)
-        if keep is None and self.loiter_lead_s > self.config.min_lead_s:
-            # Nothing that far ahead (a short route, or a long lead on a fast rehearsal):
-            # the nearest waypoint the shortest lead allows, rather than no turns at all.
-            keep = self._keep_seq(m, gs * self.config.min_lead_s)
+        keep = self._loiter_keep_seq(m)
         if keep is None:
             out.append(
                 act.Report(

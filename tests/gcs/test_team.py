@@ -1332,6 +1332,42 @@ def test_loiter_turns_splice_at_the_loiter_lead_not_the_team_re_plan_lead(
     assert s0 + gs * 90.0 <= job.s_m <= s0 + gs * 90.0 + spacing + 1.0
 
 
+def test_loiter_turns_splice_nearer_where_the_loiter_lead_leaves_no_room_for_them(
+    team: TeamController,
+) -> None:
+    """The waypoint the loiter lead ahead has too little path after it for turns; the one
+    the shortest lead ahead has room (as the team-time check found when it let the team
+    time move later): the turns are spliced after that one, not given up."""
+    vid = "UAV3"
+    m = team.members[vid]
+    airborne(team, vid, m.takeoff_s)
+    length_m = m.track.length_m
+    gs = 20.0
+    # 90 s before the last waypoint but one: that one is the shortest lead (60 s) ahead, the
+    # last (4.4 km on, with 1.3 km after it) the loiter lead (120 s) ahead.
+    ahead = sorted({s for s in m.mission.item_s_m if s is not None and s < length_m})
+    s0 = ahead[-2] - gs * 90.0
+    t0 = m.takeoff_s + 300.0
+    team.handle(act.PlanningLead(3_000.0, 120.0), 0.0)
+    keep = {}
+    for lead_s in (FlightConfig().min_lead_s, 120.0):
+        k = team._keep_seq(replace(m, s_m=s0, groundspeed_m_s=gs), gs * lead_s)
+        assert k is not None
+        keep[lead_s] = k
+    near, far = keep[FlightConfig().min_lead_s], keep[120.0]
+    s_near, s_far = m.mission.item_s_m[near], m.mission.item_s_m[far]
+    assert s_near is not None and s_far is not None and s_near < s_far
+    assert not team._can_loiter_after(m, s_far)
+    assert team._can_loiter_after(m, s_near)
+    m.target_s += 900.0
+    out = team.handle(fix(team, vid, s0, t0, gs), t0)
+    (job,) = [a.job for a in of(out, act.Compute)]
+    assert isinstance(job, act.LoiterJob)
+    assert job.keep_seq == near
+    vs, _ = job.run()
+    assert any(lo.s_m >= s_near for lo in vs.loiters)
+
+
 def test_a_vehicle_in_its_loiter_turns_is_timed_and_a_late_one_leaves_them_and_moves_the_team_time(
     team: TeamController,
 ) -> None:
