@@ -477,6 +477,3 @@ def main(argv: Sequence[str] | None = None) -> int:
         log.warning("flight worker %s", refused)
     return asyncio.run(_main(folder, db_url, resume))
 
-
-if __name__ == "__main__":
-    sys.exit(main())
