@@ -476,4 +476,3 @@ def main(argv: Sequence[str] | None = None) -> int:
     if refused is not None:
         log.warning("flight worker %s", refused)
     return asyncio.run(_main(folder, db_url, resume))
-
