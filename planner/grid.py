@@ -12,12 +12,15 @@ import math
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from functools import cached_property
+from typing import TYPE_CHECKING
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy import sparse
 
 from planner.threats import ThreatZone, exposure, forbidden_mask
+
+if TYPE_CHECKING:
+    from scipy import sparse
 
 FloatArray = NDArray[np.float64]
 IntArray = NDArray[np.int64]
@@ -129,6 +132,8 @@ class CostMap:
         dst = self.neighbors.ravel()
         w = self.edge_cost.ravel()
         ok = np.isfinite(w)
+        from scipy import sparse  # a sixth of a second: only where routes are searched
+
         return sparse.csr_array((w[ok], (src[ok], dst[ok])), shape=(n, n))
 
     def path_cost(self, nodes: Sequence[int] | IntArray) -> float:

@@ -13,7 +13,6 @@ from dataclasses import dataclass, field
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy.sparse import csgraph
 
 from planner.coupling import TimingLimits
 from planner.grid import CostMap
@@ -98,6 +97,8 @@ def goal_fields(cost_map: CostMap, goal_nodes: Sequence[int]) -> list[tuple[Floa
     The graph is symmetric, so Dijkstra from the goal gives every node's cost to reach it; one
     call searches from every goal (each search is its own, as if alone).
     """
+    from scipy.sparse import csgraph  # a sixth of a second: only where routes are searched
+
     dist, pred = csgraph.dijkstra(
         cost_map.graph(), directed=True, indices=list(goal_nodes), return_predecessors=True
     )

@@ -20,7 +20,7 @@ from gcs.service.processjobs import ProcessJobs, Progress
 
 __all__ = ["FlightJobs", "start_server"]
 
-PRELOAD = ("gcs.service.flightjobs",)
+PRELOAD = ("gcs.service.flightjobs", "scipy.sparse.csgraph")
 """Imported once by the jobs' fork server (the planner with it)."""
 RUNNING = 2
 """Jobs of one flight that run at once (a loiter job beside a re-plan)."""

@@ -30,7 +30,7 @@ __all__ = [
     "plan_schedule",
 ]
 
-PRELOAD = ("gcs.service.planjobs",)
+PRELOAD = ("gcs.service.planjobs", "scipy.sparse.csgraph")
 """Imported once by the job processes' fork server (every job starts with them loaded)."""
 
 Planned = tuple[str, bytes] | tuple[str, str, float | None, str | None] | tuple[str, str]
