@@ -22,7 +22,7 @@ from gcs.errors import GcsError
 from gcs.rehearsal.figures import FIGURES, plot_paths, plot_speeds, plot_timeline
 from gcs.rehearsal.flightrecord import Flight, flight_world, parse_flight
 
-__all__ = ["arrival_table", "write_report"]
+__all__ = ["arrival_table", "write_figure", "write_report"]
 
 
 # --- tables -----------------------------------------------------------------------------------
@@ -251,10 +251,15 @@ def _write_text(path: Path, text: str) -> None:
 
 
 def write_report(
-    flight: Mapping[str, Any], out_dir: Path, *, scenario_path: Path | None = None
+    flight: Mapping[str, Any],
+    out_dir: Path,
+    *,
+    scenario_path: Path | None = None,
+    figures: bool = True,
 ) -> list[Path]:
     """Write paths.png, speeds.png, timeline.png, arrivals.md and index.html into ``out_dir``
-    and return the paths written.
+    and return the paths written (without ``figures``, the two pages only: each figure then
+    drawn when it is first asked for, :func:`write_figure`).
 
     The scenario is ``scenario_path`` when given, else the one the record carries
     (``scenario``, with the threats the operator added: ``operator_threats``), else, for a
@@ -267,16 +272,47 @@ def write_report(
     out_dir = Path(out_dir)
     scenario, world = flight_world(flight, out_dir, scenario_path)
     title = scenario.name
-    try:
-        out_dir.mkdir(parents=True, exist_ok=True)
-    except OSError as err:
-        raise GcsError(f"{out_dir}: cannot create the report folder ({err.strerror})") from None
-    paths_png, speeds_png, timeline_png = (out_dir / name for name in FIGURES)
-    plot_paths(parsed, world, title, paths_png)
-    plot_speeds(parsed, title, speeds_png)
-    plot_timeline(parsed, title, timeline_png)
+    _make_folder(out_dir)
+    written = []
+    if figures:
+        paths_png, speeds_png, timeline_png = (out_dir / name for name in FIGURES)
+        plot_paths(parsed, world, title, paths_png)
+        plot_speeds(parsed, title, speeds_png)
+        plot_timeline(parsed, title, timeline_png)
+        written = [paths_png, speeds_png, timeline_png]
     md = out_dir / "arrivals.md"
     _write_text(md, _markdown(parsed, f"{title}: rehearsal report"))
     index = out_dir / "index.html"
     _write_text(index, _html(parsed, f"{title}: rehearsal report"))
-    return [paths_png, speeds_png, timeline_png, md, index]
+    return [*written, md, index]
+
+
+def write_figure(
+    flight: Mapping[str, Any], out_dir: Path, name: str, *, scenario_path: Path | None = None
+) -> Path:
+    """Draw one figure of the report (``name`` one of :data:`FIGURES`) into ``out_dir``, as
+    :func:`write_report` would, and return its path."""
+    if name not in FIGURES:
+        raise GcsError(f"no report figure {name!r} (one of {', '.join(FIGURES)})")
+    parsed = parse_flight(flight)
+    out_dir = Path(out_dir)
+    scenario, world = flight_world(flight, out_dir, scenario_path)
+    _make_folder(out_dir)
+    out = out_dir / name
+    # Drawn beside and moved in whole: a reader never gets half a file.
+    part = out.with_name(f".part.{name}")
+    if name == "paths.png":
+        plot_paths(parsed, world, scenario.name, part)
+    elif name == "speeds.png":
+        plot_speeds(parsed, scenario.name, part)
+    else:
+        plot_timeline(parsed, scenario.name, part)
+    part.replace(out)
+    return out
+
+
+def _make_folder(out_dir: Path) -> None:
+    try:
+        out_dir.mkdir(parents=True, exist_ok=True)
+    except OSError as err:
+        raise GcsError(f"{out_dir}: cannot create the report folder ({err.strerror})") from None

@@ -27,6 +27,8 @@ from gcs.coordination.events import FlightEvent
 from gcs.coordination.runner import ENDED, FlightState
 from gcs.errors import GcsError
 from gcs.mavlink.signing import SigningConfig
+from gcs.rehearsal.figures import FIGURES
+from gcs.rehearsal.report import write_figure
 from gcs.service.ended import FINAL_FILE, EndedFlight, EndedFlights, keep_final
 from gcs.service.fleet import Fleet, FleetVehicle, VehicleBusy
 from gcs.service.flight import Rehearsal, stop_kept_simulator
@@ -103,6 +105,7 @@ class Engine:
         self.planning = Planning(store, self.limits, self.config.method, plan_ray)
         """Scenarios, planning jobs and planned schedules."""
         self.ended = EndedFlights(data_dir / "flights")
+        self._drawing: dict[tuple[str, str], asyncio.Lock] = {}
         """Flights that ended before this process started (read from their folders)."""
         self.fleet = Fleet()
         self.flights: dict[str, WorkerFlight] = {}
@@ -391,6 +394,24 @@ class Engine:
         if folder is None or not folder.is_dir():
             raise NotFound(f"flight {flight_id} has no report yet")
         return folder
+
+    async def report_file(self, flight_id: str, name: str) -> Path:
+        """A file of the flight's report: a figure is drawn from the record the first time
+        it is asked for (a second or so; the flight's worker leaves only the pages)."""
+        folder = self.report_dir(flight_id)
+        path = folder / name
+        if "/" in name or name.startswith("."):
+            raise NotFound(f"no report file {name!r}")
+        if name not in FIGURES or path.is_file():
+            if not path.is_file():
+                raise NotFound(f"no report file {name!r}")
+            return path
+        lock = self._drawing.setdefault((flight_id, name), asyncio.Lock())
+        async with lock:
+            if not path.is_file():
+                record = await self.record(flight_id)
+                await asyncio.to_thread(write_figure, record, folder, name)
+        return path
 
     # -- steering (commands to the flight's worker) ---------------------------------------------
 

@@ -612,7 +612,8 @@ class Flight:
 
         self.record = await asyncio.to_thread(record_file)
         report = folder / "report"
-        await asyncio.to_thread(write_report, self.record, report)
+        # The pages now; each figure drawn by the service when it is first asked for.
+        await asyncio.to_thread(write_report, self.record, report, figures=False)
         self.report_dir = report
 
     async def _stop_simulator(self) -> None:

@@ -21,6 +21,7 @@ import pytest
 import yaml
 
 from gcs.api.demo import sse_messages
+from gcs.rehearsal.figures import FIGURES
 from tests import oracle
 from tests.flightstory import story
 from tests.gcs.conftest import PAPER
@@ -364,6 +365,22 @@ async def test_an_aborted_vehicle_goes_home_over_http_and_the_others_arrive_on_t
             await asyncio.sleep(0.2)
         record = _ok(r)
         events = await _all_events(client, fid)
+        # The report: its pages left by the worker, each figure drawn when first asked for.
+        folder = service.data_dir / "flights" / fid / "report"
+        assert sorted(p.name for p in folder.iterdir()) == ["arrivals.md", "index.html"]
+        index = (await client.get(f"/v1/flights/{fid}/report/index.html")).text
+        drawn = await asyncio.gather(
+            *(client.get(f"/v1/flights/{fid}/report/{n}") for n in FIGURES for _ in range(2))
+        )
+        for n, got in zip([n for n in FIGURES for _ in range(2)], drawn, strict=True):
+            assert f'src="{n}"' in index
+            assert got.status_code == 200 and got.content.startswith(b"\x89PNG"), (n, got)
+            assert got.content == (folder / n).read_bytes()
+        assert sorted(p.name for p in folder.iterdir()) == sorted(
+            ["arrivals.md", "index.html", *FIGURES]
+        )
+        for bad in ("nope.png", ".part.paths.png", "..%2Fflight.json"):
+            assert (await client.get(f"/v1/flights/{fid}/report/{bad}")).status_code == 404
     by_id = {v["id"]: v for v in record["vehicles"]}
     assert by_id["UAV1"]["state"] == "aborted"
     # The others on their slots, judged from the truth log: the abort leaves the team time

@@ -173,10 +173,7 @@ async def record(flight_id: str, request: Request) -> dict[str, Any]:
 @router.get("/flights/{flight_id}/report/{name}", dependencies=observe)
 async def report_file(flight_id: str, name: str, request: Request) -> FileResponse:
     """A file of the flight's report (index.html, arrivals.md, paths.png, ...)."""
-    path = engine_of(request).report_dir(flight_id) / name
-    if "/" in name or name.startswith(".") or not path.is_file():
-        raise NotFound(f"no report file {name!r}")
-    return FileResponse(path)
+    return FileResponse(await engine_of(request).report_file(flight_id, name))
 
 
 # -- the stream ---------------------------------------------------------------------------------
