@@ -8,28 +8,63 @@ from __future__ import annotations
 import asyncio
 import json
 import re
+from collections.abc import AsyncIterator, Iterator
 from pathlib import Path
 from typing import Any
 
 import httpx
 import pytest
+import pytest_asyncio
 import yaml
 from fastapi import FastAPI
 from sqlalchemy import func, select
 
+from gcs.api.app import create_app
 from gcs.service.engine import Engine
 from gcs.store.models import Base
 from sitl_stub.lockstep import Lockstep
-from tests.api.conftest import PAPER, app_with, auth, problem, running
+from tests.api.conftest import PAPER, app_with, auth, problem, running, settings_for
+from tests.gcs.conftest import postgres_schema
 
 YAML = {**auth("plan"), "Content-Type": "application/yaml"}
 JSON = {**auth("plan"), "Content-Type": "application/json"}
 
 
-@pytest.fixture
-def db_url(store_url: str) -> str:
-    """Every test here on SQLite and on PostgreSQL."""
-    return store_url
+pytestmark = pytest.mark.asyncio(loop_scope="module")
+"""The tests run in the module's loop, where its one app per store (:func:`app`) runs."""
+
+
+@pytest.fixture(scope="module", params=["sqlite", "postgresql"])
+def shared_url(
+    request: pytest.FixtureRequest, tmp_path_factory: pytest.TempPathFactory
+) -> Iterator[str]:
+    """The module's store: a SQLite file, and a PostgreSQL schema of its own."""
+    if request.param == "sqlite":
+        yield f"sqlite:///{tmp_path_factory.mktemp('bad-input') / 'tcgcs.db'}"
+    else:
+        yield from postgres_schema()
+
+
+@pytest.fixture(scope="module")
+def app(shared_url: str, tmp_path_factory: pytest.TempPathFactory) -> FastAPI:
+    """One app per store for the module's refusals (each checks that it changed nothing,
+    so they need no store of their own), its routes and store set up once, not per check.
+    The tests that count what the service holds take a :func:`fresh` one."""
+    return create_app(settings_for(tmp_path_factory.mktemp("bad-input") / "data", shared_url))
+
+
+@pytest_asyncio.fixture(scope="module", loop_scope="module")
+async def client(app: FastAPI) -> AsyncIterator[httpx.AsyncClient]:
+    async for c in running(app):
+        yield c
+
+
+@pytest_asyncio.fixture(loop_scope="module")
+async def fresh(store_url: str, tmp_path: Path) -> AsyncIterator[tuple[httpx.AsyncClient, FastAPI]]:
+    """An app of its own on SQLite and on PostgreSQL, and its client."""
+    app = create_app(settings_for(tmp_path / "data", store_url))
+    async for c in running(app):
+        yield c, app
 
 
 def _paper_with(path: str, value: Any) -> dict[str, Any]:
@@ -320,7 +355,10 @@ async def test_refused_posts_store_nothing(client: httpx.AsyncClient, app: FastA
 # -- Idempotency-Key --------------------------------------------------------------------------
 
 
-async def test_retried_schedule_is_one_job(client: httpx.AsyncClient, app: FastAPI) -> None:
+async def test_retried_schedule_is_one_job(
+    fresh: tuple[httpx.AsyncClient, FastAPI],
+) -> None:
+    client, app = fresh
     scenario_id = await _keep_paper(client)
     engine: Engine = app.state.engine
     body = {"scenario_id": scenario_id, "dry_run": True}
@@ -345,7 +383,10 @@ async def test_retried_schedule_is_one_job(client: httpx.AsyncClient, app: FastA
     assert len(engine.planning.jobs) == 2
 
 
-async def test_retries_at_once_are_one_job(client: httpx.AsyncClient, app: FastAPI) -> None:
+async def test_retries_at_once_are_one_job(
+    fresh: tuple[httpx.AsyncClient, FastAPI],
+) -> None:
+    client, app = fresh
     scenario_id = await _keep_paper(client)
     headers = {**JSON, "Idempotency-Key": "together"}
     body = {"scenario_id": scenario_id, "dry_run": True}
@@ -357,8 +398,9 @@ async def test_retries_at_once_are_one_job(client: httpx.AsyncClient, app: FastA
 
 
 async def test_retried_scenario_and_refusal_replayed(
-    client: httpx.AsyncClient, app: FastAPI
+    fresh: tuple[httpx.AsyncClient, FastAPI],
 ) -> None:
+    client, app = fresh
     text = PAPER.read_bytes()
     headers = {**YAML, "Idempotency-Key": "scenario-1"}
     first = await client.post("/v1/scenarios", content=text, headers=headers)
@@ -407,9 +449,12 @@ async def _flight_row(client: httpx.AsyncClient, app: FastAPI, flight_id: str) -
     return tuple(row)
 
 
-async def test_stale_if_match_is_412(client: httpx.AsyncClient, app: FastAPI) -> None:
+async def test_stale_if_match_is_412(
+    fresh: tuple[httpx.AsyncClient, FastAPI],
+) -> None:
     """A flight of the paper schedule on bundled simulator vehicles (planned, not launched):
     a move with the version read is taken, one with a stale version is refused."""
+    client, app = fresh
     schedule = await _planned(client, await _keep_paper(client))
     r = await client.post(
         "/v1/flights",
