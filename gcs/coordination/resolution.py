@@ -86,17 +86,17 @@ class Ahead:
         held = max(until_s - self.t_s, response_s)
         gs = self.groundspeed_m_s
         new_gs = max(gs + (airspeed_m_s - self.airspeed_m_s) * self.tas_per_eas, 0.0)
+        # np.clip as maximum then minimum (the same values, without np.clip's Python wrapper:
+        # this runs at every forecast).
         s = (
             self.s_m
             + gs * (np.minimum(dt, response_s) + np.maximum(dt - held, 0.0))
-            + new_gs * np.clip(dt - response_s, 0.0, held - response_s)
+            + new_gs * np.minimum(np.maximum(dt - response_s, 0.0), held - response_s)
         )
-        s = np.clip(s, self.route_s_m[0], self.route_s_m[-1])
-        out = np.stack(
-            [np.interp(s, self.route_s_m, self.route_east_m),
-             np.interp(s, self.route_s_m, self.route_north_m)],
-            axis=-1,
-        )  # fmt: skip
+        s = np.minimum(np.maximum(s, self.route_s_m[0]), self.route_s_m[-1])
+        out = np.empty((*s.shape, 2))
+        out[..., 0] = np.interp(s, self.route_s_m, self.route_east_m)
+        out[..., 1] = np.interp(s, self.route_s_m, self.route_north_m)
         out[dt > self.horizon_s] = np.nan
         return out
 
@@ -326,10 +326,12 @@ class Forecasts:
         shift = np.rint(self._start_s[me] - self._start_s[rows]).astype(np.int64)
         mine = self._positions[me]
         least2 = np.full(len(rows), np.inf)
-        for sh in np.unique(shift):
+        shifts = set(shift.tolist())  # np.unique's values (the order does not matter)
+        for sh in shifts:
             if abs(sh) >= k:
                 continue
-            sel = shift == sh
+            # One shift (the usual case): every row, with no mask to build and apply.
+            sel: slice | NDArray[np.bool_] = slice(None) if len(shifts) == 1 else shift == sh
             theirs = (
                 self._positions[rows[sel], sh:] if sh >= 0 else self._positions[rows[sel], : k + sh]
             )
