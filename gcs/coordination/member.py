@@ -7,6 +7,7 @@ team clock's). :class:`VehicleState` is what an operator is shown.
 
 from __future__ import annotations
 
+import bisect
 import enum
 import math
 from dataclasses import dataclass, field
@@ -183,6 +184,10 @@ class Member:
     for its slot meanwhile."""
     next_resolve_s: float = -math.inf
     """When its pairs are next predicted for resolution."""
+    _loiter_seqs: tuple[PathMission, tuple[int, ...]] | None = field(
+        default=None, init=False, repr=False, compare=False
+    )
+    """``(mission, seqs)``: the seqs of that mission's loiter items (:meth:`loiter_seqs`)."""
 
     def tas_per_eas(self, s_m: float) -> float:
         """True airspeed flown per unit commanded from ``s_m`` on: the route's atmosphere
@@ -213,13 +218,22 @@ class Member:
         items = self.mission.items
         return items[min(seq, len(items) - 1)].command == MAV_CMD_NAV_LOITER_TURNS
 
+    def loiter_seqs(self) -> tuple[int, ...]:
+        """The seqs of its mission's loiter items, in order: read once per mission installed
+        (it is asked at every fix)."""
+        cached = self._loiter_seqs
+        if cached is None or cached[0] is not self.mission:
+            seqs = tuple(
+                k
+                for k, it in enumerate(self.mission.items)
+                if it.command == MAV_CMD_NAV_LOITER_TURNS
+            )
+            cached = self._loiter_seqs = (self.mission, seqs)
+        return cached[1]
+
     def loiters_done(self) -> int:
-        seq = self.last_seq or 0
-        return sum(
-            1
-            for k, it in enumerate(self.mission.items)
-            if it.command == MAV_CMD_NAV_LOITER_TURNS and k < seq
-        )
+        """Its mission's loiter items before the item it flies to."""
+        return bisect.bisect_left(self.loiter_seqs(), self.last_seq or 0)
 
     def loiter_turns_left(self) -> float:
         """Loiter turns still ahead in its mission."""
