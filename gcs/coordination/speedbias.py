@@ -108,8 +108,17 @@ class SpeedBiasEstimator:
         airspeed, same kind) and ``climb_m_s`` gate the fix when given.
         """
         cfg = self.config
-        values = (t_s, ve_m_s, vn_m_s, heading_rad, predicted_tas_m_s)
-        if not all(math.isfinite(x) for x in values) or predicted_tas_m_s <= 0.0:
+        finite = math.isfinite
+        if (
+            not (
+                finite(t_s)
+                and finite(ve_m_s)
+                and finite(vn_m_s)
+                and finite(heading_rad)
+                and finite(predicted_tas_m_s)
+            )
+            or predicted_tas_m_s <= 0.0
+        ):
             self.skipped += 1
             return False
         if (
