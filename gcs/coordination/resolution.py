@@ -86,14 +86,20 @@ class Ahead:
         held = max(until_s - self.t_s, response_s)
         gs = self.groundspeed_m_s
         new_gs = max(gs + (airspeed_m_s - self.airspeed_m_s) * self.tas_per_eas, 0.0)
-        # np.clip as maximum then minimum (the same values, without np.clip's Python wrapper:
-        # this runs at every forecast).
-        s = (
-            self.s_m
-            + gs * (np.minimum(dt, response_s) + np.maximum(dt - held, 0.0))
-            + new_gs * np.minimum(np.maximum(dt - response_s, 0.0), held - response_s)
-        )
-        s = np.minimum(np.maximum(s, self.route_s_m[0]), self.route_s_m[-1])
+        # s_m + gs (min(dt, response) + max(dt - held, 0)) + new_gs clip(dt - response, 0,
+        # held - response), clipped to the route: the same operations on the same values,
+        # done in place, and np.clip as maximum then minimum (its values, without its
+        # Python wrapper): this runs at every forecast.
+        s = np.minimum(dt, response_s)
+        part = dt - held
+        s += np.maximum(part, 0.0, out=part)
+        s *= gs
+        s += self.s_m
+        np.subtract(dt, response_s, out=part)
+        np.minimum(np.maximum(part, 0.0, out=part), held - response_s, out=part)
+        part *= new_gs
+        s += part
+        np.minimum(np.maximum(s, self.route_s_m[0], out=s), self.route_s_m[-1], out=s)
         out = np.empty((*s.shape, 2))
         out[..., 0] = np.interp(s, self.route_s_m, self.route_east_m)
         out[..., 1] = np.interp(s, self.route_s_m, self.route_north_m)
@@ -338,8 +344,12 @@ class Forecasts:
             ours = mine[: k - sh] if sh >= 0 else mine[-sh:]
             de = theirs[:, :, 0] - ours[:, 0]
             dn = theirs[:, :, 1] - ours[:, 1]
-            d2 = de * de + dn * dn
-            least2[sel] = np.where(np.isnan(d2), np.inf, d2).min(axis=1)
+            de *= de
+            dn *= dn
+            de += dn
+            # The least over the seconds both forecast (fmin skips NaN: not forecast), inf
+            # where there is none: NaN replaced by inf, then the minimum, in two passes.
+            least2[sel] = np.fmin(np.fmin.reduce(de, axis=1), np.inf)
         dz = self._alt_m[rows] - self._alt_m[me] if heights else np.zeros(len(rows))
         least = np.sqrt(least2 + dz * dz)
         close = np.flatnonzero(least < separation_m)
