@@ -324,7 +324,7 @@ class Forecasts:
         k = self.steps
         live = now_s - self._fix_s <= self.stale_s
         live[me] = False
-        rows = np.flatnonzero(live)
+        rows = live.nonzero()[0]  # np.flatnonzero's, without its wrappers
         if not rows.size:
             return []
         # Their forecast's second that is my forecast's first (theirs started earlier): a
@@ -352,5 +352,5 @@ class Forecasts:
             least2[sel] = np.fmin(np.fmin.reduce(de, axis=1), np.inf)
         dz = self._alt_m[rows] - self._alt_m[me] if heights else np.zeros(len(rows))
         least = np.sqrt(least2 + dz * dz)
-        close = np.flatnonzero(least < separation_m)
-        return [self._ids[rows[i]] for i in close[np.argsort(least[close])]]
+        close = (least < separation_m).nonzero()[0]
+        return [self._ids[rows[i]] for i in close[least[close].argsort()]]
