@@ -131,11 +131,36 @@ def _closest(
     return float(d[k]), float(t[k]), pa[k], pb[k]
 
 
+_PAIR_CACHE_SIZE = 8192
+_pair_cache: dict[
+    tuple[int, int, str, str], tuple[VehicleSchedule, VehicleSchedule, PairSeparation]
+] = {}
+"""Pairs searched, keyed by the two schedules' identities and the exact step and start (each
+entry keeps its schedules alive, so an identity is not reused while it is cached)."""
+
+
 def pair_separation(
     a: VehicleSchedule, b: VehicleSchedule, *, step_s: float, from_s: float = -math.inf
 ) -> PairSeparation:
     """Closest approach of two scheduled vehicles while both fly (inf if never together),
-    from ``from_s`` on (a re-plan's start: what was flown before is not its to change)."""
+    from ``from_s`` on (a re-plan's start: what was flown before is not its to change).
+
+    A pair searched already is not searched again: the team's separation is asked for again
+    after a few of its vehicles moved (and schedules are not changed once made)."""
+    key = (id(a), id(b), float(step_s).hex(), float(from_s).hex())
+    hit = _pair_cache.get(key)
+    if hit is not None and hit[0] is a and hit[1] is b:
+        return hit[2]
+    found = _pair_separation(a, b, step_s, from_s)
+    if len(_pair_cache) >= _PAIR_CACHE_SIZE:
+        _pair_cache.clear()
+    _pair_cache[key] = (a, b, found)
+    return found
+
+
+def _pair_separation(
+    a: VehicleSchedule, b: VehicleSchedule, step_s: float, from_s: float
+) -> PairSeparation:
     t0 = max(a.takeoff_s, b.takeoff_s, from_s)
     t1 = min(a.arrival_s, b.arrival_s)
     if not t1 > t0:
@@ -181,6 +206,10 @@ BOX_SAMPLES = 32
 hundred-vehicle team's grid, about 27 s: 800 m at 30 m/s)."""
 
 
+RECENT_TRACKS = 4
+"""Tracks :class:`TeamSamples` keeps of the schedules it sampled last."""
+
+
 class TeamSamples:
     """The team's schedules sampled once on a common time grid, for trying one vehicle's
     other timings against the rest (:meth:`nearest`) without sampling them again."""
@@ -203,6 +232,8 @@ class TeamSamples:
         )
         """East, north and altitude, each (vehicle, time), m."""
         self._row = {vid: k for k, vid in enumerate(self.ids)}
+        self._recent: list[tuple[VehicleSchedule, FloatArray]] = []
+        """The tracks :meth:`track` sampled last, newest first (each with its schedule)."""
         self._starts = np.arange(0, len(self.t_s), BOX_SAMPLES)
         self.boxes = np.stack([self._boxes(self.planes[:, k]) for k in range(len(self.ids))], 1)
         """Each vehicle's horizontal extent over each block of :data:`BOX_SAMPLES` samples:
@@ -222,8 +253,17 @@ class TeamSamples:
 
     def track(self, vs: VehicleSchedule) -> FloatArray:
         """``vs`` sampled on the team's grid (east, north and altitude rows; NaN where it does
-        not fly): a timing to be tried more than once is sampled once."""
-        return np.ascontiguousarray(_positions(vs, self.t_s).T)
+        not fly): a timing to be tried more than once is sampled once.
+
+        The last few schedules asked for are kept (by identity, read-only): a timing is
+        usually tried against one vehicle, then the team, then taken, each asking again."""
+        for kept, track in self._recent:
+            if kept is vs:
+                return track
+        track = np.ascontiguousarray(_positions(vs, self.t_s).T)
+        track.flags.writeable = False
+        self._recent = [(vs, track), *self._recent[: RECENT_TRACKS - 1]]
+        return track
 
     def nearest(
         self,
