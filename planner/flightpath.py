@@ -273,31 +273,34 @@ class FlightPath:
         """
         s = np.asarray(s_m, dtype=np.float64).reshape(-1)
         tolerance_m = _S_REL_TOL * max(1.0, self._length_m)
-        outside = ~((s >= -tolerance_m) & (s <= self._length_m + tolerance_m))
-        if outside.any():
+        # min and max are NaN when any distance is: such an array is refused too.
+        if s.size and not (s.min() >= -tolerance_m and s.max() <= self._length_m + tolerance_m):
+            outside = ~((s >= -tolerance_m) & (s <= self._length_m + tolerance_m))
             bad = float(s[np.flatnonzero(outside)[0]])
             raise GeometryError(f"s_m must be in [0, {self._length_m}] m, got {bad!r}")
         s = np.minimum(np.maximum(s, 0.0), self._length_m)
-        starts_m = np.asarray(self._starts_m, dtype=np.float64)
-        index = np.maximum(np.searchsorted(starts_m, s, side="right") - 1, 0)
-        table = np.array(
-            [
-                (
-                    seg.start.east_m,
-                    seg.start.north_m,
-                    seg.start.heading_rad,
-                    seg.length_m,
-                    TURN_SIGN[seg.turn],
-                    seg.radius_m,
+        table = _segment_table(self)
+        index = np.maximum(np.searchsorted(table.starts_m, s, side="right") - 1, 0)
+        along_m = np.minimum(np.maximum(s - table.starts_m[index], 0.0), table.length_m[index])
+        # Every row as on a straight (its segment's sine and cosine looked up, not computed
+        # again per row), then the rows on arcs, if any, as :func:`_advance_arcs` has them.
+        out = np.empty((s.size, 3), dtype=np.float64)
+        out[:, 0] = table.east_m[index] + along_m * table.sin_heading[index]
+        out[:, 1] = table.north_m[index] + along_m * table.cos_heading[index]
+        out[:, 2] = table.heading_rad[index]
+        if table.has_arcs:
+            arc = np.flatnonzero(table.sign[index] != 0.0)
+            if arc.size:
+                on = index[arc]
+                out[arc] = _advance_arcs(
+                    table.east_m[on],
+                    table.north_m[on],
+                    table.heading_rad[on],
+                    table.sign[on],
+                    along_m[arc],
+                    table.radius_m[on],
                 )
-                for seg in self.segments
-            ],
-            dtype=np.float64,
-        )[index]
-        along_m = np.minimum(np.maximum(s - starts_m[index], 0.0), table[:, 3])
-        return _advance_each(
-            table[:, 0], table[:, 1], table[:, 2], table[:, 4], along_m, table[:, 5]
-        )
+        return out
 
     def remaining_m(self, s_m: float) -> float:
         """Return the distance left to fly from ``s_m`` to the end, m.
@@ -481,7 +484,7 @@ def _segment_box_m(segment: Segment) -> tuple[float, float, float, float]:
     )
 
 
-def _advance_each(
+def _advance_arcs(
     east_m: NDArray[np.float64],
     north_m: NDArray[np.float64],
     heading_rad: NDArray[np.float64],
@@ -489,25 +492,84 @@ def _advance_each(
     s_m: NDArray[np.float64],
     radius_m: NDArray[np.float64],
 ) -> NDArray[np.float64]:
-    """Element-wise ``_advance`` (each row its own start, kind and distance); (N, 3) poses.
+    """Element-wise ``_advance`` along arcs (each row its own start, turn and distance);
+    (N, 3) poses.
 
     The operations are those of the scalar version in the same order, so the two agree
     exactly; numpy's float64 sin and cos round as the C library's do.
     """
     out = np.empty((s_m.size, 3), dtype=np.float64)
-    line = sign == 0.0
-    out[line, 0] = east_m[line] + s_m[line] * np.sin(heading_rad[line])
-    out[line, 1] = north_m[line] + s_m[line] * np.cos(heading_rad[line])
-    out[line, 2] = heading_rad[line]
-    arc = ~line
-    half_turn_rad = 0.5 * s_m[arc] / radius_m[arc]
-    chord_m = 2.0 * radius_m[arc] * np.sin(half_turn_rad)
-    chord_heading_rad = heading_rad[arc] + sign[arc] * half_turn_rad
-    out[arc, 0] = east_m[arc] + chord_m * np.sin(chord_heading_rad)
-    out[arc, 1] = north_m[arc] + chord_m * np.cos(chord_heading_rad)
-    heading = np.mod(heading_rad[arc] + 2.0 * sign[arc] * half_turn_rad, TAU)
-    out[arc, 2] = np.where(heading >= TAU, 0.0, heading)
+    half_turn_rad = 0.5 * s_m / radius_m
+    chord_m = 2.0 * radius_m * np.sin(half_turn_rad)
+    chord_heading_rad = heading_rad + sign * half_turn_rad
+    out[:, 0] = east_m + chord_m * np.sin(chord_heading_rad)
+    out[:, 1] = north_m + chord_m * np.cos(chord_heading_rad)
+    heading = np.mod(heading_rad + 2.0 * sign * half_turn_rad, TAU)
+    out[:, 2] = np.where(heading >= TAU, 0.0, heading)
     return out
+
+
+@dataclass(frozen=True, slots=True)
+class _SegmentTable:
+    """A path's segments as arrays, for :meth:`FlightPath.poses_at`."""
+
+    starts_m: NDArray[np.float64]
+    length_m: NDArray[np.float64]
+    east_m: NDArray[np.float64]
+    north_m: NDArray[np.float64]
+    heading_rad: NDArray[np.float64]
+    sin_heading: NDArray[np.float64]
+    """``sin(heading_rad)``: a straight's ``_advance`` factors (the same bits as per row)."""
+    cos_heading: NDArray[np.float64]
+    sign: NDArray[np.float64]
+    radius_m: NDArray[np.float64]
+    has_arcs: bool
+
+
+_TABLE_CACHE_SIZE = 4096
+_table_cache: dict[int, tuple[FlightPath, _SegmentTable]] = {}
+"""Keyed by the path's identity (each entry keeps its path alive, so the identity is not
+reused while it is cached; paths are immutable)."""
+
+
+def _segment_table(path: FlightPath) -> _SegmentTable:
+    """``path``'s :class:`_SegmentTable`, built once per path: the same path is sampled
+    over and over when a team's timings are compared."""
+    hit = _table_cache.get(id(path))
+    if hit is not None and hit[0] is path:
+        return hit[1]
+    columns = np.array(
+        [
+            (
+                seg.start.east_m,
+                seg.start.north_m,
+                seg.start.heading_rad,
+                seg.length_m,
+                TURN_SIGN[seg.turn],
+                seg.radius_m,
+            )
+            for seg in path.segments
+        ],
+        dtype=np.float64,
+    ).T
+    table = _SegmentTable(
+        starts_m=np.asarray(path._starts_m, dtype=np.float64),
+        length_m=columns[3].copy(),
+        east_m=columns[0].copy(),
+        north_m=columns[1].copy(),
+        heading_rad=columns[2].copy(),
+        sin_heading=np.sin(columns[2]),
+        cos_heading=np.cos(columns[2]),
+        sign=columns[4].copy(),
+        radius_m=columns[5].copy(),
+        has_arcs=bool((columns[4] != 0.0).any()),
+    )
+    for array in (getattr(table, name) for name in table.__slots__ if name != "has_arcs"):
+        array.flags.writeable = False
+    if len(_table_cache) >= _TABLE_CACHE_SIZE:
+        _table_cache.clear()
+    _table_cache[id(path)] = (path, table)
+    return table
 
 
 def straight(
