@@ -65,6 +65,79 @@ class Separation:
 
 def _positions(vs: VehicleSchedule, t: FloatArray) -> FloatArray:
     """``vs.position_at`` at every time of ``t``, with the profile's altitude there as a third
+    column (NaN rows where it does not fly): :func:`_positions_masked`, by slices of ``t``
+    where it ascends (as every time grid here does) and ``vs`` has no loiter."""
+    t = np.asarray(t, dtype=np.float64)
+    if vs.loiters or not _ascending(t) or not _times_known(vs):
+        return _positions_masked(vs, t)
+    out = np.full((len(t), 3), np.nan)
+    # On ascending times each time window is a slice: where the masks of
+    # _positions_masked select, found by bisection instead of compared at every sample.
+    first = int(np.searchsorted(t, vs.takeoff_s, side="left"))
+    stop = int(np.searchsorted(t, vs.arrival_s, side="right"))
+    if stop <= first:
+        return out
+    flying_t = t[first:stop]
+    s = _along_s_m(vs, flying_t)
+    end = np.isnan(s)
+    along: NDArray[np.intp] | slice
+    if end.any():
+        out[first + np.flatnonzero(end)] = (
+            vs.path.end.east_m,
+            vs.path.end.north_m,
+            vs.alt_at(vs.path.length_m),
+        )
+        along = first + np.flatnonzero(~end)
+        s = s[~end]
+    else:
+        along = slice(first, stop)
+    if s.size:
+        s_along = np.minimum(np.maximum(s, 0.0), vs.path.length_m)
+        out[along, :2] = vs.path.poses_at(s_along)[:, :2]
+        out[along, 2] = np.interp(s_along, vs.wp_s_m, vs.wp_alt_m)
+    return out
+
+
+def _ascending(t: FloatArray) -> bool:
+    """Whether ``t`` holds at least two times, none NaN, none less than the one before."""
+    return len(t) >= 2 and bool((t[1:] >= t[:-1]).all())
+
+
+def _times_known(vs: VehicleSchedule) -> bool:
+    """Whether none of the times :func:`_along_s_m` bisects at is NaN (a NaN time compares
+    false at every sample, but would bisect to the end)."""
+    times = [vs.takeoff_s, vs.arrival_s, vs.climb_end_s]
+    times += [x for leg in vs.legs for x in (leg.t_start_s, leg.t_end_s)]
+    return not any(math.isnan(x) for x in times)
+
+
+def _along_s_m(vs: VehicleSchedule, t: FloatArray) -> FloatArray:
+    """Along-path distance at each of the ascending times ``t`` (all while ``vs`` flies and
+    no loiter), NaN after its last leg: :func:`_positions_masked`'s ``s``, the same formulas
+    over the same samples, the first window that holds a sample setting it."""
+    s = np.full(len(t), np.nan)
+    if not vs.airborne_start:
+        climbing = int(np.searchsorted(t, vs.climb_end_s, side="left"))
+        span = max(vs.climb_end_s - vs.takeoff_s, 1e-9)
+        s[:climbing] = vs.climb_s_m * (t[:climbing] - vs.takeoff_s) / span
+        if not vs.legs:  # state_at: on the ground until it has legs
+            s[:climbing] = 0.0
+    for leg in vs.legs:
+        lo = int(np.searchsorted(t, leg.t_start_s, side="left"))
+        hi = int(np.searchsorted(t, leg.t_end_s, side="right"))
+        if hi <= lo:
+            continue
+        part = s[lo:hi]  # a view: set in place
+        free = np.isnan(part)
+        if free.all():
+            part[:] = leg.s_start_m + (t[lo:hi] - leg.t_start_s) * leg.groundspeed_m_s
+        elif free.any():
+            part[free] = leg.s_start_m + (t[lo:hi][free] - leg.t_start_s) * leg.groundspeed_m_s
+    return s
+
+
+def _positions_masked(vs: VehicleSchedule, t: FloatArray) -> FloatArray:
+    """``vs.position_at`` at every time of ``t``, with the profile's altitude there as a third
     column (NaN rows where it does not fly): the same arithmetic on arrays, the path's poses
     looked up at once (:meth:`FlightPath.poses_at`)."""
     t = np.asarray(t, dtype=np.float64)

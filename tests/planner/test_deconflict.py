@@ -3,11 +3,12 @@
 from __future__ import annotations
 
 import math
+from dataclasses import replace
 
 import numpy as np
 import pytest
 
-from planner.deconflict import _positions, pair_separation, separation
+from planner.deconflict import _positions, _positions_masked, pair_separation, separation
 from planner.flightpath import straight
 from planner.plan import build_world, plan
 from planner.retime import build_schedule
@@ -128,6 +129,33 @@ def test_the_team_separation_matches_every_pair_searched_on_its_own() -> None:
             assert math.isinf(p.distance_m)
         else:
             assert want - 1e-6 <= p.distance_m <= want + required / 20.0, (p, want)
+
+
+def test_positions_by_slices_are_the_masked_ones_to_the_last_bit() -> None:
+    """On ascending times ``_positions`` finds each window by bisection: the same bits as
+    comparing every sample, the windows' own ends among the times, repeated times too."""
+    scenario = parse_scenario(small_scenario(arrival={"kind": "simultaneous", "required_s": 2600}))
+    s = build_schedule(scenario, plan(scenario, "astar"), world=build_world(scenario))
+    a = _vs("A", 0, 0, 20_000, 0, 20.0, 0.0)
+    gappy = replace(  # airborne, two legs apart, and at the path's end before its arrival
+        a,
+        arrival_s=1200.0,
+        legs=(Leg(0.0, 10_000.0, 20.0, 0.0, 500.0), Leg(10_000.0, 20_000.0, 20.0, 600.0, 1100.0)),
+        airborne_start=True,
+    )
+    rng = np.random.default_rng(0)
+    for vs in [*s.vehicles, a, gappy]:
+        ends = [vs.takeoff_s, vs.arrival_s, vs.climb_end_s]
+        ends += [x for leg in vs.legs for x in (leg.t_start_s, leg.t_end_s)]
+        grids = [
+            np.linspace(vs.takeoff_s - 50.0, vs.arrival_s + 50.0, 3001),
+            np.sort(np.concatenate([rng.uniform(vs.takeoff_s, vs.arrival_s, 500), ends, ends])),
+            np.linspace(vs.takeoff_s + 10.0, vs.takeoff_s + 11.0, 101),
+            np.linspace(vs.arrival_s + 1.0, vs.arrival_s + 2.0, 5),
+        ]
+        for t in grids:
+            got, want = _positions(vs, t), _positions_masked(vs, t)
+            assert got.tobytes() == want.tobytes(), vs.vehicle_id
 
 
 def test_positions_sampled_at_once_are_the_schedule_s_own_at_every_time() -> None:
