@@ -305,6 +305,8 @@ class TeamSamples:
         )
         """East, north and altitude, each (vehicle, time), m."""
         self._row = {vid: k for k, vid in enumerate(self.ids)}
+        self._held = list(vehicles)
+        """The schedule each row of :attr:`planes` samples."""
         self._recent: list[tuple[VehicleSchedule, FloatArray]] = []
         """The tracks :meth:`track` sampled last, newest first (each with its schedule)."""
         self._starts = np.arange(0, len(self.t_s), BOX_SAMPLES)
@@ -328,8 +330,14 @@ class TeamSamples:
         """``vs`` sampled on the team's grid (east, north and altitude rows; NaN where it does
         not fly): a timing to be tried more than once is sampled once.
 
-        The last few schedules asked for are kept (by identity, read-only): a timing is
-        usually tried against one vehicle, then the team, then taken, each asking again."""
+        A schedule of the team is copied from its row; the last few others asked for are kept
+        (by identity, read-only): a timing is usually tried against one vehicle, then the
+        team, then taken, each asking again."""
+        k = self._row.get(vs.vehicle_id)
+        if k is not None and self._held[k] is vs:
+            held = np.array(self.planes[:, k])  # a copy: the row changes when it is replaced
+            held.flags.writeable = False
+            return held
         for kept, track in self._recent:
             if kept is vs:
                 return track
@@ -461,6 +469,7 @@ class TeamSamples:
         sampled it, when the caller has it)."""
         k = self._row[vs.vehicle_id]
         self.planes[:, k] = self.track(vs) if track is None else track
+        self._held[k] = vs
         self.boxes[:, k] = self._boxes(self.planes[:, k])
 
 
