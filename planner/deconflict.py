@@ -175,9 +175,17 @@ def _positions_masked(vs: VehicleSchedule, t: FloatArray) -> FloatArray:
 
 
 def _distance_m(a: FloatArray, b: FloatArray) -> FloatArray:
-    """3-D distances between positions (east, north, altitude in the last axis)."""
-    d: FloatArray = np.sqrt(((a - b) ** 2).sum(axis=-1))
-    return d
+    """3-D distances between positions (east, north, altitude in the last axis).
+
+    The squares are added column by column in the order a sum over the last axis takes
+    them (the same bits), which numpy does several times faster than that reduction over
+    rows of three."""
+    d = a - b
+    d *= d
+    d2 = d[..., 0] + d[..., 1]
+    d2 += d[..., 2]
+    out: FloatArray = np.sqrt(d2)
+    return out
 
 
 def _squared_gaps_m2(planes: FloatArray, mine: FloatArray) -> FloatArray:

@@ -8,7 +8,13 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from planner.deconflict import _positions, _positions_masked, pair_separation, separation
+from planner.deconflict import (
+    _distance_m,
+    _positions,
+    _positions_masked,
+    pair_separation,
+    separation,
+)
 from planner.flightpath import straight
 from planner.plan import build_world, plan
 from planner.retime import build_schedule
@@ -156,6 +162,14 @@ def test_positions_by_slices_are_the_masked_ones_to_the_last_bit() -> None:
         for t in grids:
             got, want = _positions(vs, t), _positions_masked(vs, t)
             assert got.tobytes() == want.tobytes(), vs.vehicle_id
+
+
+def test_distances_added_column_by_column_are_the_row_sums_to_the_last_bit() -> None:
+    rng = np.random.default_rng(1)
+    a, b = rng.normal(size=(2, 5000, 3)) * rng.choice([1e-3, 1.0, 1e4, 1e7], size=(2, 5000, 3))
+    a[:50], b[25:75, 1], a[100:110] = np.nan, -0.0, b[100:110]
+    want = np.sqrt(((a - b) ** 2).sum(axis=-1))
+    assert _distance_m(a, b).tobytes() == want.tobytes()
 
 
 def test_positions_sampled_at_once_are_the_schedule_s_own_at_every_time() -> None:
