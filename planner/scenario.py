@@ -89,6 +89,21 @@ class Origin(_Model):
     lon_deg: Annotated[float, Field(ge=-180.0, le=180.0)]
 
 
+_frames: dict[tuple[str, str], LocalFrame] = {}
+
+
+def _frame_at(lat_deg: float, lon_deg: float) -> LocalFrame:
+    """The frame about an origin, made once (it is immutable; a loiter site is looked for
+    with it at every timing tried), keyed by the exact bits of the origin."""
+    key = (float(lat_deg).hex(), float(lon_deg).hex())
+    frame = _frames.get(key)
+    if frame is None:
+        if len(_frames) >= 256:
+            _frames.clear()
+        frame = _frames[key] = LocalFrame(lat_deg, lon_deg)
+    return frame
+
+
 class Area(_Model):
     """The planning rectangle: local metres about a geographic origin."""
 
@@ -119,7 +134,7 @@ class Area(_Model):
         return self.min_north_m + self.height_m
 
     def frame(self) -> LocalFrame:
-        return LocalFrame(self.origin.lat_deg, self.origin.lon_deg)
+        return _frame_at(self.origin.lat_deg, self.origin.lon_deg)
 
     def contains(self, east_m: float, north_m: float) -> bool:
         return (
