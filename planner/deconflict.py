@@ -14,6 +14,7 @@ each pair is then refined on a finer grid.
 from __future__ import annotations
 
 import math
+import weakref
 from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any
@@ -289,6 +290,8 @@ hundred-vehicle team's grid, about 27 s: 800 m at 30 m/s)."""
 
 RECENT_TRACKS = 4
 """Tracks :class:`TeamSamples` keeps of the schedules it sampled last."""
+_MADE_TRACKS = 4096
+"""Tracks :class:`TeamSamples` remembers making (by a weak reference: not kept alive)."""
 
 
 class TeamSamples:
@@ -316,6 +319,9 @@ class TeamSamples:
         self._held = list(vehicles)
         """The schedule each row of :attr:`planes` samples."""
         self._recent: list[tuple[VehicleSchedule, FloatArray]] = []
+        self._made: dict[int, tuple[weakref.ref[FloatArray], FloatArray | None]] = {}
+        """The tracks :meth:`track` made (by identity), each with its :meth:`_boxes` once
+        they are asked for."""
         """The tracks :meth:`track` sampled last, newest first (each with its schedule)."""
         self._starts = np.arange(0, len(self.t_s), BOX_SAMPLES)
         self.boxes = np.stack([self._boxes(self.planes[:, k]) for k in range(len(self.ids))], 1)
@@ -334,6 +340,26 @@ class TeamSamples:
                 ]
             )
 
+    def _track_boxes(self, track: FloatArray) -> FloatArray:
+        """``_boxes(track)``, worked out once for a track :meth:`track` made (read-only, so
+        it cannot change): a timing's track is compared with the team round after round."""
+        made = self._made.get(id(track))
+        if made is None or made[0]() is not track:
+            return self._boxes(track)
+        boxes = made[1]
+        if boxes is None:
+            boxes = self._boxes(track)
+            self._made[id(track)] = (made[0], boxes)
+        return boxes
+
+    def _made_here(self, track: FloatArray) -> FloatArray:
+        """``track``, read-only, taken down as made by :meth:`track`."""
+        track.flags.writeable = False
+        if len(self._made) >= _MADE_TRACKS:
+            self._made.clear()  # dead tracks' entries, mostly
+        self._made[id(track)] = (weakref.ref(track), None)
+        return track
+
     def track(self, vs: VehicleSchedule) -> FloatArray:
         """``vs`` sampled on the team's grid (east, north and altitude rows; NaN where it does
         not fly): a timing to be tried more than once is sampled once.
@@ -343,14 +369,12 @@ class TeamSamples:
         team, then taken, each asking again."""
         k = self._row.get(vs.vehicle_id)
         if k is not None and self._held[k] is vs:
-            held = np.array(self.planes[:, k])  # a copy: the row changes when it is replaced
-            held.flags.writeable = False
-            return held
+            # A copy: the row changes when it is replaced.
+            return self._made_here(np.array(self.planes[:, k]))
         for kept, track in self._recent:
             if kept is vs:
                 return track
-        track = np.ascontiguousarray(_positions(vs, self.t_s).T)
-        track.flags.writeable = False
+        track = self._made_here(np.ascontiguousarray(_positions(vs, self.t_s).T))
         self._recent = [(vs, track), *self._recent[: RECENT_TRACKS - 1]]
         return track
 
@@ -427,7 +451,7 @@ class TeamSamples:
         in few of them."""
         n = len(self.ids)
         least, where = np.full(n, np.inf), np.full(n, -1, dtype=np.intp)
-        mine, theirs, m = self._boxes(track), self.boxes, below_m
+        mine, theirs, m = self._track_boxes(track), self.boxes, below_m
         with np.errstate(invalid="ignore"):
             near = (
                 (theirs[0] <= mine[1] + m)
