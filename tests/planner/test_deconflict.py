@@ -149,8 +149,13 @@ def test_positions_by_slices_are_the_masked_ones_to_the_last_bit() -> None:
         legs=(Leg(0.0, 10_000.0, 20.0, 0.0, 500.0), Leg(10_000.0, 20_000.0, 20.0, 600.0, 1100.0)),
         airborne_start=True,
     )
+    joined = replace(  # the second leg starts at the first's end: that time is the first's
+        a,
+        arrival_s=1000.0,
+        legs=(Leg(0.0, 10_000.0, 20.0, 0.0, 500.0), Leg(10_000.0, 20_000.0, 20.0, 500.0, 1000.0)),
+    )
     rng = np.random.default_rng(0)
-    for vs in [*s.vehicles, a, gappy]:
+    for vs in [*s.vehicles, a, gappy, joined]:
         ends = [vs.takeoff_s, vs.arrival_s, vs.climb_end_s]
         ends += [x for leg in vs.legs for x in (leg.t_start_s, leg.t_end_s)]
         grids = [
