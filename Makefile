@@ -37,13 +37,12 @@ lint: $(STAMP)
 typecheck: $(STAMP)
 	$(VENV)/bin/mypy
 
-# On every core and two more (pytest-xdist): a flight waits on its simulator's pace part of
-# the time, and a service test on its flight, so one worker per core left a third of the CPU
-# idle, and one more still a sixth (8 min 13 s and 6 min 33 s against 5 min 46 s here). The long tests (marked
+# On every core and one more (pytest-xdist): a flight waits on its simulator's pace part of
+# the time, so one worker per core leaves a fifth of the CPU idle. The long tests (marked
 # slow, the whole flights among them) are handed out first, in turn to each worker; a module
 # whose fixture flies once (xdist_group) stays on one worker. The 30 slowest tests are listed
 # at the end.
-TEST_WORKERS ?= $(shell echo $$(( $$(nproc) + 2 )))
+TEST_WORKERS ?= $(shell echo $$(( $$(nproc) + 1 )))
 PYTEST := $(VENV)/bin/pytest -q -n $(TEST_WORKERS) --dist loadgroup
 
 pytest: $(STAMP) compiled
