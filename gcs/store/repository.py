@@ -101,6 +101,43 @@ def _get(session: Session, model: type[_Row], key: Any, what: str, *, lock: bool
     return row
 
 
+def _follow(session: Session, flight_id: str, events: Sequence[FlightEvent]) -> None:
+    """What events change in the flight's row, in their order: the team time, the flight's
+    state (each a new version of the row, as :meth:`Store.update_flight`), a vehicle's
+    phase."""
+    flight: FlightRow | None = None
+    for e in events:
+        team_time_s = e.value if e.kind is EventKind.ARRIVAL else None
+        state = e.payload.get("state") if e.kind is EventKind.FLIGHT else None
+        if team_time_s is not None or state is not None:
+            if flight is None:
+                flight = _get(session, FlightRow, flight_id, f"flight {flight_id!r}", lock=True)
+            if team_time_s is not None:
+                flight.team_time_s = team_time_s
+                flight.version += 1
+            if state is not None:
+                if str(state) not in FLIGHT_STATES:
+                    raise StoreError(
+                        f"flight state {state!r} is not one of {', '.join(FLIGHT_STATES)}"
+                    )
+                flight.state = str(state)
+                flight.version += 1
+            flight.updated_utc_s = time.time()
+        if e.kind is EventKind.STATE and e.vehicle is not None:
+            phase = str(e.payload["state"])
+            if phase not in VEHICLE_PHASES:
+                raise StoreError(
+                    f"vehicle phase {phase!r} is not one of {', '.join(VEHICLE_PHASES)}"
+                )
+            row = _get(
+                session,
+                FlightVehicleRow,
+                (flight_id, e.vehicle),
+                f"vehicle {e.vehicle!r} in flight {flight_id!r}",
+            )
+            row.phase = phase
+
+
 class Store:
     """Scenarios, flights, events and uploads in one SQL database (see the package)."""
 
@@ -406,8 +443,10 @@ class Store:
     # -- events -------------------------------------------------------------------------------
 
     def add_events(self, flight_id: str, events: Sequence[FlightEvent]) -> int:
-        """Keep events (by their ``seq``); one already kept is not written again. Returns how
-        many were new."""
+        """Keep events (by their ``seq``), and what the new ones change in the flight's row
+        (the team time, the flight's state, a vehicle's phase) in the same transaction: the
+        row never runs ahead of, or behind, the events kept, whenever the process dies. One
+        already kept is not written again. Returns how many were new."""
         if not events:
             return 0
         seqs = [e.seq for e in events]
@@ -435,6 +474,7 @@ class Store:
                 )
                 for e in new
             )
+            _follow(session, flight_id, new)
             try:
                 session.flush()
             except IntegrityError as err:
@@ -671,15 +711,4 @@ class EventWriter:
                     e, payload={k: v for k, v in e.payload.items() if k != "items"}
                 )
             kept.append(e)
-            self._follow(e)
         return self.store.add_events(self.flight_id, kept)
-
-    def _follow(self, e: FlightEvent) -> None:
-        """What an event changes in the flight's row: the team time, the flight's state, a
-        vehicle's phase."""
-        if e.kind is EventKind.ARRIVAL and e.value is not None:
-            self.store.update_flight(self.flight_id, team_time_s=e.value)
-        if e.kind is EventKind.FLIGHT and "state" in e.payload:
-            self.store.update_flight(self.flight_id, state=str(e.payload["state"]))
-        if e.kind is EventKind.STATE and e.vehicle is not None:
-            self.store.set_vehicle(self.flight_id, e.vehicle, phase=str(e.payload["state"]))

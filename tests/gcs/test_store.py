@@ -103,6 +103,43 @@ def test_events_are_kept_once_in_sequence(store: Store) -> None:
     assert math.isnan(store.events(fid, after_seq=8)[0].utc_s)
 
 
+def test_the_flight_row_follows_the_events_kept_in_their_transaction(store: Store) -> None:
+    """The team time, the flight's state and a vehicle's phase that events change are kept
+    with those events, in one transaction: a batch refused keeps neither (a process killed
+    between the two once left the row's team time ahead of its event), and an event sent
+    again does not move the row back."""
+    sid = store.save_scenario(SCENARIO, name="demo")
+    fid = store.create_flight(sid, {"UAV1": None})
+
+    def ev(seq: int, kind: EventKind, value: float | None = None, **payload: str) -> FlightEvent:
+        vehicle = "UAV1" if kind is EventKind.STATE else None
+        return FlightEvent(1.7e9 + seq, float(seq), vehicle, kind, "", None, value, seq, payload)
+
+    first = [
+        ev(1, EventKind.FLIGHT, state="running"),
+        ev(2, EventKind.ARRIVAL, 1279.1),
+        ev(3, EventKind.STATE, state="on_route"),
+    ]
+    assert store.add_events(fid, first) == 3
+    f = store.flight(fid)
+    assert (f.state, f.team_time_s, f.version, f.vehicles["UAV1"][0]) == (
+        "running",
+        1279.1,
+        3,
+        "on_route",
+    )
+    refused = [ev(4, EventKind.ARRIVAL, 1281.6), ev(5, EventKind.FLIGHT, state="flying")]
+    with pytest.raises(StoreError, match="'flying' is not one of"):
+        store.add_events(fid, refused)
+    assert [e.seq for e in store.events(fid)] == [1, 2, 3]
+    assert store.flight(fid) == f
+    later = [ev(4, EventKind.ARRIVAL, 1281.6)]
+    assert store.add_events(fid, later) == 1
+    assert store.add_events(fid, first) == 0  # kept already: the row stays as it is
+    f = store.flight(fid)
+    assert (f.team_time_s, f.version, f.vehicles["UAV1"][0]) == (1281.6, 4, "on_route")
+
+
 def test_uploaded_missions_come_back_item_for_item(store: Store) -> None:
     sid = store.save_scenario(SCENARIO, name="demo")
     fid = store.create_flight(sid, {"UAV1": None})
