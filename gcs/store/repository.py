@@ -101,41 +101,70 @@ def _get(session: Session, model: type[_Row], key: Any, what: str, *, lock: bool
     return row
 
 
+def _change_flight(
+    session: Session,
+    flight_id: str,
+    *,
+    expected_version: int | None = None,
+    state: str | None = None,
+    team_time_s: float | None = None,
+    start_utc_s: float | None = None,
+    resume: Mapping[str, Any] | None = None,
+) -> int:
+    """:meth:`Store.update_flight` within ``session``'s transaction."""
+    if state is not None and state not in FLIGHT_STATES:
+        raise StoreError(f"flight state {state!r} is not one of {', '.join(FLIGHT_STATES)}")
+    row = _get(session, FlightRow, flight_id, f"flight {flight_id!r}", lock=True)
+    if expected_version is not None and row.version != expected_version:
+        raise StoreConflict(
+            f"flight {flight_id}: version {expected_version} is stale (now {row.version})"
+        )
+    if state is not None:
+        row.state = state
+    if team_time_s is not None:
+        row.team_time_s = team_time_s
+    if start_utc_s is not None:
+        row.start_utc_s = start_utc_s
+    if resume is not None:
+        row.resume = dict(resume)
+    row.version += 1
+    row.updated_utc_s = time.time()
+    return row.version
+
+
+def _change_vehicle(
+    session: Session,
+    flight_id: str,
+    vehicle_id: str,
+    *,
+    phase: str | None = None,
+    system_id: int | None = None,
+) -> None:
+    """:meth:`Store.set_vehicle` within ``session``'s transaction."""
+    if phase is not None and phase not in VEHICLE_PHASES:
+        raise StoreError(f"vehicle phase {phase!r} is not one of {', '.join(VEHICLE_PHASES)}")
+    row = _get(
+        session,
+        FlightVehicleRow,
+        (flight_id, vehicle_id),
+        f"vehicle {vehicle_id!r} in flight {flight_id!r}",
+    )
+    if phase is not None:
+        row.phase = phase
+    if system_id is not None:
+        row.system_id = system_id
+
+
 def _follow(session: Session, flight_id: str, events: Sequence[FlightEvent]) -> None:
-    """What events change in the flight's row, in their order: the team time, the flight's
-    state (each a new version of the row, as :meth:`Store.update_flight`), a vehicle's
-    phase."""
-    flight: FlightRow | None = None
+    """What events change in the flight's row, in their order, within ``session``'s
+    transaction: the team time, the flight's state, a vehicle's phase."""
     for e in events:
-        team_time_s = e.value if e.kind is EventKind.ARRIVAL else None
-        state = e.payload.get("state") if e.kind is EventKind.FLIGHT else None
-        if team_time_s is not None or state is not None:
-            if flight is None:
-                flight = _get(session, FlightRow, flight_id, f"flight {flight_id!r}", lock=True)
-            if team_time_s is not None:
-                flight.team_time_s = team_time_s
-                flight.version += 1
-            if state is not None:
-                if str(state) not in FLIGHT_STATES:
-                    raise StoreError(
-                        f"flight state {state!r} is not one of {', '.join(FLIGHT_STATES)}"
-                    )
-                flight.state = str(state)
-                flight.version += 1
-            flight.updated_utc_s = time.time()
+        if e.kind is EventKind.ARRIVAL and e.value is not None:
+            _change_flight(session, flight_id, team_time_s=e.value)
+        if e.kind is EventKind.FLIGHT and "state" in e.payload:
+            _change_flight(session, flight_id, state=str(e.payload["state"]))
         if e.kind is EventKind.STATE and e.vehicle is not None:
-            phase = str(e.payload["state"])
-            if phase not in VEHICLE_PHASES:
-                raise StoreError(
-                    f"vehicle phase {phase!r} is not one of {', '.join(VEHICLE_PHASES)}"
-                )
-            row = _get(
-                session,
-                FlightVehicleRow,
-                (flight_id, e.vehicle),
-                f"vehicle {e.vehicle!r} in flight {flight_id!r}",
-            )
-            row.phase = phase
+            _change_vehicle(session, flight_id, e.vehicle, phase=str(e.payload["state"]))
 
 
 class Store:
@@ -385,25 +414,16 @@ class Store:
         StoreError
             ``state`` is not one of :data:`FLIGHT_STATES`.
         """
-        if state is not None and state not in FLIGHT_STATES:
-            raise StoreError(f"flight state {state!r} is not one of {', '.join(FLIGHT_STATES)}")
         with Session(self.engine) as session, session.begin():
-            row = _get(session, FlightRow, flight_id, f"flight {flight_id!r}", lock=True)
-            if expected_version is not None and row.version != expected_version:
-                raise StoreConflict(
-                    f"flight {flight_id}: version {expected_version} is stale (now {row.version})"
-                )
-            if state is not None:
-                row.state = state
-            if team_time_s is not None:
-                row.team_time_s = team_time_s
-            if start_utc_s is not None:
-                row.start_utc_s = start_utc_s
-            if resume is not None:
-                row.resume = dict(resume)
-            row.version += 1
-            row.updated_utc_s = time.time()
-            return row.version
+            return _change_flight(
+                session,
+                flight_id,
+                expected_version=expected_version,
+                state=state,
+                team_time_s=team_time_s,
+                start_utc_s=start_utc_s,
+                resume=resume,
+            )
 
     def save_checkpoint(self, flight_id: str, blob: bytes) -> None:
         """Keep the flight's checkpoint (the newest replaces the one before)."""
@@ -426,19 +446,8 @@ class Store:
         phase: str | None = None,
         system_id: int | None = None,
     ) -> None:
-        if phase is not None and phase not in VEHICLE_PHASES:
-            raise StoreError(f"vehicle phase {phase!r} is not one of {', '.join(VEHICLE_PHASES)}")
         with Session(self.engine) as session, session.begin():
-            row = _get(
-                session,
-                FlightVehicleRow,
-                (flight_id, vehicle_id),
-                f"vehicle {vehicle_id!r} in flight {flight_id!r}",
-            )
-            if phase is not None:
-                row.phase = phase
-            if system_id is not None:
-                row.system_id = system_id
+            _change_vehicle(session, flight_id, vehicle_id, phase=phase, system_id=system_id)
 
     # -- events -------------------------------------------------------------------------------
 
@@ -474,11 +483,11 @@ class Store:
                 )
                 for e in new
             )
-            _follow(session, flight_id, new)
             try:
                 session.flush()
             except IntegrityError as err:
                 raise StoreError(f"flight {flight_id}: events not kept: {err.orig}") from None
+            _follow(session, flight_id, new)
         return len(new)
 
     def events(
