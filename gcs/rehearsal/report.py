@@ -21,6 +21,7 @@ from typing import Any
 from gcs.errors import GcsError
 from gcs.rehearsal.figures import FIGURES, plot_paths, plot_speeds, plot_timeline
 from gcs.rehearsal.flightrecord import Flight, flight_world, parse_flight
+from planner.plan import World
 
 __all__ = ["arrival_table", "write_figure", "write_report"]
 
@@ -274,12 +275,9 @@ def write_report(
     title = scenario.name
     _make_folder(out_dir)
     written = []
-    if figures:
-        paths_png, speeds_png, timeline_png = (out_dir / name for name in FIGURES)
-        plot_paths(parsed, world, title, paths_png)
-        plot_speeds(parsed, title, speeds_png)
-        plot_timeline(parsed, title, timeline_png)
-        written = [paths_png, speeds_png, timeline_png]
+    for name in FIGURES if figures else ():
+        _draw(parsed, world, title, name, out_dir / name)
+        written.append(out_dir / name)
     md = out_dir / "arrivals.md"
     _write_text(md, _markdown(parsed, f"{title}: rehearsal report"))
     index = out_dir / "index.html"
@@ -301,14 +299,19 @@ def write_figure(
     out = out_dir / name
     # Drawn beside and moved in whole: a reader never gets half a file.
     part = out.with_name(f".part.{name}")
-    if name == "paths.png":
-        plot_paths(parsed, world, scenario.name, part)
-    elif name == "speeds.png":
-        plot_speeds(parsed, scenario.name, part)
-    else:
-        plot_timeline(parsed, scenario.name, part)
+    _draw(parsed, world, scenario.name, name, part)
     part.replace(out)
     return out
+
+
+def _draw(parsed: Flight, world: World, title: str, name: str, out: Path) -> None:
+    """Draw the figure ``name`` (one of :data:`FIGURES`) into ``out``."""
+    if name == "paths.png":
+        plot_paths(parsed, world, title, out)
+    elif name == "speeds.png":
+        plot_speeds(parsed, title, out)
+    else:
+        plot_timeline(parsed, title, out)
 
 
 def _make_folder(out_dir: Path) -> None:

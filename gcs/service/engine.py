@@ -105,8 +105,9 @@ class Engine:
         self.planning = Planning(store, self.limits, self.config.method, plan_ray)
         """Scenarios, planning jobs and planned schedules."""
         self.ended = EndedFlights(data_dir / "flights")
-        self._drawing: dict[tuple[str, str], asyncio.Lock] = {}
         """Flights that ended before this process started (read from their folders)."""
+        self._drawing: dict[tuple[str, str], asyncio.Lock] = {}
+        """A lock per report figure being drawn: (flight, file name)."""
         self.fleet = Fleet()
         self.flights: dict[str, WorkerFlight] = {}
         self.vehicle_ids: dict[str, str] = {}
@@ -402,15 +403,13 @@ class Engine:
         path = folder / name
         if "/" in name or name.startswith("."):
             raise NotFound(f"no report file {name!r}")
-        if name not in FIGURES or path.is_file():
-            if not path.is_file():
-                raise NotFound(f"no report file {name!r}")
-            return path
-        lock = self._drawing.setdefault((flight_id, name), asyncio.Lock())
-        async with lock:
-            if not path.is_file():
-                record = await self.record(flight_id)
-                await asyncio.to_thread(write_figure, record, folder, name)
+        if name in FIGURES and not path.is_file():
+            async with self._drawing.setdefault((flight_id, name), asyncio.Lock()):
+                if not path.is_file():
+                    record = await self.record(flight_id)
+                    await asyncio.to_thread(write_figure, record, folder, name)
+        if not path.is_file():
+            raise NotFound(f"no report file {name!r}")
         return path
 
     # -- steering (commands to the flight's worker) ---------------------------------------------
