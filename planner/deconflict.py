@@ -24,6 +24,7 @@ from numpy.typing import NDArray
 
 from planner.errors import SeparationError
 from planner.flightpath import FlightPath
+from planner.memo import IdentityMemo
 from planner.schedule import VehicleSchedule, loiter_position
 
 FloatArray = NDArray[np.float64]
@@ -213,12 +214,8 @@ def _closest(
     return float(d[k]), float(t[k]), pa[k], pb[k]
 
 
-_PAIR_CACHE_SIZE = 8192
-_pair_cache: dict[
-    tuple[int, int, str, str], tuple[VehicleSchedule, VehicleSchedule, PairSeparation]
-] = {}
-"""Pairs searched, keyed by the two schedules' identities and the exact step and start (each
-entry keeps its schedules alive, so an identity is not reused while it is cached)."""
+_PAIRS: IdentityMemo[PairSeparation] = IdentityMemo(8192)
+"""Pairs searched, by the two schedules and the exact step and start."""
 
 
 def pair_separation(
@@ -229,15 +226,11 @@ def pair_separation(
 
     A pair searched already is not searched again: the team's separation is asked for again
     after a few of its vehicles moved (and schedules are not changed once made)."""
-    key = (id(a), id(b), float(step_s).hex(), float(from_s).hex())
-    hit = _pair_cache.get(key)
-    if hit is not None and hit[0] is a and hit[1] is b:
-        return hit[2]
-    found = _pair_separation(a, b, step_s, from_s)
-    if len(_pair_cache) >= _PAIR_CACHE_SIZE:
-        _pair_cache.clear()
-    _pair_cache[key] = (a, b, found)
-    return found
+    return _PAIRS.get(
+        (a, b),
+        (float(step_s).hex(), float(from_s).hex()),
+        lambda: _pair_separation(a, b, step_s, from_s),
+    )
 
 
 def _pair_separation(
@@ -319,10 +312,10 @@ class TeamSamples:
         self._held = list(vehicles)
         """The schedule each row of :attr:`planes` samples."""
         self._recent: list[tuple[VehicleSchedule, FloatArray]] = []
+        """The tracks :meth:`track` sampled last, newest first (each with its schedule)."""
         self._made: dict[int, tuple[weakref.ref[FloatArray], FloatArray | None]] = {}
         """The tracks :meth:`track` made (by identity), each with its :meth:`_boxes` once
         they are asked for."""
-        """The tracks :meth:`track` sampled last, newest first (each with its schedule)."""
         self._starts = np.arange(0, len(self.t_s), BOX_SAMPLES)
         self.boxes = np.stack([self._boxes(self.planes[:, k]) for k in range(len(self.ids))], 1)
         """Each vehicle's horizontal extent over each block of :data:`BOX_SAMPLES` samples:

@@ -149,12 +149,30 @@ def _advance_array(
     radius_m: float,
 ) -> NDArray[np.float64]:
     """Vectorised :func:`_advance` over distances ``s_m``; returns (len(s_m), 3)."""
+    if sign != 0:
+        return _advance_arcs(east_m, north_m, heading_rad, sign, s_m, radius_m)
     out = np.empty((s_m.size, 3), dtype=np.float64)
-    if sign == 0:
-        out[:, 0] = east_m + s_m * math.sin(heading_rad)
-        out[:, 1] = north_m + s_m * math.cos(heading_rad)
-        out[:, 2] = heading_rad
-        return out
+    out[:, 0] = east_m + s_m * math.sin(heading_rad)
+    out[:, 1] = north_m + s_m * math.cos(heading_rad)
+    out[:, 2] = heading_rad
+    return out
+
+
+def _advance_arcs(
+    east_m: float | NDArray[np.float64],
+    north_m: float | NDArray[np.float64],
+    heading_rad: float | NDArray[np.float64],
+    sign: float | NDArray[np.float64],
+    s_m: NDArray[np.float64],
+    radius_m: float | NDArray[np.float64],
+) -> NDArray[np.float64]:
+    """:func:`_advance` along arcs over distances ``s_m``, each other argument one value or
+    one per distance (each row its own start, turn and radius); (len(s_m), 3) poses.
+
+    The operations are those of the scalar version in the same order, so the two agree
+    exactly; numpy's float64 sin and cos round as the C library's do.
+    """
+    out = np.empty((s_m.size, 3), dtype=np.float64)
     half_turn_rad = 0.5 * s_m / radius_m
     chord_m = 2.0 * radius_m * np.sin(half_turn_rad)
     chord_heading_rad = heading_rad + sign * half_turn_rad

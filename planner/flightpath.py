@@ -23,17 +23,18 @@ from numpy.typing import ArrayLike, NDArray
 
 from planner.dubins import (
     _S_REL_TOL,
-    TAU,
     TURN_SIGN,
     GeometryError,
     Pose,
     _advance,
+    _advance_arcs,
     _check_radius,
     _check_s,
     _sample_pieces,
     normalise_heading_rad,
     shortest_path,
 )
+from planner.memo import IdentityMemo
 
 __all__ = [
     "FlightPath",
@@ -484,31 +485,6 @@ def _segment_box_m(segment: Segment) -> tuple[float, float, float, float]:
     )
 
 
-def _advance_arcs(
-    east_m: NDArray[np.float64],
-    north_m: NDArray[np.float64],
-    heading_rad: NDArray[np.float64],
-    sign: NDArray[np.float64],
-    s_m: NDArray[np.float64],
-    radius_m: NDArray[np.float64],
-) -> NDArray[np.float64]:
-    """Element-wise ``_advance`` along arcs (each row its own start, turn and distance);
-    (N, 3) poses.
-
-    The operations are those of the scalar version in the same order, so the two agree
-    exactly; numpy's float64 sin and cos round as the C library's do.
-    """
-    out = np.empty((s_m.size, 3), dtype=np.float64)
-    half_turn_rad = 0.5 * s_m / radius_m
-    chord_m = 2.0 * radius_m * np.sin(half_turn_rad)
-    chord_heading_rad = heading_rad + sign * half_turn_rad
-    out[:, 0] = east_m + chord_m * np.sin(chord_heading_rad)
-    out[:, 1] = north_m + chord_m * np.cos(chord_heading_rad)
-    heading = np.mod(heading_rad + 2.0 * sign * half_turn_rad, TAU)
-    out[:, 2] = np.where(heading >= TAU, 0.0, heading)
-    return out
-
-
 @dataclass(frozen=True, slots=True)
 class _SegmentTable:
     """A path's segments as arrays, for :meth:`FlightPath.poses_at`."""
@@ -526,18 +502,17 @@ class _SegmentTable:
     has_arcs: bool
 
 
-_TABLE_CACHE_SIZE = 4096
-_table_cache: dict[int, tuple[FlightPath, _SegmentTable]] = {}
-"""Keyed by the path's identity (each entry keeps its path alive, so the identity is not
-reused while it is cached; paths are immutable)."""
+_TABLES: IdentityMemo[_SegmentTable] = IdentityMemo(4096)
+"""Each path's :class:`_SegmentTable`, by the path (paths are immutable)."""
 
 
 def _segment_table(path: FlightPath) -> _SegmentTable:
     """``path``'s :class:`_SegmentTable`, built once per path: the same path is sampled
     over and over when a team's timings are compared."""
-    hit = _table_cache.get(id(path))
-    if hit is not None and hit[0] is path:
-        return hit[1]
+    return _TABLES.get((path,), None, lambda: _new_segment_table(path))
+
+
+def _new_segment_table(path: FlightPath) -> _SegmentTable:
     columns = np.array(
         [
             (
@@ -566,9 +541,6 @@ def _segment_table(path: FlightPath) -> _SegmentTable:
     )
     for array in (getattr(table, name) for name in table.__slots__ if name != "has_arcs"):
         array.flags.writeable = False
-    if len(_table_cache) >= _TABLE_CACHE_SIZE:
-        _table_cache.clear()
-    _table_cache[id(path)] = (path, table)
     return table
 
 

@@ -15,6 +15,7 @@ the validated model.
 
 from __future__ import annotations
 
+import functools
 import json
 import math
 from itertools import pairwise
@@ -89,19 +90,11 @@ class Origin(_Model):
     lon_deg: Annotated[float, Field(ge=-180.0, le=180.0)]
 
 
-_frames: dict[tuple[str, str], LocalFrame] = {}
-
-
-def _frame_at(lat_deg: float, lon_deg: float) -> LocalFrame:
-    """The frame about an origin, made once (it is immutable; a loiter site is looked for
-    with it at every timing tried), keyed by the exact bits of the origin."""
-    key = (float(lat_deg).hex(), float(lon_deg).hex())
-    frame = _frames.get(key)
-    if frame is None:
-        if len(_frames) >= 256:
-            _frames.clear()
-        frame = _frames[key] = LocalFrame(lat_deg, lon_deg)
-    return frame
+@functools.lru_cache(maxsize=256)
+def _frame_at(lat_hex: str, lon_hex: str) -> LocalFrame:
+    """The frame about an origin given by its exact bits (``float.hex``), made once: it is
+    immutable, and a loiter site is looked for with it at every timing tried."""
+    return LocalFrame(float.fromhex(lat_hex), float.fromhex(lon_hex))
 
 
 class Area(_Model):
@@ -134,7 +127,7 @@ class Area(_Model):
         return self.min_north_m + self.height_m
 
     def frame(self) -> LocalFrame:
-        return _frame_at(self.origin.lat_deg, self.origin.lon_deg)
+        return _frame_at(float(self.origin.lat_deg).hex(), float(self.origin.lon_deg).hex())
 
     def contains(self, east_m: float, north_m: float) -> bool:
         return (
