@@ -108,17 +108,8 @@ class SpeedBiasEstimator:
         airspeed, same kind) and ``climb_m_s`` gate the fix when given.
         """
         cfg = self.config
-        finite = math.isfinite
-        if (
-            not (
-                finite(t_s)
-                and finite(ve_m_s)
-                and finite(vn_m_s)
-                and finite(heading_rad)
-                and finite(predicted_tas_m_s)
-            )
-            or predicted_tas_m_s <= 0.0
-        ):
+        values = (t_s, ve_m_s, vn_m_s, heading_rad, predicted_tas_m_s)
+        if not all(map(math.isfinite, values)) or predicted_tas_m_s <= 0.0:
             self.skipped += 1
             return False
         if (
