@@ -24,7 +24,7 @@ from gcs.service.engine import Engine
 from gcs.store.models import Base
 from sitl_stub.lockstep import Lockstep
 from tests.api.conftest import PAPER, app_with, auth, problem, running, settings_for
-from tests.gcs.conftest import postgres_schema
+from tests.gcs.conftest import store_url_of
 
 YAML = {**auth("plan"), "Content-Type": "application/yaml"}
 JSON = {**auth("plan"), "Content-Type": "application/json"}
@@ -39,10 +39,7 @@ def shared_url(
     request: pytest.FixtureRequest, tmp_path_factory: pytest.TempPathFactory
 ) -> Iterator[str]:
     """The module's store: a SQLite file, and a PostgreSQL schema of its own."""
-    if request.param == "sqlite":
-        yield f"sqlite:///{tmp_path_factory.mktemp('bad-input') / 'tcgcs.db'}"
-    else:
-        yield from postgres_schema()
+    yield from store_url_of(request.param, tmp_path_factory.mktemp("bad-input"))
 
 
 @pytest.fixture(scope="module")

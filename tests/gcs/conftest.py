@@ -120,13 +120,19 @@ def pg_url() -> Iterator[str]:
     yield from postgres_schema()
 
 
+def store_url_of(kind: str, folder: Path) -> Iterator[str]:
+    """A store URL of ``kind``: a SQLite file in ``folder``, or a PostgreSQL schema of its own
+    (:func:`postgres_schema`)."""
+    if kind == "sqlite":
+        yield f"sqlite:///{folder / 'tcgcs.db'}"
+    else:
+        yield from postgres_schema()
+
+
 @pytest.fixture(params=["sqlite", "postgresql"])
 def store_url(request: pytest.FixtureRequest, tmp_path: Path) -> Iterator[str]:
     """A store URL on SQLite (a file) and on PostgreSQL."""
-    if request.param == "sqlite":
-        yield f"sqlite:///{tmp_path / 'tcgcs.db'}"
-    else:
-        yield from postgres_schema()
+    yield from store_url_of(request.param, tmp_path)
 
 
 def assert_flight_kept(url: str, record: dict[str, Any]) -> None:
