@@ -6,7 +6,12 @@ buttons and their confirmations, the mouse on the map) and read through what it 
 (``window.tcgcs``) and what it says (the DOM); the service is checked over HTTP, and the flight
 the operator flew is judged by the oracle from the simulator's truth log (arrivals against the
 slots set before launch, 3-D separation, the scenario's zones and the one drawn on the map:
-:func:`tests.verdict.assert_flown`)."""
+:func:`tests.verdict.assert_flown`).
+
+Each of the operator's steps is taken with the rehearsal paused at a set mission time
+(``POST /v1/flights/{id}/pause``): at 200x a second of wall time is 200 s of flight, and how
+long the page and a busy machine take over a step must not move where the flight is when it
+lands."""
 
 from __future__ import annotations
 
@@ -27,6 +32,7 @@ from tests.service.test_flights_http import (
     _all_events,
     _flight,
     _ok,
+    _paused,
     _uav3_box,
     truth_log,
 )
@@ -45,15 +51,24 @@ UAVS = ("UAV1", "UAV2", "UAV3")
 # the team arrives at 1,260 s as planned, later by what the pop-up, the wind and the
 # operator's move cost. At 200x a second of wall time is some 200 s of flight, and the page
 # hears the mission time every 0.5 s of wall time (``TELEMETRY_WALL_S``): a wait for a mission
-# time ends up to 100 s past it.
+# time ends up to 100 s past it, so the operator's steps are taken at pauses.
 FLYING_S = 260.0
 """The map is read twice, 150 s of flight apart, from here: UAV1, the last up, has just taken
-off (258 s). The second read and the rows' states come by some 610 s, before UAV3 turns into
-its holding circle in B3 (some 680 s)."""
+off (258 s). The second read and the rows' states come at 410 s, before UAV3 turns into its
+holding circle in B3 (some 680 s)."""
+READ_APART_S = 150.0
+STEER_S = 620.0
+"""The operator draws a no-fly zone on UAV3's route here: after the scenario's pop-up (some
+558 s) and UAV2's route round it, while UAV3 flies to B3 (13.7 km along its 19 km route, some
+680-1,040 s) short of the box (15.3 km along it, _uav3_box). The zone is in force at once; the
+flight re-plans round it once resumed."""
+TEAM_S = 680.0
+"""The operator moves the team time here, UAV3's route round the zone on board, before UAV1
+turns its loiter circle (some 720-835 s: a zone re-planned round while it turns there moved
+the team time up to 59 s later)."""
 TEAM_MOVE_S = 30.0
-"""How far the operator moves the team time (120 s at full size, scaled as the flight), once
-UAV3's route round the zone is in: the move reaches the service some 720-850 s, and every
-vehicle has 400 s or more of flight left to lose 30 s in. (Later it may not: the service takes
+"""How far the operator moves the team time (120 s at full size, scaled as the flight): every
+vehicle has 580 s or more of flight left to lose 30 s in. (Later it may not: the service takes
 a move while a vehicle has a waypoint a minute ahead, but one already at its minimum speed
 with no room left for whole loiter turns then arrives early; UAV1 passed its goal 3-13 s
 early with the move at some 1,020 s.)"""
@@ -62,14 +77,33 @@ MID_FLIGHT_S = 1_100.0
 zone drawn on the map."""
 DROP_S = 20.0
 """The stream is dropped: UAV2 is climbing out (0 s), UAV3's and UAV1's takeoffs (75 s,
-258 s) come while it is down. It is back some 4 s of wall time later (the network is down
-2 s, the page tries again after 0.25, 0.5, 1 and 2 s): some 830 s at 200x."""
+258 s) come while it is down (the network is down 2 s of wall time, the page tries again after
+0.25, 0.5, 1 and 2 s: some 830 s at 200x, or the pause at :data:`ABORT_S`)."""
 ABORT_S = 600.0
-"""UAV1 (up since 258 s) is aborted from here, or once the stream is back if that is later
-(at 200x, some 830 s)."""
+"""UAV1 (up since 258 s) is aborted here, the rehearsal paused until the stream is back."""
 ABORT_ALL_S = 900.0
-"""The rest are aborted from here (UAV1 flying home), or right after UAV1 if that is later
-(at 200x, some 920 s): before the team time (1,260 s or later)."""
+"""The rest are aborted here (UAV1 flying home), paused, before the team time (1,260 s or
+later)."""
+
+
+async def _pause_at(c: Console, fid: str, *at_s: float) -> None:
+    """The rehearsal is to wait at mission seconds ``at_s``: the steps an operator takes there
+    take no flight time, however long the page (or a busy machine) takes over them."""
+    async with c.service.client() as client:
+        for t_s in at_s:
+            _ok(await client.post(f"/v1/flights/{fid}/pause", json={"at_s": t_s}))
+
+
+async def _paused_at(c: Console, fid: str, at_s: float) -> None:
+    """Wait until the rehearsal waits at its pause at ``at_s`` and the page has heard so."""
+    async with c.service.client() as client:
+        await _paused(client, fid, at_s)
+    await c.until_mission(at_s)
+
+
+async def _resume(c: Console, fid: str) -> None:
+    async with c.service.client() as client:
+        _ok(await client.post(f"/v1/flights/{fid}/resume"))
 
 
 def _inside(e: float, n: float, polygon: list[list[float]]) -> bool:
@@ -89,9 +123,11 @@ async def _positions(c: Console) -> tuple[float, dict[str, tuple[float, float]]]
     return got["t"], {vid: (e, n) for vid, e, n in got["v"]}
 
 
-async def _three_moving(c: Console) -> None:
-    t1, first = await _positions(c)
-    await c.until_mission(t1 + 150.0)
+async def _three_moving(c: Console, fid: str) -> None:
+    await _paused_at(c, fid, FLYING_S)
+    _, first = await _positions(c)
+    await _resume(c, fid)
+    await _paused_at(c, fid, FLYING_S + READ_APART_S)
     _, second = await _positions(c)
     assert set(first) == set(second) == set(UAVS)
     for vid in UAVS:
@@ -171,19 +207,18 @@ async def test_an_operator_flies_the_paper_scenario_from_the_console(
         "() => tcgcs.state.flightState === 'ready' && document.querySelector('#flight-note')"
         ".textContent.includes('UAV1 ok, UAV2 ok, UAV3 ok')"
     )
+    # The operator's steps wait for the flight where they are taken (each at a pause).
+    await _pause_at(c, fid, FLYING_S, FLYING_S + READ_APART_S, STEER_S, TEAM_S)
     await page.click("#launch")
     await c.confirm()
 
     # Three vehicles fly: what the map draws moves between two reads.
-    await c.until_mission(FLYING_S)
-    await _three_moving(c)
+    await _three_moving(c, fid)
+    await _resume(c, fid)
 
-    # A no-fly zone drawn by mouse on UAV3's route, after the scenario's pop-up (some 558 s):
-    # once the page has UAV2's route round it on board. The zone reaches the service some
-    # 600-740 s (the drawing takes half a second or so of wall time), while UAV3 flies to or
-    # holds in B3 (13.7 km along its 19 km route, some 680-1,040 s) short of the box (15.3 km
-    # along it, _uav3_box), and before UAV1 turns its loiter circle (some 720-835 s: a zone
-    # re-planned round while it turns there moved the team time up to 59 s later).
+    # A no-fly zone drawn by mouse on UAV3's route at STEER_S, once the page has UAV2's route
+    # round the scenario's pop-up on board.
+    await _paused_at(c, fid, STEER_S)
     await c.until(
         """() => tcgcs.events.some(e => e.kind === "upload" && e.vehicle === "UAV2"
                                       && e.payload.what === "after POPUP1")"""
@@ -199,6 +234,7 @@ async def test_an_operator_flies_the_paper_scenario_from_the_console(
     op1 = next(t for t in doc["threats"] if t["id"] == "OP1")
     assert op1["kind"] == "no_fly" and op1["in_force"], op1
     assert op1["polygon"] == [[round(e), round(n)] for e, n in polygon]
+    await _resume(c, fid)
     route = await c.until(
         """old => {
           const v = tcgcs.state.mapDoc.vehicles.find(v => v.id === "UAV3");
@@ -213,9 +249,10 @@ async def test_an_operator_flies_the_paper_scenario_from_the_console(
     planned = {v["id"]: v["planned"] for v in await c.js("tcgcs.state.mapDoc.vehicles")}
     assert [v for v, labels in planned.items() if "after OP1" in labels] == ["UAV3"]
 
-    # The team time: +30 s moves every slot (from the time and slots the page has once it has
-    # the team-time version the zone's re-plan left); one no vehicle can make is refused in
-    # words.
+    # The team time at TEAM_S: +30 s moves every slot (from the time and slots the page has
+    # once it has the team-time version the zone's re-plan left); one no vehicle can make is
+    # refused in words.
+    await _paused_at(c, fid, TEAM_S)
     async with c.service.client() as client:
         version = int(_ok(await client.get(f"/v1/flights/{fid}/team-time"))["version"])
     await c.until("v => tcgcs.state.teamTimeVersion === v", version)
@@ -245,6 +282,7 @@ async def test_an_operator_flies_the_paper_scenario_from_the_console(
         refused,
         re.S,
     ), refused
+    await _resume(c, fid)
 
     # Mid-flight, then the arrival.
     await c.until_mission(MID_FLIGHT_S)
@@ -294,6 +332,7 @@ async def test_the_console_resumes_a_dropped_stream_and_sends_vehicles_home(
     c, page = console, console.page
     async with c.service.client() as client:
         fid, _ = await _flight(client, {"speedup": 200.0, "seed": 2}, scenario_name="compact")
+    await _pause_at(c, fid, ABORT_S, ABORT_ALL_S)
 
     # The stream passes through the test, which can drop it and refuse reconnects.
     gate: dict[str, Any] = {"blocked": False, "live": []}
@@ -335,10 +374,13 @@ async def test_the_console_resumes_a_dropped_stream_and_sends_vehicles_home(
     assert await c.js("tcgcs.stream.reconnects") >= 2
 
     # Abort UAV1 from its row: it flies home; then all of them.
-    await c.until_mission(ABORT_S)
+    await _paused_at(c, fid, ABORT_S)
     await page.click('#vehicles tr[data-vehicle="UAV1"] button.abort')
     await c.confirm()
-    # The page's request is on its way once confirmed: its row says when the flight has it.
+    # The page's request is on its way once confirmed: its row says when the flight has it
+    # (paused: the vehicle's new mode comes with its telemetry once the simulator flies on).
+    await c.until("() => tcgcs.table.text().UAV1.state === 'aborted'")
+    await _resume(c, fid)
     row = await c.until(
         """() => { const r = tcgcs.table.text().UAV1;
                    return r.state === "aborted" && r.mode === "RTL" && r; }"""
@@ -348,10 +390,12 @@ async def test_the_console_resumes_a_dropped_stream_and_sends_vehicles_home(
     uav1 = next(v for v in snap["vehicles"] if v["id"] == "UAV1")
     assert uav1["state"] == "aborted" and uav1["link"]["mode"] == "RTL", uav1
     assert await page.is_disabled('#vehicles tr[data-vehicle="UAV1"] button.abort'), row
-    await c.until_mission(ABORT_ALL_S)
+    await _paused_at(c, fid, ABORT_ALL_S)
     await c.screenshot("console-abort.png")
     await page.click("#abort-all")
     await c.confirm()
+    await c.until("() => Object.values(tcgcs.table.text()).every(r => r.state === 'aborted')")
+    await _resume(c, fid)
     await c.until("() => tcgcs.stream.state === 'ended'", timeout_s=60.0)
 
     async with c.service.client() as client:
