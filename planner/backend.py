@@ -36,6 +36,13 @@ LOOPBACK_ONLY_ENV = "RAY_ENABLE_WINDOWS_OR_OSX_CLUSTER"
 """Ray's switch between a cluster (its services on the node's network address) and one
 machine (on the loopback address, as on Windows and macOS): "0" is one machine."""
 
+RAY_START_TRIES = 3
+"""How many times a Ray started here is started before the backend gives up. Ray waits a fixed
+30 s of wall time for its new node to register (``ray._private.node``), which a busy machine
+can overrun; each start that timed out is shut down before the next."""
+RAY_START_TIMED_OUT = "timed out during startup"
+"""What Ray's error says when its node did not register in time."""
+
 
 class Backend(Protocol):
     """Runs a plan's per-vehicle work: the cost-to-go fields before the search, and the
@@ -126,9 +133,10 @@ class RayBackend:
             }
             if address is None:
                 options["num_cpus"] = num_cpus
+                _start_here(ray, options)
             else:
                 options["address"] = address
-            ray.init(**options)
+                ray.init(**options)
             self._started = True
         self._task = ray.remote(_finish_one)
         self._fields = ray.remote(_fields)
@@ -162,3 +170,16 @@ class RayBackend:
         if self._started:
             self._ray.shutdown()
             self._started = False
+
+
+def _start_here(ray: Any, options: dict[str, Any]) -> None:
+    """Start a Ray on this machine, again (up to :data:`RAY_START_TRIES` in all) while its
+    node times out registering; any other error at once."""
+    for attempt in range(1, RAY_START_TRIES + 1):
+        try:
+            ray.init(**options)
+            return
+        except Exception as err:
+            if RAY_START_TIMED_OUT not in str(err) or attempt == RAY_START_TRIES:
+                raise
+            ray.shutdown()

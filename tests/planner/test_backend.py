@@ -3,13 +3,14 @@ would be joined) are the routes finished in this process, for the same seed."""
 
 from __future__ import annotations
 
+import sys
 from collections.abc import Iterator
 from pathlib import Path
 
 import numpy as np
 import pytest
 
-from planner.backend import LocalBackend, RayBackend
+from planner.backend import RAY_START_TRIES, LocalBackend, RayBackend
 from planner.errors import InfeasibleError
 from planner.plan import Plan, plan
 from planner.scenario import load_scenario, parse_scenario
@@ -66,3 +67,60 @@ def test_a_route_that_cannot_be_made_flyable_on_ray_fails_as_it_does_here(
     with pytest.raises(InfeasibleError) as remote:
         plan(scenario, "astar", backend=ray_backend)
     assert str(here.value) in str(remote.value)
+
+
+class _SlowRay:
+    """Stands in for the ``ray`` module: its first ``fail`` starts time out as Ray's node does
+    on a busy machine (``ray._private.node``: "The current node timed out during startup")."""
+
+    def __init__(
+        self, fail: int, error: str = "The current node timed out during startup."
+    ) -> None:
+        self.fail, self.error = fail, error
+        self.calls: list[str] = []
+
+    def is_initialized(self) -> bool:
+        return False
+
+    def init(self, **options: object) -> None:
+        self.calls.append("init")
+        if self.calls.count("init") <= self.fail:
+            raise Exception(self.error)
+
+    def shutdown(self) -> None:
+        self.calls.append("shutdown")
+
+    def remote(self, fn: object) -> object:
+        return fn
+
+
+@pytest.mark.parametrize("fail", [1, 2])
+def test_a_ray_started_here_is_started_again_while_its_node_times_out(
+    monkeypatch: pytest.MonkeyPatch, fail: int
+) -> None:
+    slow = _SlowRay(fail)
+    monkeypatch.setitem(sys.modules, "ray", slow)
+    backend = RayBackend(num_cpus=1)
+    assert slow.calls == ["init", "shutdown"] * fail + ["init"]
+    backend.close()
+    assert slow.calls[-1] == "shutdown"
+
+
+def test_a_ray_that_times_out_every_time_or_fails_otherwise_says_so(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    slow = _SlowRay(RAY_START_TRIES)
+    monkeypatch.setitem(sys.modules, "ray", slow)
+    with pytest.raises(Exception, match="timed out during startup"):
+        RayBackend(num_cpus=1)
+    assert slow.calls.count("init") == RAY_START_TRIES
+    broken = _SlowRay(1, "raylet binary not found")
+    monkeypatch.setitem(sys.modules, "ray", broken)
+    with pytest.raises(Exception, match="raylet binary not found"):
+        RayBackend(num_cpus=1)
+    assert broken.calls == ["init"]  # not a timeout: not tried again
+    joining = _SlowRay(1)
+    monkeypatch.setitem(sys.modules, "ray", joining)
+    with pytest.raises(Exception, match="timed out"):
+        RayBackend("auto")
+    assert joining.calls == ["init"]  # a cluster joined is not started here
