@@ -38,6 +38,10 @@ class Load:
     readers: int = 200
     read_s: float = 60.0
     streams: int = 50
+    answer_s: float | None = 60.0
+    """How long (wall s) a request waits for its answer before it counts as unanswered; None:
+    as long as it takes (a test's verdict, which no machine's load may move: a busy machine
+    runs the service's planning jobs, scenario parses among them, behind everything else)."""
 
 
 @dataclass
@@ -62,9 +66,10 @@ class LoadSeen:
 
 
 class _Client:
-    def __init__(self, client: httpx.AsyncClient, seen: LoadSeen) -> None:
+    def __init__(self, client: httpx.AsyncClient, seen: LoadSeen, answer_s: float | None) -> None:
         self.c = client
         self.seen = seen
+        self.answer_s = answer_s
 
     async def request(self, method: str, path: str, **kw: Any) -> httpx.Response | None:
         try:
@@ -102,7 +107,7 @@ async def _oversized(c: _Client, nbytes: int) -> None:
     except ConnectionError:
         pass  # answered and closed early: read what it said
     try:
-        status_line = await asyncio.wait_for(reader.readline(), 60.0)
+        status_line = await asyncio.wait_for(reader.readline(), c.answer_s)
         status = int(status_line.split()[1])
     except (ConnectionError, TimeoutError, IndexError, ValueError) as err:
         c.seen.server_errors.append(f"POST /v1/scenarios ({nbytes} bytes): no answer ({err!r})")
@@ -169,9 +174,9 @@ async def apply(url: str, token: str, flight_id: str, load: Load) -> LoadSeen:
     limits = httpx.Limits(max_connections=load.readers + load.streams + 20)
     headers = {"Authorization": f"Bearer {token}"}
     async with httpx.AsyncClient(
-        base_url=url, headers=headers, limits=limits, timeout=60.0
+        base_url=url, headers=headers, limits=limits, timeout=load.answer_s
     ) as client:
-        c = _Client(client, seen)
+        c = _Client(client, seen, load.answer_s)
         until = time.monotonic() + load.read_s
         await asyncio.gather(
             _uploads(c, load),
@@ -190,12 +195,12 @@ HEALTH_EVERY_S = 0.1
 """How often (wall s) the monitor asks ``/v1/health``."""
 
 
-def _monitor(url: str, stop: Any, out: Any) -> None:
+def _monitor(url: str, answer_s: float | None, stop: Any, out: Any) -> None:
     """Ask ``/v1/health`` every :data:`HEALTH_EVERY_S` on one kept connection until ``stop``
     is set; put the answer times (ms) and any failure."""
     times: list[float] = []
     failures: list[str] = []
-    with httpx.Client(base_url=url, timeout=60.0) as client:
+    with httpx.Client(base_url=url, timeout=answer_s) as client:
         while not stop.is_set():
             t0 = time.perf_counter()
             try:
@@ -218,7 +223,7 @@ def loaded(url: str, token: str, flight_id: str, load: Load) -> Iterator[Any]:
     ctx = mp.get_context("spawn")
     out, heard, stop = ctx.Queue(), ctx.Queue(), ctx.Event()
     proc = ctx.Process(target=_run, args=(url, token, flight_id, load, out), daemon=True)
-    monitor = ctx.Process(target=_monitor, args=(url, stop, heard), daemon=True)
+    monitor = ctx.Process(target=_monitor, args=(url, load.answer_s, stop, heard), daemon=True)
     monitor.start()
     proc.start()
 

@@ -33,6 +33,7 @@ from gcs.api.tiles import TileSource
 from gcs.service.engine import Engine, Infeasible, InvalidInput, ServiceError, TooBusy
 from gcs.service.planning import Limits
 from gcs.service.scenariotext import ScenarioLimits
+from gcs.service.workers import ahead_of_service
 from gcs.store.repository import Store, StoreConflict, StoreError, StoreNotFound
 
 __all__ = ["create_app"]
@@ -85,7 +86,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
             plan_ray=settings.plan_ray,
             spare_worker=settings.spare_worker,
             lockstep_dir=settings.lockstep_dir,
-            worker_nice=settings.worker_nice,
+            worker_nice=_worker_nice(settings),
         )
         app.state.engine = engine
         for fid in await engine.resume_kept():
@@ -160,6 +161,19 @@ def create_app(settings: Settings | None = None) -> FastAPI:
         return Response(metrics_text(request.app.state.engine, watch), media_type="text/plain")
 
     return app
+
+
+def _worker_nice(settings: Settings) -> int | None:
+    """``TCGCS_WORKER_NICE``, or unset the workers ahead of the service where it may be."""
+    if settings.worker_nice is not None:
+        return settings.worker_nice
+    ahead = ahead_of_service()
+    if ahead is None:
+        log.info(
+            "flight workers run at the service's priority (running them ahead of it needs "
+            "CAP_SYS_NICE)"
+        )
+    return ahead
 
 
 def _limits(settings: Settings) -> Limits:

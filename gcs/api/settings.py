@@ -73,7 +73,9 @@ class Settings(BaseSettings):
     """The flight workers' scheduling priority (``nice``; their planning jobs run at it too):
     below the service's own (0) puts flights ahead of the API and of anything else on the
     machine, and needs the privilege to raise a priority (CAP_SYS_NICE; refused, a worker
-    says so in its log and runs at the service's). Unset: the service's."""
+    says so in its log and runs at the service's). Unset: 5 ahead of the service's where the
+    service may raise a priority, else the service's
+    (:func:`gcs.service.workers.ahead_of_service`)."""
     spare_worker: bool = True
     """Keep one flight worker started and loaded ahead of the next flight (or of a worker
     that dies): it takes its flight in a fifth of a second instead of the Python start-up

@@ -36,9 +36,29 @@ from gcs.service.ended import FINAL_FILE
 from gcs.service.scenariotext import Conflict, NotFound, ServiceError
 from gcs.service.worker import LINE_LIMIT, LOG_FILE, READS, error_of, socket_path
 
-__all__ = ["RESTARTS", "Spawner", "WorkerFlight", "WorkerGone"]
+__all__ = ["RESTARTS", "WORKERS_AHEAD", "Spawner", "WorkerFlight", "WorkerGone", "ahead_of_service"]
 
 log = logging.getLogger(__name__)
+
+WORKERS_AHEAD = 5
+"""How far ahead of the service its flight workers run unless told (``nice`` this much lower),
+where the service may raise a priority: a flight's control loop before the API, its planning
+jobs and anything else on the machine at the default priority."""
+
+
+def ahead_of_service() -> int | None:
+    """The flight workers' priority unless told (``TCGCS_WORKER_NICE``): :data:`WORKERS_AHEAD`
+    ahead of this process where it may raise a priority (CAP_SYS_NICE, or a ``RLIMIT_NICE``
+    that allows it: tried on this process, then put back), else None (this process's)."""
+    now = os.getpriority(os.PRIO_PROCESS, 0)
+    ahead = max(-20, now - WORKERS_AHEAD)
+    try:
+        os.setpriority(os.PRIO_PROCESS, 0, ahead)
+    except OSError:
+        return None
+    os.setpriority(os.PRIO_PROCESS, 0, now)  # a lower priority needs no privilege
+    return ahead
+
 
 READY_WALL_S = 60.0
 """How long (wall s) a new worker may take to say it is ready (its simulator started, its

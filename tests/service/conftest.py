@@ -5,6 +5,8 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import subprocess
+import sys
 from collections.abc import AsyncIterator, Mapping
 from dataclasses import dataclass
 from pathlib import Path
@@ -21,6 +23,17 @@ def proc_stat(pid: int) -> list[str]:
     """A process's fields in /proc/PID/stat after its name (the kernel's field 3 on: state,
     ppid, ... nice is the 17th here)."""
     return Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
+
+
+def nice_of(pid: int) -> int:
+    """A process's ``nice``, read by the kernel's account (/proc/PID/stat, field 19)."""
+    return int(proc_stat(pid)[16])
+
+
+def may_raise_priority() -> bool:
+    """Whether a process of this user may run ahead of the default priority (CAP_SYS_NICE)."""
+    probe = subprocess.run([sys.executable, "-c", "import os; os.nice(-1)"], check=False)
+    return probe.returncode == 0
 
 
 @dataclass

@@ -17,8 +17,6 @@ import os
 import pickle
 import signal
 import sqlite3
-import subprocess
-import sys
 import time
 from collections import Counter
 from pathlib import Path
@@ -31,7 +29,7 @@ from gcs.store.repository import Store
 from tests.flightstory import story
 from tests.gcs.conftest import hold_while_away
 from tests.paperbounds import team_time_move_max_s
-from tests.service.conftest import proc_stat, serve
+from tests.service.conftest import may_raise_priority, nice_of, serve
 from tests.service.test_flights_http import (
     ARRIVAL_TOLERANCE_S,
     _all_events,
@@ -105,17 +103,6 @@ WORKER_NICE = -2
 """The workers' priority asked for (``TCGCS_WORKER_NICE``) where a test checks it."""
 
 
-def _may_raise_priority() -> bool:
-    """Whether a process of this user may run ahead of the default priority (CAP_SYS_NICE)."""
-    probe = subprocess.run([sys.executable, "-c", "import os; os.nice(-1)"], check=False)
-    return probe.returncode == 0
-
-
-def _nice_of(pid: int) -> int:
-    """A process's ``nice``, read by the kernel's account (/proc/PID/stat, field 19)."""
-    return int(proc_stat(pid)[16])
-
-
 @pytest.mark.parametrize("how", [signal.SIGKILL, signal.SIGSTOP], ids=["killed", "hung"])
 async def test_a_killed_or_hung_flight_worker_is_flown_on_from_its_checkpoint(
     tmp_path: Path, how: signal.Signals
@@ -138,9 +125,9 @@ async def test_a_killed_or_hung_flight_worker_is_flown_on_from_its_checkpoint(
             assert len(spare) == 1, spare  # started when the flight's worker was
             # TCGCS_WORKER_NICE: the workers (the spare too) ahead of the service, where the
             # privilege allows (else they say so and run at the service's).
-            nice = WORKER_NICE if _may_raise_priority() else _nice_of(svc.proc.pid)
-            assert worker["nice"] == _nice_of(pid) == _nice_of(spare[0]) == nice, worker
-            assert _nice_of(svc.proc.pid) == os.getpriority(os.PRIO_PROCESS, 0)
+            nice = WORKER_NICE if may_raise_priority() else nice_of(svc.proc.pid)
+            assert worker["nice"] == nice_of(pid) == nice_of(spare[0]) == nice, worker
+            assert nice_of(svc.proc.pid) == os.getpriority(os.PRIO_PROCESS, 0)
             os.kill(pid, how)
             away = asyncio.create_task(hold_while_away(data / "flights" / fid / "pace", AWAY_S))
             try:
