@@ -11,6 +11,7 @@ import signal
 import pytest
 import yaml
 
+from tests.gcs.conftest import hold_while_away
 from tests.service.conftest import Service
 from tests.service.test_flights_http import _flight, _ok, _paused, _scheduled, _taken_on
 from tests.teams import compact_paper
@@ -52,8 +53,9 @@ async def test_a_paused_flight_whose_worker_died_is_paused_again_by_the_next(
 ) -> None:
     """Paused, with a later pause asked for, when its worker is killed: the worker that takes
     the flight on from its checkpoint keeps both, holds the flight (where its simulator had
-    got to: the simulator flies on only once no ground station has acknowledged it for
-    seconds), and flies on when resumed, to its later pause."""
+    got to: on its own the simulator flies on once no ground station has acknowledged it for
+    seconds, :data:`sitl_stub.lockstep.STALE_WALL_S`; here the test holds it meanwhile), and
+    flies on when resumed, to its later pause."""
     later_s = PAUSE_AT_S + 150.0
     async with spare_service.client() as client:
         fid, _ = await _flight(client, {"speedup": 200.0, "seed": 4}, scenario_name="compact")
@@ -63,7 +65,13 @@ async def test_a_paused_flight_whose_worker_died_is_paused_again_by_the_next(
         first = await _paused(client, fid, PAUSE_AT_S)
         pid = first["worker"]["pid"]
         os.kill(pid, signal.SIGKILL)
+        # Until the next worker acknowledges it, the simulator is held where it is (a ground
+        # station away for no flight at all), however long a busy machine takes to start it.
+        away = asyncio.create_task(
+            hold_while_away(spare_service.data_dir / "flights" / fid / "pace", 0.0)
+        )
         await _taken_on(client, fid, pid)
+        await away
         while not (snap := _ok(await client.get(f"/v1/flights/{fid}")))["pause"]["paused"]:
             assert snap["state"] in ("ready", "running"), snap["state"]  # ready: taking it on
             await asyncio.sleep(0.05)
