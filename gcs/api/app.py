@@ -187,6 +187,7 @@ def _limits(settings: Settings) -> Limits:
         jobs_running=settings.jobs_running,
         jobs_per_owner=settings.jobs_per_token,
         job_time_limit_s=settings.job_time_limit_s,
+        job_niceness=settings.job_niceness,
     )
 
 

@@ -53,6 +53,10 @@ class Settings(BaseSettings):
     """Jobs one token may have queued or running; past it, 429 with Retry-After."""
     job_time_limit_s: float = Field(default=900.0, gt=0.0)
     """A planning job running longer (wall s) is stopped and failed."""
+    job_niceness: int = Field(default=10, ge=0, le=19)
+    """How much lower than the service's own its planning jobs' scheduling priority is
+    (``nice``; a local Ray a job starts runs at the job's): planning is batch work, behind
+    flights and requests."""
     plan_ray: str | None = Field(default=None, min_length=1)
     """Where planning jobs finish their vehicles' routes: unset, in the job's own process
     (and processes it forks, for a large team); ``local``, a Ray each job starts on this

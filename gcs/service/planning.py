@@ -65,6 +65,8 @@ class Limits:
     """What a 429 tells the client to wait, s."""
     parse_time_limit_s: float = 120.0
     """Reading one scenario's text (at most the body limit) takes no longer, wall s."""
+    job_niceness: int = JOB_NICENESS
+    """How much lower than this process's the jobs' scheduling priority is (``nice``)."""
 
 
 @dataclass
@@ -143,7 +145,7 @@ class Planning:
         self.method = method
         self.ray = ray
         self.work = ProcessJobs(
-            limits.jobs_running, preload=planjobs.PRELOAD, niceness=JOB_NICENESS
+            limits.jobs_running, preload=planjobs.PRELOAD, niceness=limits.job_niceness
         )
         self.jobs: dict[str, Job] = {}
         self.schedules: dict[str, PlannedSchedule] = {}
