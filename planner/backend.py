@@ -108,7 +108,8 @@ class RayBackend:
     ----------
     address
         A running cluster to join (``ray.init(address=...)``: ``"auto"``, ``"ray://host:10001"``);
-        None starts a Ray on this machine, with ``num_cpus`` workers (all cores when None).
+        None starts a Ray on this machine, with ``num_cpus`` workers (all cores when None),
+        whatever cluster ``RAY_ADDRESS`` or an earlier ``ray start`` names.
     num_cpus
         For a Ray started here only.
 
@@ -132,7 +133,9 @@ class RayBackend:
                 "configure_logging": False,
             }
             if address is None:
-                options["num_cpus"] = num_cpus
+                # "local": a new Ray, never one that RAY_ADDRESS or the last `ray start` on
+                # this machine (/tmp/ray/ray_current_cluster) names, running or not.
+                options |= {"address": "local", "num_cpus": num_cpus}
                 _start_here(ray, options)
             else:
                 options["address"] = address

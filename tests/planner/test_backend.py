@@ -78,12 +78,14 @@ class _SlowRay:
     ) -> None:
         self.fail, self.error = fail, error
         self.calls: list[str] = []
+        self.options: list[dict[str, object]] = []
 
     def is_initialized(self) -> bool:
         return False
 
     def init(self, **options: object) -> None:
         self.calls.append("init")
+        self.options.append(options)
         if self.calls.count("init") <= self.fail:
             raise Exception(self.error)
 
@@ -102,6 +104,8 @@ def test_a_ray_started_here_is_started_again_while_its_node_times_out(
     monkeypatch.setitem(sys.modules, "ray", slow)
     backend = RayBackend(num_cpus=1)
     assert slow.calls == ["init", "shutdown"] * fail + ["init"]
+    # A new Ray each time, not the cluster RAY_ADDRESS or the last `ray start` here names.
+    assert [o["address"] for o in slow.options] == ["local"] * (fail + 1)
     backend.close()
     assert slow.calls[-1] == "shutdown"
 
@@ -124,3 +128,4 @@ def test_a_ray_that_times_out_every_time_or_fails_otherwise_says_so(
     with pytest.raises(Exception, match="timed out"):
         RayBackend("auto")
     assert joining.calls == ["init"]  # a cluster joined is not started here
+    assert joining.options == [{**joining.options[0], "address": "auto"}]
