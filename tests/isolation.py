@@ -40,8 +40,10 @@ class Load:
     streams: int = 50
     answer_s: float | None = 60.0
     """How long (wall s) a request waits for its answer before it counts as unanswered; None:
-    as long as it takes (a test's verdict, which no machine's load may move: a busy machine
-    runs the service's planning jobs, scenario parses among them, behind everything else)."""
+    as long as it takes, and the stream clients follow the flight to its end (a test's
+    verdict, which no machine's load may move: a busy machine runs the service's planning
+    jobs, scenario parses among them, behind everything else, and may start the load's own
+    process after the readers' window)."""
 
 
 @dataclass
@@ -154,8 +156,11 @@ async def _reader(c: _Client, flight_id: str, until: float) -> None:
 
 
 async def _stream(c: _Client, flight_id: str, until: float) -> None:
+    """Follow the flight's stream until ``until`` (or, where requests wait for their answers
+    however long, :attr:`Load.answer_s` None, to the flight's end)."""
+    window = None if c.answer_s is None else max(0.0, until - time.monotonic())
     with contextlib.suppress(httpx.HTTPError, TimeoutError):
-        async with asyncio.timeout(max(0.0, until - time.monotonic())):
+        async with asyncio.timeout(window):
             async with c.c.stream(
                 "GET", f"/v1/flights/{flight_id}/stream",
                 headers={"Accept": "text/event-stream"}, timeout=None,
