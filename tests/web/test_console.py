@@ -115,25 +115,25 @@ def _inside(e: float, n: float, polygon: list[list[float]]) -> bool:
     return inside
 
 
-async def _positions(c: Console) -> tuple[float, dict[str, tuple[float, float]]]:
-    """The mission time and each vehicle's position the map draws."""
-    got = await c.js(
-        "({t: tcgcs.telemetry.t_s, v: tcgcs.map.vehicles.map(v => [v.id, v.east_m, v.north_m])})"
-    )
-    return got["t"], {vid: (e, n) for vid, e, n in got["v"]}
+async def _positions(c: Console) -> dict[str, tuple[float, float]]:
+    """Each vehicle's position the map draws."""
+    got = await c.js("tcgcs.map.vehicles.map(v => [v.id, v.east_m, v.north_m])")
+    return {vid: (e, n) for vid, e, n in got}
 
 
 async def _three_moving(c: Console, fid: str) -> None:
+    """The map read at two pauses 150 s of flight apart (the flight flies on after)."""
     await _paused_at(c, fid, FLYING_S)
-    _, first = await _positions(c)
+    first = await _positions(c)
     await _resume(c, fid)
     await _paused_at(c, fid, FLYING_S + READ_APART_S)
-    _, second = await _positions(c)
+    second = await _positions(c)
     assert set(first) == set(second) == set(UAVS)
     for vid in UAVS:
         assert math.dist(first[vid], second[vid]) > 500.0, (vid, first[vid], second[vid])
     rows = await c.js("tcgcs.table.text()")
     assert all(rows[v]["state"] in ("on route", "climbing", "link silent") for v in UAVS), rows
+    await _resume(c, fid)
 
 
 async def _draw_no_fly(c: Console, box: list[tuple[float, float]]) -> list[list[float]]:
@@ -214,7 +214,6 @@ async def test_an_operator_flies_the_paper_scenario_from_the_console(
 
     # Three vehicles fly: what the map draws moves between two reads.
     await _three_moving(c, fid)
-    await _resume(c, fid)
 
     # A no-fly zone drawn by mouse on UAV3's route at STEER_S, once the page has UAV2's route
     # round the scenario's pop-up on board.
