@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import math
 from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any
@@ -58,7 +59,9 @@ class FleetVehicle:
             "system_id": self.vehicle.system_id,
             "flight_id": self.flight_id,
             "link": {
-                "heartbeat_age_s": None if age is None else round(max(age, 0.0), 3),
+                # Up to the next millisecond: an age past the link's timeout never reads
+                # as within it beside "healthy": false.
+                "heartbeat_age_s": None if age is None else math.ceil(max(age, 0.0) * 1e3) / 1e3,
                 "healthy": st.link_ok(now_s),
                 "received": c.received,
                 "sent": c.sent,
