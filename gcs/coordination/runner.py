@@ -1141,13 +1141,7 @@ class FlightRunner:
         runner.adjustments = [e for e in events if e.strategy is not None]
         runner.state = FlightState.READY
         runner.resumed = True
-        # What was under way when the process died is gone: decided again, re-planned again.
-        for m in team.members.values():
-            m.busy_command = m.busy_mission = False
-            m.leaving_seq = None
-            m.link_silent = False
-        team.popups_done -= team.popups_running
-        team.popups_running.clear()
+        team.restarted()
         return runner
 
     async def reconcile(self) -> dict[str, str]:

@@ -1537,6 +1537,21 @@ class TeamController(ZoneGuard, TeamTime):
     def rebind_world(self, world: World) -> None:
         self.world = world
 
+    def restarted(self) -> None:
+        """Taken on from a checkpoint by a new process: what was under way when the old one died
+        is gone (commands, uploads and re-plans are decided again), and what it had watched is
+        out of date (the vehicles flew on unwatched meanwhile)."""
+        for m in self.members.values():
+            m.busy_command = m.busy_mission = False
+            m.leaving_seq = None
+            m.link_silent = False
+            # The progress and standing-still watches start again at the first fix: the time
+            # since the checkpoint's last fix is no time seen without progress (a vehicle that
+            # finished a loiter meanwhile is behind the farthest point it reached circling).
+            m.progress = m.still = None
+        self.popups_done -= self.popups_running
+        self.popups_running.clear()
+
 
 def _neighbours(
     forecasts: Forecasts, pair: tuple[str, str], within_m: float, t: float, *, heights: bool = True

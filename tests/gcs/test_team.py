@@ -857,6 +857,42 @@ def test_a_pickled_controller_decides_as_the_one_it_was_taken_from(
     assert uav2["state"] == "on_route" and uav2["slot_s"] == pytest.approx(m.target_s)
 
 
+def test_a_vehicle_that_left_its_loiter_unwatched_is_no_stall_after_a_restart(
+    team: TeamController, paper: tuple[Scenario, World, Schedule]
+) -> None:
+    """Taken on from a checkpoint kept as it circled in a loiter: at the first fix after the
+    restart it has left the loiter and is behind the farthest point it reached circling. Its
+    progress is watched from that fix on, not from the checkpoint's last one."""
+    vid = "UAV2"
+    m, t0 = flying(team, vid, 600.0)
+    team.config = dataclasses.replace(team.config, stall_bound_s=10.0)
+    loiter_seq = 2
+    items = list(m.mission.items)
+    items[loiter_seq] = dataclasses.replace(items[loiter_seq], command=MAV_CMD_NAV_LOITER_TURNS)
+    m.mission = dataclasses.replace(m.mission, items=tuple(items))
+    circling = fix_at(team, vid, 20_250.0, t0)
+    team.handle(act.Fix(**{**circling.__dict__, "mission_seq": loiter_seq}), t0)
+    assert m.state is VehicleState.LOITERING
+    copy = pickle.loads(pickle.dumps(team))
+    copy.rebind_world(paper[1])
+    copy.restarted()
+    # 40 s later (4 x the bound), out of the loiter, 250 m behind where it circled.
+    t1 = t0 + 40.0
+    out = copy.handle(act.Fix(**{**fix_at(copy, vid, 20_000.0, t1).__dict__, "mission_seq": 3}), t1)
+    assert not reports(out, EventKind.VEHICLE_LOST)
+    # The watch goes on from there: making no progress past the bound from that fix is a stall.
+    lost: list[act.Report] = []
+    t = t1
+    while not lost:
+        t += 0.5
+        f = fix_at(copy, vid, 20_000.0 - 12.5 * (t - t1), t)
+        lost = reports(
+            copy.handle(act.Fix(**{**f.__dict__, "mission_seq": 3}), t), EventKind.VEHICLE_LOST
+        )
+    assert t - t1 == pytest.approx(copy.config.stall_bound_s + 0.5, abs=0.01)
+    assert f"no progress along its route for {t - t1:.1f} s" in lost[0].reason
+
+
 # -- supervision ---------------------------------------------------------------------------------
 
 
