@@ -14,15 +14,25 @@ goal, the search's heuristic), the other per-vehicle part of a plan.
 - :class:`RayBackend`: each vehicle a Ray task. The world, the problem and the zones are put
   into Ray's object store once and shared by the tasks (on a cluster, shipped once to each
   node). ``address=None`` starts a Ray on this machine, listening on the loopback address
-  only; ``address="auto"`` or ``"ray://head:10001"`` joins a running cluster
+  only; ``address="auto"``, ``"head:6379"`` or ``"ray://head:10001"`` joins a running cluster
   (``ray.init(address=...)``). Ray is imported only when this backend is made.
+
+Joining a cluster: one named by a loopback address is this machine's alone, and is joined on
+the loopback address (Ray would otherwise put the machine's network address in its place).
+Ray's ``ray start`` turns token authentication on whenever a token is at hand
+(``RAY_AUTH_TOKEN``, the file ``RAY_AUTH_TOKEN_PATH`` names or ``~/.ray/auth_token``, which a
+Ray started here writes), but a driver joining it sends its token only in ``RAY_AUTH_MODE=token``;
+with ``RAY_AUTH_MODE`` unset and a token at hand, the backend joins in that mode (a cluster
+without authentication takes it as well).
 """
 
 from __future__ import annotations
 
+import ipaddress
 import os
 from collections.abc import Sequence
 from dataclasses import dataclass
+from pathlib import Path
 from typing import TYPE_CHECKING, Any, Protocol
 
 if TYPE_CHECKING:
@@ -32,6 +42,10 @@ if TYPE_CHECKING:
 
 __all__ = ["Backend", "LocalBackend", "RayBackend"]
 
+AUTH_MODE_ENV = "RAY_AUTH_MODE"
+"""Ray's switch for token authentication: "token" sends the token at hand."""
+AUTH_TOKEN_ENV = "RAY_AUTH_TOKEN"
+AUTH_TOKEN_PATH_ENV = "RAY_AUTH_TOKEN_PATH"
 LOOPBACK_ONLY_ENV = "RAY_ENABLE_WINDOWS_OR_OSX_CLUSTER"
 """Ray's switch between a cluster (its services on the node's network address) and one
 machine (on the loopback address, as on Windows and macOS): "0" is one machine."""
@@ -118,10 +132,13 @@ class RayBackend:
     """
 
     def __init__(self, address: str | None = None, *, num_cpus: int | None = None) -> None:
-        if address is None:
-            # A Ray started here is this machine's alone: its services listen on the loopback
-            # address, not the machine's network address (read when ray is first imported).
+        # Both read when ray is first imported.
+        if address is None or _on_loopback(address):
+            # A Ray started here (or joined on the loopback address) is this machine's alone:
+            # its services on the loopback address, not the machine's network address.
             os.environ.setdefault(LOOPBACK_ONLY_ENV, "0")
+        if address is not None and AUTH_MODE_ENV not in os.environ and _token_at_hand():
+            os.environ[AUTH_MODE_ENV] = "token"
         import ray
 
         self._ray = ray
@@ -186,3 +203,22 @@ def _start_here(ray: Any, options: dict[str, Any]) -> None:
             if RAY_START_TIMED_OUT not in str(err) or attempt == RAY_START_TRIES:
                 raise
             ray.shutdown()
+
+
+def _on_loopback(address: str) -> bool:
+    """``address`` (``"host:port"`` or ``"ray://host:port"``) names a loopback host."""
+    host = address.removeprefix("ray://").rsplit(":", 1)[0].strip("[]")
+    if host == "localhost":
+        return True
+    try:
+        return ipaddress.ip_address(host).is_loopback
+    except ValueError:
+        return False
+
+
+def _token_at_hand() -> bool:
+    """A Ray authentication token where Ray looks for one."""
+    if os.environ.get(AUTH_TOKEN_ENV):
+        return True
+    path = os.environ.get(AUTH_TOKEN_PATH_ENV)
+    return Path(path).is_file() if path else (Path.home() / ".ray" / "auth_token").is_file()

@@ -3,6 +3,7 @@ would be joined) are the routes finished in this process, for the same seed."""
 
 from __future__ import annotations
 
+import os
 import sys
 from collections.abc import Iterator
 from pathlib import Path
@@ -10,7 +11,15 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from planner.backend import RAY_START_TRIES, LocalBackend, RayBackend
+from planner.backend import (
+    AUTH_MODE_ENV,
+    AUTH_TOKEN_ENV,
+    AUTH_TOKEN_PATH_ENV,
+    LOOPBACK_ONLY_ENV,
+    RAY_START_TRIES,
+    LocalBackend,
+    RayBackend,
+)
 from planner.errors import InfeasibleError
 from planner.plan import Plan, plan
 from planner.scenario import load_scenario, parse_scenario
@@ -129,3 +138,46 @@ def test_a_ray_that_times_out_every_time_or_fails_otherwise_says_so(
         RayBackend("auto")
     assert joining.calls == ["init"]  # a cluster joined is not started here
     assert joining.options == [{**joining.options[0], "address": "auto"}]
+
+
+@pytest.mark.parametrize(
+    ("address", "loopback"),
+    [
+        ("127.0.0.1:6379", True),
+        ("ray://localhost:10001", True),
+        ("[::1]:6379", True),
+        ("head.example:6379", False),
+        ("10.1.2.3:6379", False),
+        ("auto", False),
+    ],
+)
+@pytest.mark.parametrize("token", ["file", "default_file", "env", "none", "mode_set"])
+def test_a_cluster_is_joined_on_its_loopback_address_and_with_the_token_at_hand(
+    monkeypatch: pytest.MonkeyPatch, tmp_path: Path, address: str, loopback: bool, token: str
+) -> None:
+    """Ray's ``ray start`` turns token authentication on when a token is at hand; a driver
+    sends it only in ``RAY_AUTH_MODE=token`` (Ray's ``authentication_token_setup``), which the
+    backend sets when it is unset and a token is where Ray looks for one. A cluster on a
+    loopback address is joined on it (``ray._private.services.resolve_ip_for_localhost``
+    otherwise puts the machine's network address in its place)."""
+    for name in (AUTH_MODE_ENV, AUTH_TOKEN_ENV, AUTH_TOKEN_PATH_ENV, LOOPBACK_ONLY_ENV):
+        monkeypatch.delenv(name, raising=False)
+    monkeypatch.setenv("HOME", str(tmp_path))
+    if token == "file":
+        (tmp_path / "token").write_text("t")
+        monkeypatch.setenv(AUTH_TOKEN_PATH_ENV, str(tmp_path / "token"))
+    elif token == "default_file":
+        (tmp_path / ".ray").mkdir()
+        (tmp_path / ".ray" / "auth_token").write_text("t")
+    elif token == "env":
+        monkeypatch.setenv(AUTH_TOKEN_ENV, "t")
+    elif token == "mode_set":
+        monkeypatch.setenv(AUTH_MODE_ENV, "disabled")
+        monkeypatch.setenv(AUTH_TOKEN_ENV, "t")
+    joined = _SlowRay(0)
+    monkeypatch.setitem(sys.modules, "ray", joined)
+    RayBackend(address).close()
+    assert joined.options[0]["address"] == address
+    assert os.environ.get(LOOPBACK_ONLY_ENV) == ("0" if loopback else None)
+    expected = {"none": None, "mode_set": "disabled"}.get(token, "token")
+    assert os.environ.get(AUTH_MODE_ENV) == expected
