@@ -1,8 +1,9 @@
 """The service's engine: the fleet, the store, planning (:mod:`gcs.service.planning`) and the
 flights, for the life of the process.
 
-Everything an API request does goes through :class:`Engine`: register a vehicle (or start
-bundled simulator vehicles), keep a scenario and plan a schedule as a job (its
+Everything an API request does goes through :class:`Engine`: register a vehicle (kept in the
+store, :mod:`gcs.service.registry`: a restarted service lists it under the same id and opens
+its link again), keep a scenario and plan a schedule as a job (its
 :class:`~gcs.service.planning.Planning`), create a flight on a schedule and vehicles, upload,
 launch, steer it (threats, team time, abort) and read it (snapshot, events, record, report).
 A flight is a :class:`~gcs.coordination.runner.FlightRunner` with its event and checkpoint
@@ -30,9 +31,10 @@ from gcs.mavlink.signing import SigningConfig
 from gcs.rehearsal.figures import FIGURES
 from gcs.rehearsal.report import write_figure
 from gcs.service.ended import FINAL_FILE, EndedFlight, EndedFlights, keep_final
-from gcs.service.fleet import Fleet, FleetVehicle, VehicleBusy
+from gcs.service.fleet import Fleet, FleetVehicle, VehicleBusy, unreached_view
 from gcs.service.flight import Rehearsal, stop_kept_simulator
 from gcs.service.planning import Limits, Planning
+from gcs.service.registry import Registry
 from gcs.service.scenariotext import (
     Conflict,
     Infeasible,
@@ -45,7 +47,7 @@ from gcs.service.scenariotext import (
 )
 from gcs.service.worker import FlightSpec, VehicleSpec
 from gcs.service.workers import FEED_SILENCE_S, RECONNECT_WALL_S, Spawner, WorkerFlight
-from gcs.store.repository import EventWriter, Store
+from gcs.store.repository import EventWriter, Store, StoreError
 from planner.scenario import Threat
 from sitl_stub.lockstep import LOCKSTEP_BYTES, Lockstep
 
@@ -109,10 +111,9 @@ class Engine:
         self._drawing: dict[tuple[str, str], asyncio.Lock] = {}
         """A lock per report figure being drawn: (flight, file name)."""
         self.fleet = Fleet()
+        self.registry = Registry(store, self.fleet)
+        """The API's vehicle ids, and the registered vehicles kept in the store."""
         self.flights: dict[str, WorkerFlight] = {}
-        self.vehicle_ids: dict[str, str] = {}
-        """Vehicle id (the API's) -> connection string."""
-        self._named = 0
         self._tasks: set[asyncio.Task[Any]] = set()
 
     async def close(self) -> None:
@@ -125,6 +126,7 @@ class Engine:
             await flight.close(stop=flight.simulated or not airborne)
         for task in list(self._tasks):
             task.cancel()
+        await self.registry.close()
         await self.planning.close()
         await self.workers.close()
         await self.fleet.close()
@@ -140,50 +142,92 @@ class Engine:
     async def add_vehicle(
         self, connection: str, *, system_id: int | None = None, signing_key: str | None = None
     ) -> dict[str, Any]:
-        """Register a live vehicle by connection string (its link opened, HEARTBEAT heard).
+        """Register a live vehicle by connection string (its link opened, HEARTBEAT heard), and
+        keep the registration in the store (nothing is kept when no vehicle answers). A
+        connection already registered answers with its id: a vehicle whose link is open (or
+        in a flight) as it is; one whose link is not open (kept by an earlier service process
+        and not answering yet, or registered with a signing key, which is not kept) has it
+        opened now, with ``signing_key`` if given, the system id kept if none is given.
 
         Raises
         ------
         InvalidInput
-            A malformed connection string or signing key.
+            A malformed connection string or signing key; no signing key for a vehicle that
+            was registered with one and whose link is not open.
         ServiceError
             No vehicle answered there.
         """
-        for vid, conn in self.vehicle_ids.items():
-            if conn == connection:
-                return self.vehicle_view(vid)
+        signing = None if signing_key is None else _signing(signing_key)
+        vid = self.registry.id_of(connection)
+        if vid is not None and self._reached(connection):
+            return self.vehicle_view(vid)
+        kept = self.registry.kept.get(connection)
+        if kept is not None:
+            if signing is None and self.registry.key_needed(connection):
+                raise InvalidInput(
+                    f"signing_key: vehicle {kept.id} ({connection}) was registered with a "
+                    "signing key, which is not kept: give it again"
+                )
+            system_id = kept.system_id if system_id is None else system_id
+            await self.registry.stop_reopening(connection)
         try:
-            signing = None if signing_key is None else _signing(signing_key)
             held = await self.fleet.vehicle(connection, system_id, signing=signing)
         except ValueError as err:
             raise InvalidInput(f"connection: {err}") from None
         except (GcsError, TimeoutError, OSError) as err:
+            self.registry.reopen(connection)  # a kept one: tried again in the background
             raise ServiceError(f"no vehicle answered at {connection}: {err}") from None
-        return self.vehicle_view(self._name(held.connection))
+        signed = held.connection in self.fleet.signing
+        try:
+            vid = await self.registry.keep(held.connection, system_id, signed=signed)
+        except StoreError:
+            if kept is None:
+                await self.fleet.drop([held.connection])
+            raise
+        return self.vehicle_view(vid)
 
-    def _name(self, connection: str) -> str:
-        """The API's id of the vehicle at ``connection`` (a new one the first time: ids are
-        never given twice, even once a vehicle has gone)."""
-        for vid, conn in self.vehicle_ids.items():
-            if conn == connection:
-                return vid
-        self._named += 1
-        vid = f"v{self._named}"
-        self.vehicle_ids[vid] = connection
-        return vid
+    def _reached(self, connection: str) -> bool:
+        """The service holds a link to the vehicle at ``connection``, or a running flight's
+        worker does."""
+        return self.fleet.held(connection) is not None or self._flying(connection) is not None
+
+    def _flying(self, connection: str) -> WorkerFlight | None:
+        """The flight, not over, whose worker holds (or reaches for) the vehicle at
+        ``connection``, if any."""
+        return next(
+            (
+                f
+                for f in self.flights.values()
+                if not f.over and connection in f.connections.values()
+            ),
+            None,
+        )
 
     def _held(self, vehicle_id: str) -> FleetVehicle:
-        conn = self.vehicle_ids.get(vehicle_id)
+        conn = self.registry.ids.get(vehicle_id)
         held = None if conn is None else self.fleet.held(conn)
+        if conn is not None and held is None:
+            flight = self._flying(conn)
+            if flight is not None:
+                raise Conflict(f"vehicle {conn} is already in flight {flight.id}")
+            if conn in self.registry.kept:
+                why = (
+                    "it was registered with a signing key: register it again with the key"
+                    if self.registry.key_needed(conn)
+                    else "no vehicle answers there yet; it is tried again in the background"
+                )
+                raise Conflict(f"vehicle {vehicle_id} ({conn}): its link is not open ({why})")
         if held is None:
             raise NotFound(f"no vehicle {vehicle_id!r}")
         return held
 
     def vehicle_view(self, vehicle_id: str) -> dict[str, Any]:
-        """A vehicle held by the service, or by the worker of the flight it is in: its link,
-        and its mode and armed state while the link is up (null once it is down, its last
-        word kept as ``last_mode`` and ``last_armed``)."""
-        conn = self.vehicle_ids.get(vehicle_id)
+        """A vehicle the service knows: held by the service, by the worker of the flight it
+        is in, or registered and kept with its link not open (``link.open`` false, nothing
+        known now). Its link, and its mode and armed state while the link is up (null once it
+        is down, its last word kept as ``last_mode`` and ``last_armed``); and whether a
+        signing key must be given again (``signing_key_needed``)."""
+        conn = self.registry.ids.get(vehicle_id)
         view = None if conn is None else self._view(conn)
         if view is None:
             raise NotFound(f"no vehicle {vehicle_id!r}")
@@ -191,21 +235,25 @@ class Engine:
 
     def _view(self, connection: str) -> dict[str, Any] | None:
         held = self.fleet.held(connection)
+        flight = self._flying(connection)
+        kept = self.registry.kept.get(connection)
         if held is not None and not held.lent:
             view = held.view()
-        else:
-            flight = next(
-                (f for f in self.flights.values() if connection in f.vehicle_views()), None
-            )
-            if flight is None:
-                return None
+        elif flight is not None and connection in flight.vehicle_views():
             view = dict(flight.vehicle_views()[connection])
+        elif flight is not None or kept is not None:
+            system_id = None if kept is None else kept.system_id
+            view = unreached_view(connection, system_id, self.registry.last_word.get(connection))
+            view["flight_id"] = None if flight is None else flight.id
+        else:
+            return None
         view.pop("counters", None)
+        view["signing_key_needed"] = self.registry.key_needed(connection)
         return view
 
     def vehicle_views(self) -> list[dict[str, Any]]:
         out = []
-        for vid, conn in self.vehicle_ids.items():
+        for vid, conn in self.registry.ids.items():
             view = self._view(conn)
             if view is not None:
                 out.append({"id": vid, **view})
@@ -215,7 +263,7 @@ class Engine:
         """Per connection of every open link (here and in the flight workers), its
         counters (``/metrics``)."""
         out = {}
-        for conn in self.vehicle_ids.values():
+        for conn in self.registry.ids.values():
             held = self.fleet.held(conn)
             if held is not None and not held.lent:
                 out[conn] = held.view()["counters"]
@@ -310,7 +358,7 @@ class Engine:
 
     def _adopt(self, flight: WorkerFlight) -> None:
         for conn in flight.connections.values():
-            self._name(conn)
+            self.registry.name(conn)
         flight.on_over = self._over
         flight.keep_told = EventWriter(self.store, flight.id).write
         self.flights[flight.id] = flight
@@ -321,9 +369,22 @@ class Engine:
         conns = sorted(set(flight.connections.values()))
         if flight.simulated:
             # Its simulator vehicles went with their simulator: no longer the service's.
-            self.vehicle_ids = {v: c for v, c in self.vehicle_ids.items() if c not in conns}
+            self.registry.forget(conns)
         else:
-            self._spawn(self.fleet.take_back(conns))
+            views = flight.vehicle_views()
+            for conn in conns:
+                if conn in views:
+                    self.registry.last_word[conn] = views[conn]
+            self._spawn(self._take_back(conns))
+
+    async def _take_back(self, connections: list[str]) -> None:
+        """The vehicles of a flight that has ended are the service's again: the links it lent
+        opened again; a kept vehicle that does not answer, or that the service never held (a
+        flight an earlier process started), is reopened in the background."""
+        lent = [c for c in connections if (h := self.fleet.held(c)) is not None and h.lent]
+        await self.fleet.take_back(lent)
+        for conn in connections:
+            self.registry.reopen(conn)
 
     async def _keep_lost(self, flight: WorkerFlight) -> None:
         """A flight no worker flies on, kept failed (with the events that say so), and its
@@ -336,12 +397,16 @@ class Engine:
     # -- restart --------------------------------------------------------------------------------
 
     async def resume_kept(self) -> list[str]:
-        """Follow again every flight an earlier service process left (killed, or stopped
-        with live vehicles in the air) that has not left its last snapshot yet: its worker
-        if it still answers, else, for a flight the store says is running, a new worker on
-        its checkpoint, on the vehicles it was flying (reached again by their connections),
-        each mission compared before anything is sent. Returns their ids (a vehicle that
-        cannot be reached fails the flight, with an event)."""
+        """Take on what an earlier service process left. Its registered vehicles first
+        (their ids and connections, :meth:`Registry.load`); then every flight it left (killed,
+        or stopped with live vehicles in the air) that has not left its last snapshot yet:
+        its worker if it still answers, else, for a flight the store says is running, a new
+        worker on its checkpoint, on the vehicles it was flying (reached again by their
+        connections), each mission compared before anything is sent. Last, the link to each
+        registered vehicle no flight's worker holds is opened again in the background (not
+        waited for: tried until it answers). Returns the ids of the flights (a vehicle that
+        cannot be reached fails its flight, with an event)."""
+        self.registry.load()
         resumed = []
         for fid in self.store.flights_in([s.value for s in FlightState]):
             folder = self.data_dir / "flights" / fid
@@ -358,6 +423,9 @@ class Engine:
                     continue
             self._adopt(flight)
             resumed.append(fid)
+        for conn in list(self.registry.kept):
+            if self._flying(conn) is None:
+                self.registry.reopen(conn)
         return resumed
 
     def flight(self, flight_id: str) -> WorkerFlight:

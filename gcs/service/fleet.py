@@ -22,7 +22,7 @@ from gcs.mavlink.signing import SigningConfig
 from gcs.mavlink.vehicle import Vehicle
 from gcs.service.stubs import StubProcess
 
-__all__ = ["Fleet", "FleetVehicle", "VehicleBusy"]
+__all__ = ["Fleet", "FleetVehicle", "VehicleBusy", "unreached_view"]
 
 
 class VehicleBusy(GcsError):
@@ -67,6 +67,7 @@ class FleetVehicle:
                 "sent": c.sent,
                 "malformed": c.malformed + c.crc_errors,
                 "rtt_s": c.rtt_s,
+                "open": True,
             },
             "counters": {
                 "received": c.received,
@@ -86,6 +87,36 @@ class FleetVehicle:
         }
 
 
+_LAST_WORD = ("last_mode", "last_armed", "lat_deg", "lon_deg", "alt_amsl_m", "battery_pct")
+"""The fields of a vehicle's view that hold what it last said (kept while its link is down)."""
+
+
+def unreached_view(
+    connection: str, system_id: int | None, last: dict[str, Any] | None = None
+) -> dict[str, Any]:
+    """A vehicle whose link is not open, as ``/v1/vehicles`` shows it (the fields of
+    :meth:`FleetVehicle.view`): the link dead, nothing known now, and its last word as
+    ``last`` (an earlier view of it) holds it, else null."""
+    last = last or {}
+    return {
+        "connection": connection,
+        "system_id": last.get("system_id", system_id),
+        "flight_id": None,
+        "link": {
+            "heartbeat_age_s": None,
+            "healthy": False,
+            "received": 0,
+            "sent": 0,
+            "malformed": 0,
+            "rtt_s": None,
+            "open": False,
+        },
+        "mode": None,
+        "armed": None,
+        **{name: last.get(name) for name in _LAST_WORD},
+    }
+
+
 class Fleet:
     """Vehicle links for the life of the process; each vehicle in at most one flight."""
 
@@ -95,7 +126,9 @@ class Fleet:
         self.signing: dict[str, SigningConfig] = {}
         """Per connection, the signing of its link when none is given (a worker's vehicles)."""
         self._stack = contextlib.AsyncExitStack()
-        self._lock = asyncio.Lock()
+        self._opening: dict[str, asyncio.Lock] = {}
+        """Per connection: one link opened at a time (a vehicle that does not answer holds
+        up no other)."""
 
     async def vehicle(
         self,
@@ -112,7 +145,7 @@ class Fleet:
         ValueError
             A malformed connection string.
         """
-        async with self._lock:
+        async with self._opening.setdefault(connection, asyncio.Lock()):
             held = self._vehicles.get(connection)
             if held is not None:
                 return held

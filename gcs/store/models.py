@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from typing import Any
 
-from sqlalchemy import JSON, Float, ForeignKey, Integer, LargeBinary, String, Text
+from sqlalchemy import JSON, Boolean, Float, ForeignKey, Integer, LargeBinary, String, Text
 from sqlalchemy.orm import DeclarativeBase, Mapped, mapped_column
 
 
@@ -113,3 +113,18 @@ class IdempotencyRow(Base):
     body: Mapped[bytes] = mapped_column(LargeBinary)
     headers: Mapped[list[list[str]]] = mapped_column(JSON)
     created_utc_s: Mapped[float] = mapped_column(Float, index=True)
+
+
+class VehicleRow(Base):
+    """A live vehicle registered with ``POST /v1/vehicles``: its API id, how it is reached and
+    the system id asked for. ``signed``: it was registered with a signing key (the key itself
+    is kept for the link only, never here)."""
+
+    __tablename__ = "vehicles"
+
+    id: Mapped[str] = mapped_column(String(16), primary_key=True)
+    connection: Mapped[str] = mapped_column(String(200), unique=True)
+    system_id: Mapped[int | None] = mapped_column(Integer, nullable=True)
+    signed: Mapped[bool] = mapped_column(Boolean)
+    registered_utc_s: Mapped[float] = mapped_column(Float)
+    """When it was first registered (UTC s)."""

@@ -1,6 +1,6 @@
 """The store's operations: scenarios by content hash, flights and their state, events in
-sequence, the missions uploaded; and a bus subscriber that writes a flight's events as they
-happen.
+sequence, the missions uploaded, the live vehicles registered; and a bus subscriber that
+writes a flight's events as they happen.
 
 Every operation is one transaction. Sans-asyncio: :class:`EventWriter` runs the writes in a
 worker thread so that a slow database never holds up the control loop.
@@ -35,6 +35,7 @@ from gcs.store.models import (
     ScenarioRow,
     ScheduleRow,
     UploadRow,
+    VehicleRow,
 )
 from planner.mission import MissionItem
 
@@ -45,6 +46,7 @@ __all__ = [
     "EventWriter",
     "FlightKeeper",
     "FlightRecordRow",
+    "Registration",
     "Store",
     "StoreConflict",
     "StoreError",
@@ -84,6 +86,25 @@ class FlightRecordRow:
     resume: Mapping[str, Any] | None
     vehicles: Mapping[str, tuple[str, str | None, int | None]]
     """Vehicle id -> (phase, connection, system id)."""
+
+
+@dataclass(frozen=True)
+class Registration:
+    """A live vehicle registered with ``POST /v1/vehicles``, as the store keeps it."""
+
+    id: str
+    """The API's id (``v1``, ``v2``, ...)."""
+    connection: str
+    system_id: int | None
+    """The system id asked for (None: the first vehicle heard at the connection)."""
+    signed: bool
+    """Registered with a signing key (the key is kept for the link only, never here)."""
+    registered_utc_s: float
+    """When it was first registered (UTC s)."""
+
+
+def _registration(row: VehicleRow) -> Registration:
+    return Registration(row.id, row.connection, row.system_id, row.signed, row.registered_utc_s)
 
 
 def _item_json(it: MissionItem) -> dict[str, Any]:
@@ -168,7 +189,8 @@ def _follow(session: Session, flight_id: str, events: Sequence[FlightEvent]) -> 
 
 
 class Store:
-    """Scenarios, flights, events and uploads in one SQL database (see the package)."""
+    """Scenarios, flights, events, uploads and registered vehicles in one SQL database (see the
+    package)."""
 
     def __init__(self, engine: Engine) -> None:
         self.engine = engine
@@ -311,6 +333,47 @@ class Store:
                 row = session.get(IdempotencyRow, old)
                 if row is not None:
                     session.delete(row)
+
+    # -- registered vehicles ------------------------------------------------------------------
+
+    def register_vehicle(
+        self, vehicle_id: str, connection: str, *, system_id: int | None, signed: bool
+    ) -> Registration:
+        """Keep a registered vehicle. One registered again (the same id) keeps its connection
+        and first registration time; the system id asked for and ``signed`` are the new ones.
+
+        Raises
+        ------
+        StoreConflict
+            The id is kept with another connection, or the connection with another id.
+        """
+        with Session(self.engine) as session, session.begin():
+            row = session.get(VehicleRow, vehicle_id, with_for_update=True)
+            if row is None:
+                row = VehicleRow(
+                    id=vehicle_id,
+                    connection=connection,
+                    system_id=system_id,
+                    signed=signed,
+                    registered_utc_s=time.time(),
+                )
+                session.add(row)
+            elif row.connection != connection:
+                raise StoreConflict(f"vehicle {vehicle_id} is kept at {row.connection}")
+            else:
+                row.system_id = system_id
+                row.signed = signed
+            try:
+                session.flush()
+            except IntegrityError:
+                raise StoreConflict(f"{connection} is kept as another vehicle") from None
+            return _registration(row)
+
+    def registered_vehicles(self) -> list[Registration]:
+        """Every registered vehicle, in the order they were first registered."""
+        with Session(self.engine) as session:
+            query = select(VehicleRow).order_by(VehicleRow.registered_utc_s, VehicleRow.id)
+            return [_registration(row) for row in session.scalars(query)]
 
     # -- flights ------------------------------------------------------------------------------
 

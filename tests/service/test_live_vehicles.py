@@ -20,7 +20,7 @@ import yaml
 
 from sitl_stub.lockstep import Lockstep
 from tests.gcs.conftest import start_stub
-from tests.service.conftest import serve
+from tests.service.conftest import proc_stat, serve
 from tests.service.test_flights_http import _ok, _scheduled
 from tests.sitl_stub.conftest import free_port_base
 from tests.teams import compact_paper
@@ -71,11 +71,19 @@ async def test_registered_vehicles_are_flown_by_the_flight_worker_and_given_back
                 assert snap["state"] in ("planned", "uploading"), snap["uploads"]
                 await asyncio.sleep(0.1)
             _ok(await client.post(f"/v1/flights/{fid}/launch", json={}), 202)
+            flown_by: set[int] = set()
             while (snap := _ok(await client.get(f"/v1/flights/{fid}")))["state"] not in (
                 "completed", "failed", "aborted",
             ):  # fmt: skip
+                if snap["state"] == "running":
+                    pid = snap["worker"]["pid"]
+                    # A worker process of the service's, not the service itself.
+                    assert isinstance(pid, int) and pid != service.proc.pid, snap["worker"]
+                    assert int(proc_stat(pid)[1]) == service.proc.pid, pid
+                    flown_by.add(pid)
                 await asyncio.sleep(0.5)
             assert snap["state"] == "completed", snap["state_reason"]
+            assert flown_by, "never seen running"
             while (r := await client.get(f"/v1/flights/{fid}/record")).status_code == 404:
                 await asyncio.sleep(0.2)
             record: dict[str, Any] = _ok(r)

@@ -33,7 +33,9 @@ _JSON_SCHEMA = json_schema()
 )
 async def add_vehicle(body: VehicleIn, request: Request) -> dict[str, Any]:
     """Register a live vehicle by connection string (its link is opened and its HEARTBEAT
-    awaited); the signing key is kept for the link only."""
+    awaited), kept across restarts under its id; the signing key is kept for the link only
+    (a vehicle registered with one is registered again with it after a restart:
+    ``signing_key_needed``). A connection registered already answers with its id."""
     return await engine_of(request).add_vehicle(
         body.connection, system_id=body.system_id, signing_key=body.signing_key
     )
@@ -41,7 +43,8 @@ async def add_vehicle(body: VehicleIn, request: Request) -> dict[str, Any]:
 
 @router.get("/vehicles", dependencies=observe, tags=["vehicles"])
 async def vehicles(request: Request) -> list[dict[str, Any]]:
-    """Every vehicle the service holds, with its live status from telemetry."""
+    """Every vehicle registered (and a rehearsal's simulator vehicles while it runs), with its
+    live status from telemetry; one whose link is not open shows ``link.open`` false."""
     return engine_of(request).vehicle_views()
 
 
