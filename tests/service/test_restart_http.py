@@ -35,6 +35,7 @@ from tests.service.test_flights_http import (
     _all_events,
     _flight,
     _ok,
+    _paused,
     _taken_on,
     _until,
     truth_log,
@@ -67,6 +68,12 @@ TOGETHER_MIN_S = 800.0
 last up, takes off at its planned 258 s or later (some 430 s here), moved with the team time,
 and the three pass their goals together at the team time (some 1,450 s here): some 1,000 s
 (1,012-1,018 s seen, the truth going on past the goals until the simulator stops)."""
+SIGNAL_AT_S = 850.0
+"""The mission second at which a worker is killed or hung: the rehearsal paused there (past
+the re-plan round POPUP1, at some 730 s), so that where the flight is when its worker goes, and
+so how long it has left once taken on, is the same on any machine. Signalled as the flight
+ran on, under load it went as late as 1,075 s: taken on 34 s before the team time, a vehicle
+at its top speed could not make up what it had lost unwatched."""
 CHECKPOINT_WITHIN_S = 200.0
 """Flight seconds (one wall second at 200x) within which the service keeps a team time it
 has said in its checkpoint (a team-time move is checkpointed at once)."""
@@ -118,7 +125,9 @@ async def test_a_killed_or_hung_flight_worker_is_flown_on_from_its_checkpoint(
             serve(data, settings=settings, spare_worker=True) as svc,
             svc.client() as client,
         ):
-            fid, said, said_seq, before = await _past_the_replan(client, data)
+            fid, said, said_seq, before = await _past_the_replan(
+                client, data, pause_at_s=SIGNAL_AT_S
+            )
             worker = _ok(await client.get(f"/v1/flights/{fid}"))["worker"]
             pid = worker["pid"]
             spare = svc.spare_workers()
@@ -135,6 +144,12 @@ async def test_a_killed_or_hung_flight_worker_is_flown_on_from_its_checkpoint(
                 assert taken["worker"]["pid"] == spare[0], (taken["worker"], spare)
                 gone = await asyncio.to_thread(_gone_within, pid, 5.0)
                 assert gone, f"the old worker (pid {pid}) still runs beside the new one"
+                # The new worker keeps the pause, where the simulator had got to: resumed.
+                while not (snap := _ok(await client.get(f"/v1/flights/{fid}")))["pause"]["paused"]:
+                    assert snap["state"] in ("ready", "running"), snap["state"]
+                    await asyncio.sleep(0.05)
+                assert snap["t_s"] > SIGNAL_AT_S, snap["t_s"]  # flown on unwatched meanwhile
+                _ok(await client.post(f"/v1/flights/{fid}/resume"))
                 await _flown_on(client, svc, fid, said, said_seq, before, restarted=True)
             finally:
                 away.cancel()
@@ -231,18 +246,25 @@ def _kept_team_time(data: Path, fid: str) -> tuple[float, int] | None:
 
 
 async def _past_the_replan(
-    client: httpx.AsyncClient, data: Path
+    client: httpx.AsyncClient, data: Path, *, pause_at_s: float | None = None
 ) -> tuple[str, tuple[float, int], int, list[dict[str, Any]]]:
-    """A flight launched and flown past its re-plan round POPUP1: its id, the team time and
-    version it says (kept in its checkpoint too), the last event it had said then, and its
-    events so far."""
+    """A flight launched and flown past its re-plan round POPUP1 (and paused at
+    ``pause_at_s``, a mission second past it, if given): its id, the team time and version it
+    says (kept in its checkpoint too), the last event it had said then, and its events so
+    far."""
     fid, _ = await _flight(
         client, {"speedup": 200.0, "wind_m_s": 4.0, "seed": 3}, scenario_name="compact"
     )
+    if pause_at_s is not None:
+        _ok(await client.post(f"/v1/flights/{fid}/pause", json={"at_s": pause_at_s}))
     _ok(await client.post(f"/v1/flights/{fid}/launch", json={}), 202)
-    await _until(client, fid, POPUP_NOT_BEFORE_S)  # launched, and up to the pop-up
+    if pause_at_s is not None:
+        await _paused(client, fid, pause_at_s)
+    else:
+        await _until(client, fid, POPUP_NOT_BEFORE_S)  # launched, and up to the pop-up
     before = await _all_events(client, fid)
     while not any(e["kind"] == "replan" for e in before):
+        assert pause_at_s is None, f"no re-plan round POPUP1 by {pause_at_s} s"
         await asyncio.sleep(0.05)
         before = await _all_events(client, fid)
     # The team time the service says, once its checkpoint holds it too (the kill must not
