@@ -27,6 +27,18 @@ def story(events: Iterable[Mapping[str, Any]], *, limit: int = 120) -> str:
     return "\n".join(lines)
 
 
+def routine_story(events: Iterable[Mapping[str, Any]], vehicle: str, *, limit: int = 80) -> str:
+    """The routine events :func:`story` leaves out (speed commands and their outcomes, link
+    gaps, clock offsets) of one vehicle, the last ``limit`` of them: for a vehicle that missed
+    its slot, what it was told and what came of it."""
+    lines = [
+        f"{e.get('t_s') or 0.0:9.1f} s {vehicle:5} {e['kind']:9} {e['reason']}"
+        for e in events
+        if e.get("vehicle") == vehicle and _routine(e)
+    ]
+    return "\n".join(lines[-limit:])
+
+
 def story_of_lines(text: str, *, limit: int = 120) -> str:
     """The same for ``rehearse``'s printed log (``  t s   VEHICLE kind  reason`` lines)."""
     kept = [

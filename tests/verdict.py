@@ -27,7 +27,7 @@ from typing import Any
 import numpy as np
 
 from tests import oracle
-from tests.flightstory import story
+from tests.flightstory import routine_story, story
 
 
 @dataclass(frozen=True)
@@ -53,6 +53,9 @@ class Verdict:
     """The vehicles that must pass their goals on their slots."""
     told: str
     """The flight's story, for a failure."""
+    routine: dict[str, str]
+    """Per vehicle, its routine events (:func:`tests.flightstory.routine_story`), for a
+    vehicle off its slot."""
 
     def misses(self) -> dict[str, Any]:
         """The arriving vehicles off their slots (s off, or None: never passed)."""
@@ -90,7 +93,11 @@ class Verdict:
         """Assert the flight has none of :meth:`problems` (all of them said at once)."""
         print(self)
         problems = self.problems()
-        assert not problems, "\n".join([*problems, str(self), self.told])
+        late = [
+            f"{vid}'s speed, link and clock events:\n{self.routine.get(vid, '')}"
+            for vid in self.misses()
+        ]
+        assert not problems, "\n".join([*problems, str(self), self.told, *late])
 
     def errors_s(self) -> dict[str, float | None]:
         """Each passage against its slot moved by the shift: s early (-), late (+), 0 inside
@@ -169,6 +176,7 @@ def judge(
         together_min_s=together_min_s,
         arriving=frozenset(slots if arriving is None else arriving),
         told=story(record["events"]),
+        routine={vid: routine_story(record["events"], vid) for vid in slots},
     )
 
 
