@@ -18,7 +18,7 @@ import httpx
 
 from gcs.errors import GcsError
 
-__all__ = ["ServiceProcess", "running_service"]
+__all__ = ["ServiceProcess", "free_port", "running_service", "wait_ready"]
 
 
 @dataclass
@@ -29,7 +29,8 @@ class ServiceProcess:
     """What the service wrote on its standard error (read when it has stopped)."""
 
 
-def _free_port() -> int:
+def free_port() -> int:
+    """A free TCP port on the loopback address."""
     with socket.socket() as s:
         s.bind(("127.0.0.1", 0))
         return int(s.getsockname()[1])
@@ -54,7 +55,7 @@ async def running_service(
     GcsError
         It exited, or did not answer ``/v1/health`` within ``ready_within_s``.
     """
-    port = _free_port()
+    port = free_port()
     env = {
         **os.environ,
         "TCGCS_DATA_DIR": str(data_dir),
@@ -70,7 +71,7 @@ async def running_service(
     )  # fmt: skip
     service = ServiceProcess(f"http://127.0.0.1:{port}", proc)
     try:
-        await _ready(service, ready_within_s)
+        await wait_ready(service, ready_within_s)
         yield service
     finally:
         if proc.returncode is None:
@@ -84,7 +85,14 @@ async def running_service(
         service.stderr = err or b""
 
 
-async def _ready(service: ServiceProcess, within_s: float) -> None:
+async def wait_ready(service: ServiceProcess, within_s: float) -> None:
+    """Until the service answers ``/v1/health``.
+
+    Raises
+    ------
+    GcsError
+        It exited, or did not answer within ``within_s``.
+    """
     proc = service.proc
     loop = asyncio.get_running_loop()
     until = loop.time() + within_s

@@ -13,13 +13,13 @@ import asyncio
 import json
 import os
 import signal
-import socket
 import sys
 from pathlib import Path
 
 import httpx
 import pytest
 
+from gcs.api.process import ServiceProcess, free_port, wait_ready
 from tests.paperbounds import team_time_move_max_s
 from tests.verdict import assert_flown
 
@@ -42,33 +42,12 @@ def walk_through() -> str:
     return text[start : text.index("```", start)]
 
 
-def _free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return int(s.getsockname()[1])
-
-
-async def _ready(url: str, proc: asyncio.subprocess.Process) -> None:
-    loop = asyncio.get_running_loop()
-    until = loop.time() + READY_WALL_S
-    async with httpx.AsyncClient(base_url=url) as client:
-        while True:
-            assert proc.returncode is None, "the service exited"
-            assert loop.time() < until, f"the service did not answer within {READY_WALL_S} s"
-            try:
-                if (await client.get("/v1/health")).status_code == 200:
-                    return
-            except httpx.TransportError:
-                pass
-            await asyncio.sleep(0.1)
-
-
 async def test_the_readmes_walk_through_flies_the_paper_flight_on_its_slots(
     tmp_path: Path,
 ) -> None:
     script = walk_through()
     assert README_API in script
-    port = _free_port()
+    port = free_port()
     script = script.replace(README_API, f"http://127.0.0.1:{port}/v1")
     (tmp_path / "scenarios").symlink_to(ROOT / "scenarios")
     # As from a shell with nothing set: the service's own defaults.
@@ -78,7 +57,7 @@ async def test_the_readmes_walk_through_flies_the_paper_flight_on_its_slots(
         stdout=asyncio.subprocess.DEVNULL, stderr=asyncio.subprocess.PIPE,
     )  # fmt: skip
     try:
-        await _ready(f"http://127.0.0.1:{port}", serve)
+        await wait_ready(ServiceProcess(f"http://127.0.0.1:{port}", serve), READY_WALL_S)
         run = await asyncio.create_subprocess_exec(
             "bash", "-e", "-o", "pipefail", "-c", script, cwd=tmp_path, env=env,
             stdout=asyncio.subprocess.PIPE, stderr=asyncio.subprocess.PIPE,
