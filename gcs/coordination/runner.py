@@ -123,6 +123,13 @@ link that loses packets), and the simulator flew on meanwhile at its speed-up: a
 machine made a 52-item upload after a pop-up outlast its 78 s of flight, the vehicle was held
 short of the zone 2,100 s later and re-planned, and the team time moved 375 s. A vehicle that
 does not answer (a link blackout, which ends in flight time) lets the flight go on after it."""
+PACED_COMMAND_HOLD_WALL_S = 1.0
+"""On a pace clock a command that changes what a vehicle flies at a moment of its own (the
+launch's arm and AUTO, a loiter's exit, a hold, a resume, a mode) holds the simulator for at
+most this long (wall s) while it goes, to a vehicle whose reports still come: its round trips
+take no flight time, as they take next to none at 1x. Timed in wall time, under load they
+came seconds of flight late at 200x (a launch 3.2 s late, its vehicle 4 loiter turns where 5
+were planned and a slot missed by 1 s)."""
 REPLAN_SEARCH_SHARE = 0.25
 """A re-plan's route search (the ACO) ends with the best routes so far once this share of the
 planning lead, in wall time, is spent: the lead allows one and a half times the longest
@@ -601,10 +608,20 @@ class FlightRunner:
         if err is not None:
             log.info("%s: arming ahead of takeoff failed (%s); the launch arms it", v, err)
 
+    def _command_held(self, vehicle_id: str) -> contextlib.AbstractContextManager[None]:
+        """The clock held while a timed command goes (:data:`PACED_COMMAND_HOLD_WALL_S`), unless
+        the vehicle's reports have stopped (a blackout ends in flight time: it must not wait
+        on the hold)."""
+        m = self.members.get(vehicle_id)
+        if not self.clock.paced or (m is not None and m.link_silent):
+            return contextlib.nullcontext()
+        return self._held_clock(PACED_COMMAND_HOLD_WALL_S)
+
     async def _launch(self, a: act.Launch) -> None:
         v = self.vehicles[a.vehicle_id]
         armed = v.state.armed is True
-        err = await self._outcome(self._auto(v) if a.airborne or armed else self._arm_auto(v))
+        with self._command_held(a.vehicle_id):
+            err = await self._outcome(self._auto(v) if a.airborne or armed else self._arm_auto(v))
         self._feed(act.Launched(a.vehicle_id, err))
 
     async def _command_speed(self, a: act.CommandSpeed) -> None:
@@ -621,7 +638,8 @@ class FlightRunner:
 
     async def _set_mode(self, a: act.SetMode) -> str | None:
         v = self.vehicles[a.vehicle_id]
-        err = await self._outcome(v.set_mode(a.mode, **self._command(v)))
+        with self._command_held(a.vehicle_id):
+            err = await self._outcome(v.set_mode(a.mode, **self._command(v)))
         r = self._team().abort_done(a.vehicle_id, a.mode, err, self.now_s())
         self._publish(r)
         self._checkpoint(True)
@@ -646,7 +664,8 @@ class FlightRunner:
         )
 
     async def _hold(self, a: act.Hold) -> None:
-        err = await self._outcome(self._reposition(a))
+        with self._command_held(a.vehicle_id):
+            err = await self._outcome(self._reposition(a))
         self._feed(act.HoldTaken(a, err))
 
     async def _auto_at(self, a: act.Resume) -> None:
@@ -657,14 +676,16 @@ class FlightRunner:
         await v.set_mode("AUTO", **self._command(v))
 
     async def _resume(self, a: act.Resume) -> None:
-        err = await self._outcome(self._auto_at(a))
+        with self._command_held(a.vehicle_id):
+            err = await self._outcome(self._auto_at(a))
         self._feed(act.Resumed(a, err))
 
     async def _leave_loiter(self, a: act.LeaveLoiter) -> None:
         """MISSION_SET_CURRENT to the item after the loiter, in AUTO: ArduPlane leaves the
         turns and starts that item at once (AP_Mission::set_current_cmd)."""
         v = self.vehicles[a.vehicle_id]
-        err = await self._outcome(v.set_current_item(a.seq, **self._command(v)))
+        with self._command_held(a.vehicle_id):
+            err = await self._outcome(v.set_current_item(a.seq, **self._command(v)))
         self._feed(act.LoiterLeft(a, err))
 
     async def _upload(self, a: act.Upload) -> None:

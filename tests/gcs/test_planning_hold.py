@@ -201,3 +201,54 @@ async def test_a_vehicle_that_does_not_answer_an_upload_holds_the_flight_only_so
         with pytest.raises(GcsError, match=f"within {budget_s:.0f} s of flight"):
             await upload
         assert 100.0 + budget_s <= t_s <= 100.0 + budget_s + 2.0
+
+
+class _SlowLaunch:
+    """A vehicle on the ground whose arming and mode change answer when the test says so."""
+
+    def __init__(self) -> None:
+        self.state = SimpleNamespace(armed=False)
+        self.link = SimpleNamespace(counters=SimpleNamespace(rtt_s=0.001))
+        self.asked: list[str] = []
+        self.answer = asyncio.Event()
+
+    async def arm(self, **_: object) -> None:
+        self.asked.append("arm")
+        await self.answer.wait()
+
+    async def set_mode(self, mode: str, **_: object) -> None:
+        self.asked.append(mode)
+
+
+@pytest.mark.parametrize("silent", [False, True], ids=["heard", "silent"])
+async def test_a_launch_in_lock_step_takes_no_flight_time_unless_its_vehicle_is_silent(
+    tmp_path: Path, silent: bool
+) -> None:
+    """The launch's arm and AUTO hold the simulator while they go (timed in wall time, a
+    busy machine's launch came 3.2 s of flight late at 200x, and its vehicle missed its slot
+    by 1 s); a vehicle whose reports have stopped holds nothing (its blackout ends in flight
+    time)."""
+    async with _paced(tmp_path) as (sim, clock):
+        runner = FlightRunner(load_scenario(PAPER), clock)
+        vehicle = _SlowLaunch()
+        runner.vehicles = {"UAV1": vehicle}  # type: ignore[dict-item]
+        members = {"UAV1": SimpleNamespace(link_silent=silent)}
+        runner.team = SimpleNamespace(members=members)  # type: ignore[assignment]
+        fed: list[act.Input] = []
+        runner._feed = fed.append  # type: ignore[method-assign]
+        _synced(clock)
+        sim.publish(100.0)
+        await asyncio.sleep(0.02)
+        launch = asyncio.create_task(runner._launch(act.Launch("UAV1", airborne=False)))
+        await asyncio.sleep(0.01)
+        assert vehicle.asked == ["arm"]
+        sim.publish(100.8)
+        await asyncio.sleep(0.05)  # 10 s of flight at 200x, had the simulator not waited
+        assert sim.acknowledged_s() * 200.0 == pytest.approx(100.8 if silent else 100.0)
+        vehicle.answer.set()
+        await launch
+        assert vehicle.asked == ["arm", "AUTO"]
+        assert fed == [act.Launched("UAV1", None)]
+        assert clock.held_pace_s is None
+        await asyncio.sleep(0.02)
+        assert sim.acknowledged_s() * 200.0 == pytest.approx(100.8)
