@@ -71,6 +71,12 @@ class Ahead:
     the goal there)."""
     movable: bool = True
     """Whether it may be asked another speed (not on its final approach, say)."""
+    route_rise_m: FloatArray | None = None
+    """How far its profile's height at each of the flight's samples lies above its profile's
+    height where it is (m, with ``route_s_m``; None: it keeps the height it has). A re-plan
+    lifts a vehicle over part of its route, and a pair judged at their present heights was
+    resolved onto one height: the 60-vehicle crowd's R59 climbed 450 m away from R00 to
+    where R00's new mission took it, and they came 289 m apart."""
 
     def positions(
         self,
@@ -79,9 +85,10 @@ class Ahead:
         response_s: float,
         until_s: float = math.inf,
     ) -> FloatArray:
-        """(east, north) at the times ``t_s`` flying ``airspeed_m_s`` from its fix (reached
-        ``response_s`` after it) until ``until_s``, at its present speed again after it; NaN
-        past its look-ahead."""
+        """(east, north, height AMSL) at the times ``t_s`` flying ``airspeed_m_s`` from its fix
+        (reached ``response_s`` after it) until ``until_s``, at its present speed again after
+        it; NaN past its look-ahead. The height is its present one, changed as its profile
+        changes ahead (:attr:`route_rise_m`)."""
         dt = t_s - self.t_s
         held = max(until_s - self.t_s, response_s)
         gs = self.groundspeed_m_s
@@ -100,9 +107,14 @@ class Ahead:
         part *= new_gs
         s += part
         np.minimum(np.maximum(s, self.route_s_m[0], out=s), self.route_s_m[-1], out=s)
-        out = np.empty((*s.shape, 2))
+        out = np.empty((*s.shape, 3))
         out[..., 0] = np.interp(s, self.route_s_m, self.route_east_m)
         out[..., 1] = np.interp(s, self.route_s_m, self.route_north_m)
+        if self.route_rise_m is None:
+            out[..., 2] = self.alt_m
+        else:
+            out[..., 2] = np.interp(s, self.route_s_m, self.route_rise_m)
+            out[..., 2] += self.alt_m
         out[dt > self.horizon_s] = np.nan
         return out
 
@@ -139,12 +151,12 @@ def closest_m(
     response_s: float,
     until_s: float = math.inf,
 ) -> tuple[float, float]:
-    """The pair's least 3-D distance (their present heights) over the times ``t_s`` at these
-    airspeeds (flown until ``until_s``), and when; ``(inf, nan)`` when they are never
-    predicted together."""
+    """The pair's least 3-D distance (their heights as :meth:`Ahead.positions` has them)
+    over the times ``t_s`` at these airspeeds (flown until ``until_s``), and when;
+    ``(inf, nan)`` when they are never predicted together."""
     pa = a.positions(t_s, airspeed_a_m_s, response_s, until_s)
     pb = b.positions(t_s, airspeed_b_m_s, response_s, until_s)
-    d = np.sqrt(((pa - pb) ** 2).sum(axis=1) + (a.alt_m - b.alt_m) ** 2)
+    d = np.sqrt(((pa - pb) ** 2).sum(axis=1))
     if np.isnan(d).all():
         return math.inf, math.nan
     k = int(np.nanargmin(d))
@@ -283,12 +295,12 @@ class Forecasts:
         self._ids = list(vehicles)
         self._row = {vid: k for k, vid in enumerate(self._ids)}
         n = len(self._ids)
-        self._positions = np.full((n, self.steps, 2), np.nan)
-        """(vehicle row, whole second from its start, east/north), NaN where not forecast."""
+        self._positions = np.full((n, self.steps, 3), np.nan)
+        """(vehicle row, whole second from its start, east/north/height), NaN where not
+        forecast."""
         self._start_s = np.zeros(n)
         self._fix_s = np.full(n, -np.inf)
         """When each row was forecast from (-inf: never, or dropped)."""
-        self._alt_m = np.zeros(n)
 
     @property
     def steps(self) -> int:
@@ -303,7 +315,6 @@ class Forecasts:
         self._positions[row] = a.positions(t, a.airspeed_m_s, self.response_s)
         self._start_s[row] = start
         self._fix_s[row] = a.t_s
-        self._alt_m[row] = a.alt_m
 
     def drop(self, vehicle: str) -> None:
         """No forecast for the vehicle (not on its route, say) until its next update."""
@@ -316,8 +327,8 @@ class Forecasts:
         self, vehicle: str, separation_m: float, now_s: float, *, heights: bool = True
     ) -> list[str]:
         """The others forecast to come under ``separation_m`` of ``vehicle`` (3-D, their
-        present heights; over the ground alone without ``heights``: for a change of height)
-        in the time both forecasts cover, nearest first."""
+        heights as forecast; over the ground alone without ``heights``: for a change of
+        height) in the time both forecasts cover, nearest first."""
         me = self._row.get(vehicle)
         if me is None or vehicle not in self.ahead:
             return []
@@ -347,10 +358,13 @@ class Forecasts:
             de *= de
             dn *= dn
             de += dn
+            if heights:
+                dz = theirs[:, :, 2] - ours[:, 2]
+                dz *= dz
+                de += dz
             # The least over the seconds both forecast (fmin skips NaN: not forecast), inf
             # where there is none: NaN replaced by inf, then the minimum, in two passes.
             least2[sel] = np.fmin(np.fmin.reduce(de, axis=1), np.inf)
-        dz = self._alt_m[rows] - self._alt_m[me] if heights else np.zeros(len(rows))
-        least = np.sqrt(least2 + dz * dz)
+        least = np.sqrt(least2)
         close = (least < separation_m).nonzero()[0]
         return [self._ids[rows[i]] for i in close[least[close].argsort()]]

@@ -196,7 +196,7 @@ class RouteTrack:
         self._build_samples()
         self._build_pieces()
         self._loiter_pieces = [self._loiter_circle(loiter) for loiter in self.loiters]
-        self._flight_cache: dict[int, tuple[FloatArray, FloatArray, FloatArray]] = {}
+        self._flight_cache: dict[int, tuple[FloatArray, FloatArray, FloatArray, FloatArray]] = {}
 
     def __reduce__(self) -> tuple[Any, ...]:
         """Pickled as what it is built from (its samples are 20 times that and are built
@@ -454,16 +454,27 @@ class RouteTrack:
         of those loiters (a vehicle on its route before it is at its ``s_m``), then that
         plus the loiters' lengths; a vehicle in loiter ``loiters_done`` that has flown
         ``f`` m of it is at the loiter's ``s_m + f``."""
+        along_m, east_m, north_m, _ = self._flight(loiters_done)
+        return along_m, east_m, north_m
+
+    def flight_route_s_m(self, loiters_done: int = 0) -> FloatArray:
+        """Where along the route (its own ``s_m``) each sample of :meth:`flight_samples`
+        lies: a loiter's turns at the loiter's ``s_m`` (its height is the loiter's)."""
+        return self._flight(loiters_done)[3]
+
+    def _flight(self, loiters_done: int) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
         loiters = self.loiters[max(loiters_done, 0) :]
         if not loiters:
-            return self._s_m, self._east_m, self._north_m
+            return self._s_m, self._east_m, self._north_m, self._s_m
         key = len(loiters)
         if key not in self._flight_cache:  # asked at every conflict check: built once
             self._flight_cache[key] = self._splice(loiters)
         return self._flight_cache[key]
 
-    def _splice(self, loiters: Sequence[LoiterSpec]) -> tuple[FloatArray, FloatArray, FloatArray]:
-        along, east, north = [], [], []
+    def _splice(
+        self, loiters: Sequence[LoiterSpec]
+    ) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
+        along, east, north, route = [], [], [], []
         shift_m, done = 0.0, 0
         for loiter in loiters:
             at_m = min(max(loiter.s_m, 0.0), self._length_m)
@@ -471,6 +482,7 @@ class RouteTrack:
             along.append(self._s_m[done:k] + shift_m)
             east.append(self._east_m[done:k])
             north.append(self._north_m[done:k])
+            route.append(self._s_m[done:k])
             done = k
             entry = self.path.pose_at(at_m)
             bearing = math.atan2(
@@ -487,11 +499,18 @@ class RouteTrack:
             north.append(
                 np.append(loiter.centre_north_m + loiter.radius_m * np.cos(angle), entry.north_m)
             )
+            route.append(np.full(n + 2, at_m))
             shift_m += loiter.length_m
         along.append(self._s_m[done:] + shift_m)
         east.append(self._east_m[done:])
         north.append(self._north_m[done:])
-        return np.concatenate(along), np.concatenate(east), np.concatenate(north)
+        route.append(self._s_m[done:])
+        return (
+            np.concatenate(along),
+            np.concatenate(east),
+            np.concatenate(north),
+            np.concatenate(route),
+        )
 
     def remaining_m(self, s_m: float, loiters_done: int = 0, loiter_flown_m: float = 0.0) -> float:
         """Distance still to fly from ``s_m``, m: the path after it plus the loiters not done."""

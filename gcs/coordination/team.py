@@ -576,11 +576,19 @@ class TeamController(ZoneGuard, TeamTime):
         done = m.loiters_done()
         along_m, east_m, north_m = track.flight_samples(done)
         turning = m.in_loiter() and done < len(track.loiters)
-        at_m = m.s_m
+        at_m = here_m = m.s_m  # along its flight, and along its route (for its height)
         if turning:
             lo = track.loiters[done]
             at_m = lo.s_m + min(m.loiter_flown_m, lo.length_m)
+            here_m = lo.s_m
         climbing = self.vertical.flying.get(m.vehicle_id)
+        rise_m = None
+        if climbing is None:
+            # Its profile's changes of height ahead (a re-plan's lift among them): flying a
+            # height resolution, it holds the height it was asked.
+            vs = m.schedule
+            rise_m = np.interp(track.flight_route_s_m(done), vs.wp_s_m, vs.wp_alt_m)
+            rise_m -= vs.alt_at(here_m)
         return Ahead(
             m.vehicle_id,
             m.last_fix_s,
@@ -599,6 +607,7 @@ class TeamController(ZoneGuard, TeamTime):
             movable=not turning
             and track.length_m - m.s_m >= self.config.final_m
             and self._resolving_from(m) is None,
+            route_rise_m=rise_m,
         )
 
     def _resolve_conflicts(self, m: Member, t: float, out: list[act.Action]) -> None:

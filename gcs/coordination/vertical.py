@@ -129,8 +129,8 @@ def resolve_vertical(
     t = np.arange(now_s, min(bound, now_s + 2.0 * look_ahead_s) + step_s, step_s)
     pa = a.positions(t, a.airspeed_m_s, response_s)
     pb = b.positions(t, b.airspeed_m_s, response_s)
-    flat = np.sqrt(((pa - pb) ** 2).sum(axis=1))
-    as_flown = np.sqrt(flat**2 + (a.alt_m - b.alt_m) ** 2)
+    flat = np.sqrt(((pa[:, :2] - pb[:, :2]) ** 2).sum(axis=1))
+    as_flown = np.sqrt(flat**2 + (pa[:, 2] - pb[:, 2]) ** 2)
     within = as_flown[t <= end_s]
     if np.isnan(within).all() or not np.nanmin(within) < separation_m:
         return None
@@ -147,7 +147,8 @@ def resolve_vertical(
         if r is None:
             continue
         others = (neighbours or {}).get(mover.vehicle, ())
-        around = _around(pa if mover is a else pb, mover.alt_m, t, others, response_s)
+        around = _around(pa if mover is a else pb, t, others, response_s)
+        other_m = (pb if mover is a else pa)[:, 2]
         for layers, sense in itertools.product(range(1, max_layers + 1), (1.0, -1.0)):
             offset = sense * layers * layer_m
             target = mover.alt_m + offset
@@ -158,7 +159,7 @@ def resolve_vertical(
                 for r in (rate_m_s, max(fast_rate_m_s or rate_m_s, rate_m_s))
             ]
             lo, hi = np.minimum(*band), np.maximum(*band)
-            d = np.sqrt(flat**2 + _gap_m(lo, hi, other.alt_m) ** 2)
+            d = np.sqrt(flat**2 + _gap_m(lo, hi, other_m) ** 2)
             least = float(np.nanmin(d))
             if least < separation_m or not _clear_of(around, lo, hi, separation_m):
                 continue
@@ -185,28 +186,33 @@ def resolve_vertical(
 
 
 def _around(
-    mine: FloatArray, alt_m: float, t: FloatArray, others: Sequence[Ahead], response_s: float
-) -> list[tuple[FloatArray, float, float]]:
-    """For each other vehicle near the mover (at ``mine``, its positions at the times ``t``,
-    and ``alt_m``): their horizontal distance at those times, its height, and the least 3-D
-    distance of the two as they fly."""
+    mine: FloatArray, t: FloatArray, others: Sequence[Ahead], response_s: float
+) -> list[tuple[FloatArray, FloatArray, float]]:
+    """For each other vehicle near the mover (``mine``: its positions and heights at the
+    times ``t`` as it flies): their horizontal distance at those times, its heights, and the
+    least 3-D distance of the two as they fly."""
     out = []
     for o in others:
-        flat = np.sqrt(((mine - o.positions(t, o.airspeed_m_s, response_s)) ** 2).sum(axis=1))
+        theirs = o.positions(t, o.airspeed_m_s, response_s)
+        flat = np.sqrt(((mine[:, :2] - theirs[:, :2]) ** 2).sum(axis=1))
         if np.isnan(flat).all():
             continue
-        as_flown = float(np.nanmin(np.sqrt(flat**2 + (alt_m - o.alt_m) ** 2)))
-        out.append((flat, o.alt_m, as_flown))
+        as_flown = float(np.nanmin(np.sqrt(flat**2 + (mine[:, 2] - theirs[:, 2]) ** 2)))
+        out.append((flat, theirs[:, 2], as_flown))
     return out
 
 
-def _gap_m(lo: FloatArray, hi: FloatArray, alt_m: float) -> FloatArray:
-    """The height between ``alt_m`` and a vehicle anywhere from ``lo`` to ``hi`` (0 within)."""
+def _gap_m(lo: FloatArray, hi: FloatArray, alt_m: FloatArray) -> FloatArray:
+    """The height between ``alt_m`` and a vehicle anywhere from ``lo`` to ``hi`` (0 within),
+    at each time."""
     return np.maximum(0.0, np.maximum(lo - alt_m, alt_m - hi))
 
 
 def _clear_of(
-    around: Sequence[tuple[FloatArray, float, float]], lo: FloatArray, hi: FloatArray, d_m: float
+    around: Sequence[tuple[FloatArray, FloatArray, float]],
+    lo: FloatArray,
+    hi: FloatArray,
+    d_m: float,
 ) -> bool:
     """Whether the mover, anywhere from the heights ``lo`` to ``hi`` at each time, stays
     ``d_m`` from each other vehicle, or no closer than it comes to it as it flies."""

@@ -637,3 +637,11 @@ def test_flight_samples_splice_each_loiter_s_turns_into_the_route() -> None:
     assert along1[-1] == pytest.approx(10_000.0 + second.length_m)
     assert np.allclose(north1[along1 <= 7_000.0], along1[along1 <= 7_000.0])
     assert track.flight_samples(2)[0] is track.sample_s_m
+    # Where along the route each flight sample is (its height is the profile's there): the
+    # route's own distance (here its north), and a loiter's turns and detour at the loiter.
+    route = track.flight_route_s_m(0)
+    assert route.shape == along.shape
+    turns = on_first | (on_second | dwell)
+    assert np.allclose(route[~turns], north[~turns])
+    assert np.allclose(route[on_first], 3_000.0) and np.allclose(route[on_second | dwell], 7_000.0)
+    assert np.allclose(track.flight_route_s_m(1)[along1 <= 7_000.0], along1[along1 <= 7_000.0])

@@ -86,6 +86,8 @@ def test_the_screen_finds_the_pairs_a_pairwise_reckoning_finds() -> None:
                 float(rng.uniform(500.0, 700.0)), along,
                 e0 + along * math.sin(heading), n0 + along * math.cos(heading),
                 horizon_s=float(rng.choice([10.0, 40.0, 600.0])),
+                # Some lifted over part of the way ahead, as a re-plan lifts them.
+                route_rise_m=rng.choice([0.0, 150.0, 450.0]) * (along > rng.uniform(0, 9e3)),
             )  # fmt: skip
             ahead[vid] = a
             forecasts.update(a, a.t_s)
@@ -101,11 +103,11 @@ def test_the_screen_finds_the_pairs_a_pairwise_reckoning_finds() -> None:
                 ), dtype=np.float64)  # fmt: skip
                 pa = ahead[vid].positions(t, 20.0, 5.0)
                 pb = ahead[other].positions(t, 20.0, 5.0)
-                d2 = ((pa - pb) ** 2).sum(axis=1)
+                d2 = ((pa[:, :2] - pb[:, :2]) ** 2).sum(axis=1)
                 if np.isnan(d2).all():
                     continue
-                dz = ahead[vid].alt_m - ahead[other].alt_m
-                least = math.sqrt(float(np.nanmin(d2)) + dz * dz)
+                dz = pa[:, 2] - pb[:, 2]
+                least = math.sqrt(float(np.nanmin(d2 + dz * dz)))
                 if least < 1500.0:
                     want.append((least, other))
             assert got == [o for _, o in sorted(want)]

@@ -335,7 +335,7 @@ def test_the_forecast_screen_finds_the_pairs_a_pair_by_pair_prediction_finds() -
     for a in aheads:
         theirs = a.positions(t, 25.0, 5.0)
         ok = t <= math.ceil(a.t_s) + 90.0  # what its forecast covers
-        d = np.hypot(*(theirs[ok] - mine[ok]).T).min()
+        d = np.linalg.norm(theirs[ok] - mine[ok], axis=1).min()
         if d < 300.0:
             expected.append((d, a.vehicle))
     assert expected, "the draw puts some pair under the separation"

@@ -99,6 +99,46 @@ def test_a_head_on_pair_is_kept_apart_by_layers_and_the_mover_keeps_its_slot() -
     assert gained_m > 0.0 and gained_m < 0.1 * (SPEED_M_S - 16.0) * left_s
 
 
+def test_a_mover_keeps_clear_of_the_height_the_others_profile_takes_it_to() -> None:
+    """A re-plan lifted A 300 m from 1.5 km along its route on (its mission climbs there),
+    before it meets B head-on 3 km along. Judged at A's present height, B climbed two layers
+    to where A was going (the 60-vehicle crowd's R59 and R00, 289 m apart as flown): judged
+    on A's profile, B descends one layer. The test's own heights, second by second (A's
+    from its lifted profile, B's as commanded), keep the separation."""
+    lift_from_m, lift_m = 1_500.0, 300.0
+    along = np.array([0.0, lift_from_m, lift_from_m + 60.0, 60_000.0])
+    a = dataclasses.replace(
+        _ahead("A", 0.0, 1.0, 1_000.0, slot_in_s=900.0),
+        route_s_m=along,
+        route_east_m=along,
+        route_north_m=np.zeros(4),
+        route_rise_m=np.array([0.0, 0.0, lift_m, lift_m]),
+    )
+    b = _ahead("B", 6_000.0, -1.0, 1_000.0, slot_in_s=2_400.0)
+    room = {"A": Room(3_000.0, 400.0), "B": Room(3_000.0, 400.0)}
+    v = resolve_vertical(
+        a, b, now_s=NOW_S, separation_m=D_S, layer_m=LAYER_M, rate_m_s=RATE_M_S, room=room,
+        look_ahead_s=180.0,
+    )  # fmt: skip
+    assert v is not None and (v.vehicle, v.offset_m, v.alt_m) == ("B", -LAYER_M, 700.0)
+    assert v.unresolved_m == pytest.approx(lift_m, abs=1.0)
+    t = np.arange(NOW_S, NOW_S + 400.0, 0.1)
+    ea, eb = _flown(0.0, 1.0, t), _flown(6_000.0, -1.0, t)
+    za = 1_000.0 + lift_m * np.clip((ea - lift_from_m) / 60.0, 0.0, 1.0)
+    zb = np.array([_height(1_000.0, v.offset_m, v.start_s, v.until_s, x) for x in t])
+    d = np.sqrt((ea - eb) ** 2 + (za - zb) ** 2)
+    assert float(d.min()) >= D_S, float(d.min())
+    assert room["B"].floor_m <= zb.min()
+    # The same pair with A's profile left out: B's choice, flown against A's true heights.
+    flat = resolve_vertical(
+        dataclasses.replace(a, route_rise_m=None), b, now_s=NOW_S, separation_m=D_S,
+        layer_m=LAYER_M, rate_m_s=RATE_M_S, room=room, look_ahead_s=180.0,
+    )  # fmt: skip
+    assert flat is not None
+    zb = np.array([_height(1_000.0, flat.offset_m, flat.start_s, flat.until_s, x) for x in t])
+    assert float(np.sqrt((ea - eb) ** 2 + (za - zb) ** 2).min()) < D_S
+
+
 def test_the_higher_of_a_pair_climbs_and_one_with_no_room_above_descends() -> None:
     a = _ahead("A", 0.0, 1.0, 1_100.0, slot_in_s=2_000.0)  # 100 m above B
     b = _ahead("B", 6_000.0, -1.0, 1_000.0, slot_in_s=2_000.0)
