@@ -71,6 +71,9 @@ class Ahead:
     the goal there)."""
     movable: bool = True
     """Whether it may be asked another speed (not on its final approach, say)."""
+    final_s: float = 0.0
+    """How long its final approach lasts, at the end of its horizon: no speed is asked there,
+    so a resolution's speed must be made up before it."""
     route_rise_m: FloatArray | None = None
     """How far its profile's height at each of the flight's samples lies above its profile's
     height where it is (m, with ``route_s_m``; None: it keeps the height it has). A re-plan
@@ -205,7 +208,7 @@ def resolve(
         for speed in (mover.airspeed_min_m_s, mover.airspeed_max_m_s):
             if abs(speed - mover.airspeed_m_s) < 1e-9:
                 continue
-            hold_end = now_s + longest_hold_s(mover, speed, now_s)
+            hold_end = now_s + longest_hold_s(mover, speed, now_s, response_s + mover.final_s)
             if hold_end - now_s <= response_s:
                 continue  # its slot leaves no time to fly it
             near_so = _nearest_m(mover, speed, near, t, response_s, hold_end)
@@ -240,12 +243,15 @@ def resolve(
     return Resolution(vid, other, speed, until, d, as_flown, at, d >= separation_m, hold_end)
 
 
-def longest_hold_s(mover: Ahead, airspeed_m_s: float, now_s: float) -> float:
+def longest_hold_s(mover: Ahead, airspeed_m_s: float, now_s: float, spare_s: float = 0.0) -> float:
     """How long (s) ``mover`` may fly ``airspeed_m_s`` from ``now_s`` and still make its slot
     (``horizon_s`` after its fix): the distance it gains or loses meanwhile made up over the
-    rest of the way with :data:`RECOVERY_SHARE` of the room its speed range leaves on the
-    other side of its present airspeed (``H * |change| <= share * room * (left - H)``)."""
-    left_s = mover.t_s + mover.horizon_s - now_s
+    rest of the way but its last ``spare_s`` (its final approach, the response to the speed
+    that takes the resolution back) with :data:`RECOVERY_SHARE` of the room its speed range
+    leaves on the other side of its present airspeed (``H * |change| <= share * room *
+    (left - H)``). Made up over the whole rest, a crowd's resolution held to 6 s before the
+    slot left its mover 1.7 s early."""
+    left_s = mover.t_s + mover.horizon_s - now_s - spare_s
     change = abs(airspeed_m_s - mover.airspeed_m_s)
     if left_s <= 0.0 or change < 1e-9:
         return max(left_s, 0.0)

@@ -607,6 +607,7 @@ class TeamController(ZoneGuard, TeamTime):
             movable=not turning
             and track.length_m - m.s_m >= self.config.final_m
             and self._resolving_from(m) is None,
+            final_s=self.config.final_m / max(m.groundspeed_m_s, 1.0),
             route_rise_m=rise_m,
         )
 

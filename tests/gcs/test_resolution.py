@@ -158,9 +158,10 @@ def test_a_resolution_near_the_goals_is_held_only_as_long_as_the_slot_can_be_mad
     assert r.until_s < far.until_s - 5.0
     mover = a if r.vehicle == "A" else b
     # Flown at the resolution's speed from 5 s (the response) to its end, then the rest of
-    # the way (what 25 m/s would fly in 150 s, less what was flown) in the time left.
+    # the way (what 25 m/s would fly in 150 s, less what was flown) in the time left, less
+    # the 5 s its speed takes to come back.
     flown_m = 25.0 * 5.0 + r.airspeed_m_s * (r.until_s - 5.0)
-    needed_m_s = (25.0 * 150.0 - flown_m) / (150.0 - r.until_s)
+    needed_m_s = (25.0 * 150.0 - flown_m - 25.0 * 5.0) / (150.0 - 5.0 - r.until_s)
     lo, hi = mover.airspeed_min_m_s, mover.airspeed_max_m_s
     assert 25.0 - 0.5 * (25.0 - lo) - 1e-6 <= needed_m_s <= 25.0 + 0.5 * (hi - 25.0) + 1e-6
 
@@ -225,6 +226,23 @@ def _crossing_team() -> TeamController:
     a_, b_ = team.schedule.vehicles
     assert pair_separation(a_, b_, step_s=0.1).distance_m < 1.0  # they meet, as timed
     return team
+
+
+def test_a_resolution_is_made_up_before_the_final_approach_and_the_response() -> None:
+    """A and B cross 60 s ahead, their slots 80 s ahead, each with a 6 s final approach (no
+    speed is asked there) and 5 s for a speed to take effect. What the resolution's speed
+    gains or loses until it ends is made up, in this test's own arithmetic, with half the
+    speed range on the other side before the speed taken back takes effect and the final
+    approach begins (held to 6 s before its slot, a crowd's mover arrived 1.7 s early)."""
+    a = _straight("A", (-1500.0, 0.0), 90.0, horizon_s=80.0, final_s=6.0)
+    b = _straight("B", (0.0, -1500.0), 0.0, horizon_s=80.0, final_s=6.0)
+    r = resolve(a, b, now_s=0.0, separation_m=300.0)
+    assert r is not None
+    mover = a if r.vehicle == "A" else b
+    lo, hi = mover.airspeed_min_m_s, mover.airspeed_max_m_s
+    change = abs(r.airspeed_m_s - 25.0)
+    recover_m_s = 0.5 * ((25.0 - lo) if r.airspeed_m_s > 25.0 else (hi - 25.0))
+    assert change * (r.until_s - 5.0) <= recover_m_s * (80.0 - 6.0 - 5.0 - r.until_s) + 1e-6
 
 
 def timed_alike(data: dict[str, Any]) -> TeamController:
