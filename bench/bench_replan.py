@@ -7,10 +7,10 @@ paper's 200 km map and static threats, launch sites on the west and south edges,
 3-15 km from the target) with a disc of 4 km that appears at 1,500 s where the vehicle
 nearest the team's middle will be at 3,000 s (across the routes that funnel together there).
 The team is planned and scheduled, then the re-plan the coordinator runs when the threat
-appears (:func:`planner.popup.apply_popup`: the routes it touches planned
-again from where the vehicles will be, the team re-timed, and checked in 4-D from then on:
-pairs under d_s timed apart, lifted onto altitude layers, or said) is timed, several times,
-each from its own seed. The re-plan is what stands between the threat and the uploads: the
+appears (:func:`planner.popup.apply_popup`: the routes it touches planned again from where
+the vehicles will be, the team re-timed, and checked in 4-D from then on: pairs under d_s
+timed apart, routed round the zone wider, lifted onto altitude layers, or said) is timed,
+several times, each from its own seed. The re-plan is what stands between the threat and the uploads: the
 coordinator starts them as soon as it returns.
 
     .venv/bin/python bench/bench_replan.py --vehicles 30 [--team ring|paper] [--radius-m M]
@@ -90,11 +90,13 @@ def main() -> None:
         replanned = [e.text for e in outcome.events if e.kind == "replan"]
         pairs = [e.payload for e in outcome.events if e.kind == "conflict" and "pair" in e.payload]
         timed = sum(1 for p in pairs if p.get("resolution") == "timing")
+        wider = sum(1 for p in pairs if p.get("resolution") == "offset")
         lifted = sum(1 for p in pairs if p.get("resolution") == "altitude")
         left = sum(1 for e in outcome.events if e.kind == "alarm" and "pair" in e.payload)
         print(
             f"seed {seed}: {walls[-1]:.2f} s; {len(outcome.affected)} re-planned; "
-            f"{timed} timed apart, {lifted} lifted onto a layer, {left} pairs left under d_s; "
+            f"{timed} timed apart, {wider} routed wider, {lifted} lifted onto a layer, "
+            f"{left} pairs left under d_s; "
             f"{'; '.join(replanned)}"
         )
     print(

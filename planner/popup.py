@@ -19,6 +19,7 @@ from planner.deconflict import TeamTracks
 from planner.errors import InfeasibleError
 from planner.flightpath import FlightPath
 from planner.plan import Method, World, build_problem, build_world, solve_and_finish
+from planner.replanoffset import widened
 from planner.replanseparation import separate_replan
 from planner.replantiming import retime_through
 from planner.retime import (
@@ -336,9 +337,26 @@ def apply_popup(
         except InfeasibleError:
             return None
 
+    def widen(vs: VehicleSchedule, by_m: float) -> Retimed | None:
+        """``vs``'s vehicle routed round the zone ``by_m`` wider from where it is (the zone
+        widened for its route search alone), timed for its slot."""
+        wider = widened(zone, by_m)
+        if wider is None:
+            return None
+        vid = vs.vehicle_id
+        around = [t for t in threats if t.id != zone.id] + [wider]
+        try:
+            path = _replan(
+                world, around, scenario, current, [vid], at_s, method, rng, anchors,
+                separation_up,
+            )[vid]  # fmt: skip
+        except InfeasibleError:
+            return None
+        return lifted(path)
+
     kept = separate_replan(
         scenario, final, from_s=at_s, lift_from_m=lift_from_m, rerouted=affected,
-        retime=lifted, through=through, time_up=separation_up,
+        retime=lifted, through=through, widen=widen, time_up=separation_up,
     )  # fmt: skip
     final = kept.vehicles
     adjusted.update(kept.adjustments)

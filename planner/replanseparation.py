@@ -12,7 +12,9 @@ the ones before it leave under ``d_s``, while the re-plan's wall time lasts:
 
 1. timing (:func:`planner.replantiming.time_apart`): a re-routed vehicle passes the place
    where it would come too close earlier or later, and still arrives at its slot;
-2. altitude layers (:func:`planner.layers.lift_team`): one of the pair flies a layer higher
+2. a lateral offset (:func:`planner.replanoffset.offset_apart`): a re-routed vehicle goes
+   round the zone wider, beside the track it shares with another, timed for its slot;
+3. altitude layers (:func:`planner.layers.lift_team`): one of the pair flies a layer higher
    over the stretch where they meet, only where its new mission flies (past the waypoint it
    is spliced at), timed again for its slot. The scenario's layers, or without any, the
    heights the in-flight resolution climbs by (:func:`planner.layers.replan_layers_m`).
@@ -26,13 +28,16 @@ from __future__ import annotations
 import math
 from collections.abc import Callable, Collection, Mapping
 from dataclasses import dataclass
+from typing import Any
 
 from planner.deconflict import PairSeparation, separation
 from planner.layers import Lifted, lift_team, replan_layers_m
+from planner.replanoffset import Widen, offset_apart
 from planner.replantiming import Through, time_apart
 from planner.retime import Retimed
 from planner.scenario import Scenario
 from planner.schedule import Adjustment, Event, VehicleSchedule
+from planner.sequencing import Moved
 
 __all__ = ["ReplanSeparation", "separate_replan"]
 
@@ -48,6 +53,8 @@ class ReplanSeparation:
     """The timing adjustments of each vehicle re-timed or lifted, by id."""
     timed: tuple[str, ...]
     """The vehicles timed to pass earlier or later to keep the separation."""
+    offset: tuple[str, ...]
+    """The vehicles routed round the zone wider to keep the separation."""
     lifted: tuple[str, ...]
     """The vehicles flown on a layer to keep the separation."""
     conflicts: tuple[PairSeparation, ...]
@@ -65,6 +72,28 @@ def _pair_payload(p: PairSeparation) -> dict[str, object]:
     }
 
 
+def _take(
+    vid: str,
+    moved: Moved[Any],
+    said: str,
+    how: dict[str, object],
+    current: dict[str, VehicleSchedule],
+    from_s: float,
+) -> Event:
+    """``vid`` flies ``moved``'s schedule; the event that says so (``said``, then the pair
+    it was separated from and ``how``)."""
+    current[vid] = moved.schedule
+    p = moved.conflict
+    other = p.b if p.a == vid else p.a
+    return Event(
+        from_s,
+        "conflict",
+        f"{said} and keeps its slot: after the re-plan {other} would come within "
+        f"{p.distance_m:.0f} m of it at {p.time_s:.0f} s",
+        {**_pair_payload(p), "pair": [vid, other], **how},
+    )
+
+
 def separate_replan(
     scenario: Scenario,
     team: Mapping[str, VehicleSchedule],
@@ -74,6 +103,7 @@ def separate_replan(
     rerouted: Collection[str],
     retime: Callable[[VehicleSchedule], Retimed | None],
     through: Through,
+    widen: Widen | None = None,
     time_up: Callable[[], bool] | None = None,
 ) -> ReplanSeparation:
     """Check the re-planned ``team`` from ``from_s`` on and separate what it can.
@@ -99,6 +129,9 @@ def separate_replan(
     through
         Times a schedule for its slot through a place at a time (:data:`~planner.
         replantiming.Through`).
+    widen
+        Routes a re-routed vehicle round the zone wider and times it for its slot
+        (:data:`~planner.replanoffset.Widen`); without it, no offset is tried.
     time_up
         Says when the re-plan's wall time is spent: a stage is not begun after it, and the
         one under way ends with what it has.
@@ -111,36 +144,36 @@ def separate_replan(
     adjustments: dict[str, tuple[Adjustment, ...]] = {}
     events: list[Event] = []
     sep = separation([current[vid] for vid in order], required, from_s=from_s)
+    movable = [vid for vid in order if vid in rerouted and vid in lift_from_m]
     timed: list[str] = []
     if sep.conflicts and not up():
-        movable = [vid for vid in order if vid in rerouted and vid in lift_from_m]
         moved, sep = time_apart(
             [current[vid] for vid in order], required, from_s=from_s, movable=movable,
             through=through, time_up=up,
         )  # fmt: skip
         for vid, m in moved.items():
-            current[vid] = m.schedule
+            shift = m.chosen.shift_s
+            said = (
+                f"{vid} passes {m.chosen.via_s_m / 1000.0:.1f} km along its route "
+                f"{abs(shift):g} s {'later' if shift > 0 else 'earlier'} than timed"
+            )
+            how = {"resolution": "timing", "shift_s": shift}
+            events.append(_take(vid, m, said, how, current, from_s))
             adjustments[vid] = tuple(m.chosen.retimed.adjustments)
             timed.append(vid)
-            p = m.conflict
-            other = p.b if p.a == vid else p.a
-            shift = m.chosen.shift_s
-            events.append(
-                Event(
-                    from_s,
-                    "conflict",
-                    f"{vid} passes {m.chosen.via_s_m / 1000.0:.1f} km along its route "
-                    f"{abs(shift):g} s {'later' if shift > 0 else 'earlier'} than timed and "
-                    f"keeps its slot: after the re-plan {other} would come within "
-                    f"{p.distance_m:.0f} m of it at {p.time_s:.0f} s",
-                    {
-                        **_pair_payload(p),
-                        "pair": [vid, other],
-                        "resolution": "timing",
-                        "shift_s": shift,
-                    },
-                )
-            )
+    offset: list[str] = []
+    if sep.conflicts and widen is not None and not up():
+        wider, sep = offset_apart(
+            [current[vid] for vid in order], required, from_s=from_s, movable=movable,
+            widen=widen, time_up=up,
+        )  # fmt: skip
+        for vid, o in wider.items():
+            by_m = o.chosen.by_m
+            said = f"{vid} goes round the zone {by_m:.0f} m wider"
+            how = {"resolution": "offset", "offset_m": by_m}
+            events.append(_take(vid, o, said, how, current, from_s))
+            adjustments[vid] = tuple(o.chosen.retimed.adjustments)
+            offset.append(vid)
     layers_m = replan_layers_m(scenario)
     lifted: dict[str, Lifted[Retimed]] = {}
     if sep.conflicts and not up():
@@ -179,7 +212,7 @@ def separate_replan(
         why = (
             "the re-plan's time ran out before they were separated"
             if up()
-            else "neither timing nor an altitude layer keeps them apart"
+            else "neither timing, a wider way round nor an altitude layer keeps them apart"
         )
         said = (
             f"{p.a} and {p.b} would come within {p.distance_m:.0f} m of each other at "
@@ -191,6 +224,7 @@ def separate_replan(
         {vid: current[vid] for vid in order},
         adjustments,
         tuple(timed),
+        tuple(offset),
         tuple(lifted),
         conflicts,
         tuple(events),

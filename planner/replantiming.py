@@ -118,7 +118,7 @@ def retime_through(
         replace(a, reason=a.reason.replace(f"to arrive at {via_t_s:.1f} s", passes))
         for a in head.adjustments
     ]
-    return Retimed(tail.schedule, [*said, *tail.adjustments])
+    return Retimed(replace(tail.schedule, via=(via_s_m, via_t_s)), [*said, *tail.adjustments])
 
 
 def time_apart(

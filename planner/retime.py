@@ -465,6 +465,7 @@ def retime_on_path(
         arrival_s=arrival,
         legs=tuple(kept_legs + legs),
         loiters=tuple(kept_loiters + loiters),
+        via=None,  # timed for its slot alone
     )
     return Retimed(new, adjustments)
 

@@ -157,6 +157,10 @@ class VehicleSchedule:
     """The takeoff's climb-out (None: flying at its start, or not worked out)."""
     wind: Wind = CALM
     """The wind its timing counts on: the forecast, then the one measured in flight."""
+    via: tuple[float, float] | None = None
+    """``(s_m, t_s)``: timed to pass ``s_m`` along its path at mission time ``t_s`` on its way
+    to its slot (a re-plan's separation by timing, :func:`planner.replantiming.
+    retime_through`): the flight aims there first. None: timed for its slot alone."""
 
     def alt_at(self, s_m: float) -> float:
         return float(np.interp(s_m, self.wp_s_m, self.wp_alt_m))

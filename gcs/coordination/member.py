@@ -10,7 +10,7 @@ from __future__ import annotations
 import bisect
 import enum
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any, Literal
 
 import numpy as np
@@ -141,6 +141,10 @@ class Member:
     """Mission time since which its fixes have come without a gap longer than
     ``resettle_gap_s`` (the flight's first fixes count from the start)."""
     last_decision: Decision | None = None
+    """Its last decision for its slot (a pass timed on the way changes only what it flies)."""
+    via_track: RouteTrack | None = None
+    """Its route up to the place its schedule times it through (:attr:`planner.schedule.
+    VehicleSchedule.via`), built when first flown to."""
     eta_min_seen: tuple[tuple[float, float], ...] = ()
     """``(when, eta_min_s)`` of its last two decisions, mission s: a vehicle heard again after
     a gap moves the team time only when they agree (``resettle_drift``)."""
@@ -270,7 +274,13 @@ class Member:
         return VehicleState.ON_ROUTE
 
 
-def route_track(vs: VehicleSchedule) -> RouteTrack:
+def route_track(vs: VehicleSchedule, up_to_m: float | None = None) -> RouteTrack:
+    """The schedule's route and loiter turns as flown (up to ``up_to_m`` along it: to the
+    place it is timed through)."""
+    if up_to_m is not None:
+        head = vs.path.prefix(up_to_m)
+        assert head is not None, "a place on the path ahead"
+        vs = replace(vs, path=head, loiters=tuple(lo for lo in vs.loiters if lo.s_m <= up_to_m))
     loiters = [
         LoiterSpec(
             lo.s_m,

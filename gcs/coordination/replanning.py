@@ -312,6 +312,7 @@ class MissionChanges:
         m.mission = up.mission
         m.schedule = vs
         m.track = route_track(vs)
+        m.via_track = None
         m.next_decision_s = -math.inf
         keep = up.keep_seq
         m.splice_seq = keep

@@ -77,6 +77,9 @@ def separation_kind(ev: FlightEvent) -> SeparationEvent | None:
         if p.get("resolution") == "timing":
             action = f"timing {float(p.get('shift_s', 0.0)):+g} s"
             return SeparationEvent("resolved", a, b, action, said_m, at_s + ENCOUNTER_AFTER_S)
+        if p.get("resolution") == "offset":
+            action = f"offset {float(p.get('offset_m', 0.0)):g} m"
+            return SeparationEvent("resolved", a, b, action, said_m, at_s + ENCOUNTER_AFTER_S)
         return SeparationEvent("unresolved", a, b, "alarm", said_m, at_s + ENCOUNTER_AFTER_S)
     if "other" not in p or ev.vehicle is None:
         return None  # a re-plan's note without a pair

@@ -29,6 +29,7 @@ from __future__ import annotations
 import functools
 import math
 from collections.abc import Mapping, Sequence
+from dataclasses import replace
 from typing import Any
 
 import numpy as np
@@ -85,6 +86,11 @@ LANDING_MARGIN_S = 120.0
 POPUP_SEEN_LATE_S = 5.0
 """A pop-up threat's re-plan is counted from its appearance when its tick saw it at most this
 late (mission s; :meth:`TeamController._popup_lead_s`)."""
+VIA_SLOT_TOL_S = 0.5
+"""A place its schedule times a vehicle through is flown to while its slot is still the one
+so timed, within this (s): the team time moved, the pass no longer keeps what it kept."""
+VIA_REACHED_M = 50.0
+"""Within this of the place (m along its route) the pass is made: timed for its slot on."""
 
 
 def is_crash_text(text: str) -> bool:
@@ -1025,6 +1031,8 @@ class TeamController(ZoneGuard, TeamTime):
             "tas_per_eas": m.tas_per_eas(s),
         }
         d = m.controller.decide(m.track, **inputs)
+        if d.verdict == "on_time":
+            d = self._through_via(m, d, inputs)
         self._apply_decision(m, d, t, out)
         time_left = m.target_s - t
         cfg = self.config
@@ -1055,6 +1063,31 @@ class TeamController(ZoneGuard, TeamTime):
             if d.verdict == "early":
                 m.last_loiter_s = t
                 self._loiter(m, d, t, s, inputs["wind"], out)
+
+    def _through_via(self, m: Member, d: Decision, inputs: dict[str, Any]) -> Decision:
+        """``d`` (on time for its slot) flying the speed that passes the place its schedule
+        times it through at that time (a re-plan's separation by timing: the speed for the
+        slot alone flew the pair together again), while it has still to pass it, its slot is
+        the one it was so timed for, and that speed makes it there; else ``d``."""
+        vs = m.schedule
+        if (
+            vs.via is None
+            or abs(m.target_s - vs.arrival_s) > VIA_SLOT_TOL_S
+            or m.in_loiter()
+            or inputs["s_m"] > vs.via[0] - VIA_REACHED_M
+        ):
+            return d
+        via_s_m, via_t_s = vs.via
+        if m.via_track is None:
+            m.via_track = route_track(vs, via_s_m)
+        v = m.controller.decide(m.via_track, **(inputs | {"target_s": via_t_s}))
+        if v.verdict != "on_time":
+            return d
+        why = (
+            f"to pass {via_s_m / 1000.0:.1f} km along its route at {via_t_s:.1f} s, as the "
+            f"re-plan timed it: {v.reason}"
+        )
+        return replace(d, command_m_s=v.command_m_s, level_m_s=v.level_m_s, reason=why)
 
     def _decide_in_loiter(self, m: Member, t: float, fix: act.Fix, out: list[act.Action]) -> None:
         """In loiter turns: the rest of the turns (those flown counted from the ground

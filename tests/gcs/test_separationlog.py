@@ -125,9 +125,12 @@ def test_the_closest_distance_is_over_the_window_the_entry_states() -> None:
     assert e["closest_m"] == pytest.approx(expected, rel=2e-3)  # the next sample: 50 m more
 
 
-def test_a_re_plan_that_times_a_pair_apart_is_read_as_resolved_by_timing() -> None:
+def test_a_re_plan_that_times_a_pair_apart_or_routes_one_wider_is_read_as_resolved() -> None:
     tracks = {"A": _track(0.0, 20.0, 0.0, 800.0), "B": _track(15_000.0, -30.0, 200.0, 900.0)}
     replan = {"pair": ["A", "B"], "distance_m": 224.0, "at_s": 300.0}
     timed = _event(EventKind.CONFLICT, "A", 100.0, **replan, resolution="timing", shift_s=-15.0)
     (out,) = separation_events([timed], tracks, START_UTC)
     assert (out["kind"], out["action"], out["pair"]) == ("resolved", "timing -15 s", ["A", "B"])
+    wider = _event(EventKind.CONFLICT, "B", 100.0, **replan, resolution="offset", offset_m=450.0)
+    (out,) = separation_events([wider], tracks, START_UTC)
+    assert (out["kind"], out["action"], out["pair"]) == ("resolved", "offset 450 m", ["A", "B"])

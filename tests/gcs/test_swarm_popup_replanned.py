@@ -218,7 +218,7 @@ def test_the_record_says_each_conflict_what_was_done_and_how_close_the_pair_trul
     separated = [
         e
         for e in entries
-        if e["kind"] == "resolved" and e["action"].startswith(("timing", "altitude +"))
+        if e["kind"] == "resolved" and e["action"].startswith(("timing", "offset", "altitude +"))
     ]
     assert unresolved or separated, flight.told()
     alarms = {

@@ -204,6 +204,57 @@ def test_speed_is_commanded_only_when_the_required_level_changes(team: TeamContr
     assert abs(up.airspeed_m_s - need) <= step / 2 + 1e-6
 
 
+@pytest.mark.parametrize("slot", ["kept", "moved"])
+def test_a_vehicle_timed_through_a_place_flies_there_then_for_its_slot(
+    team: TeamController, slot: str
+) -> None:
+    """A re-plan timed UAV1 apart from another by when it passes a place 8 km ahead
+    (``schedule.via``), 20 s before the speed for its slot would: it flies the speed that
+    passes there then (the slot's alone flew the 60-vehicle crowd's R01 and R02 together
+    again, 224 m apart), still on time for its slot; past the place, the speed for its slot.
+    Once the team time has moved, the pass no longer keeps what it kept: the slot alone."""
+    vid = "UAV1"
+    m = team.members[vid]
+    t0 = m.takeoff_s + 600.0
+    airborne(team, vid, m.takeoff_s)
+    s0 = m.schedule.state_at(t0)[1]
+    via_s_m = s0 + 8_000.0
+    tas_per_eas = m.schedule.tas_per_eas(s0)
+
+    def left_m(s_m: float) -> float:  # the route and the loiter turns still to fly
+        return m.track.length_m - s_m + sum(lo.length_m for lo in m.track.loiters if lo.s_m >= s_m)
+
+    slot_eas = left_m(s0) / (m.target_s - t0) / tas_per_eas
+    via_t_s = t0 + 8_000.0 / (slot_eas * tas_per_eas) - 20.0
+    assert m.target_s == pytest.approx(m.schedule.arrival_s, abs=0.05)
+    m.schedule = dataclasses.replace(m.schedule, via=(via_s_m, via_t_s))
+    if slot == "moved":
+        m.target_s += 5.0
+    step = m.limits.step_m_s
+    cmds = of(team.handle(fix(team, vid, s0, t0, slot_eas), t0), act.CommandSpeed)
+    decided = team.members[vid].last_decision
+    assert decided is not None and decided.verdict == "on_time"  # for its slot
+    if slot == "moved":
+        need = left_m(s0) / (m.target_s - t0) / tas_per_eas
+        assert abs(decided.level_m_s - need) <= step / 2 + 1e-6
+        assert not any("to pass" in c.reason for c in cmds)
+        return
+    # The test's own arithmetic: the speed that covers the 8 km by then, in still air.
+    to_via = 8_000.0 / (via_t_s - t0) / tas_per_eas
+    (cmd,) = cmds
+    assert abs(cmd.airspeed_m_s - to_via) <= step / 2 + 1e-6 and cmd.airspeed_m_s > slot_eas
+    assert "to pass" in cmd.reason and f"{via_t_s:.1f} s" in cmd.reason
+    team.handle(act.SpeedCommanded(vid, cmd.airspeed_m_s, cmd.reason, t0), t0 + 1)
+    # Past the place at its time: the speed for its slot from there.
+    s1 = via_s_m + 100.0
+    t1 = via_t_s + 100.0 / (to_via * tas_per_eas)
+    (back,) = of(team.handle(fix(team, vid, s1, t1, cmd.airspeed_m_s), t1), act.CommandSpeed)
+    need = left_m(s1) / (m.target_s - t1) / m.schedule.tas_per_eas(s1)
+    # (Within a step: the controller takes the true airspeed's factor along the profile.)
+    assert abs(back.airspeed_m_s - need) <= step and "to pass" not in back.reason
+    assert back.airspeed_m_s < cmd.airspeed_m_s - step
+
+
 def test_a_speed_item_the_mission_runs_inside_the_final_stretch_does_not_set_the_arrival(
     team: TeamController,
 ) -> None:

@@ -21,6 +21,8 @@ from typing import Any
 import numpy as np
 import pytest
 
+from planner import replanseparation
+from planner.deconflict import separation
 from planner.plan import build_world, plan
 from planner.popup import PopupOutcome, apply_popup, popup_zones
 from planner.retime import build_schedule
@@ -184,10 +186,15 @@ def test_a_separated_re_plan_keeps_every_slot_and_flies_within_its_altitude_limi
     scenario = outcome.schedule.scenario
     ground_m = float(scenario.terrain.elevation_m)  # flat
     highest_m = 1.5 * scenario.separation_m  # three layers of half d_s
+    wider = {
+        e.payload["pair"][0] for e in outcome.events if e.payload.get("resolution") == "offset"
+    }
     for vs in outcome.schedule.vehicles:
         ref = reference.schedule.vehicle(vs.vehicle_id)
         v = scenario.vehicle(vs.vehicle_id)
         assert vs.arrival_s == pytest.approx(ref.arrival_s, abs=0.05), vs.vehicle_id
+        if vs.vehicle_id in wider:
+            continue  # another route round the zone (the test above)
         assert vs.path.length_m == pytest.approx(ref.path.length_m)
         s = np.linspace(0.0, vs.path.length_m, 4001)
         z = np.interp(s, vs.wp_s_m, vs.wp_alt_m)
@@ -202,3 +209,72 @@ def test_a_separated_re_plan_keeps_every_slot_and_flies_within_its_altitude_limi
         # Where it is in the air before the re-plan's start is not changed.
         t_s = np.arange(vs.takeoff_s, at_s, 1.0)
         assert np.allclose(_track(vs, t_s), _track(ref, t_s), equal_nan=True), vs.vehicle_id
+
+
+def test_a_pair_on_the_zones_edge_that_no_timing_separates_is_routed_round_it_wider(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """The wide disc sends R01 and R02 (and R28 and R29) round one edge of it, together: with
+    the timing stage left out, one of each pair goes round the zone wider (the zone widened
+    for its route search alone) and keeps its slot. By the test's own samples every pair
+    keeps d_s from the re-plan's start; the vehicle routed wider keeps that much more room
+    from the zone as it goes round."""
+
+    def untimed(
+        team: list[VehicleSchedule], required_m: float, *, from_s: float, **_: object
+    ) -> tuple[dict[str, object], object]:
+        return {}, separation(list(team), required_m, from_s=from_s)
+
+    monkeypatch.setattr(replanseparation, "time_apart", untimed)
+    n, centre_m, radius_m, at_s = BUNCHED["30, wide disc"]
+    args = {"centre_m": centre_m, "radius_m": radius_m, "at_s": at_s, "seed": 1}
+    _, outcome = _flown(ring_team(n), **args)
+    _, reference = _flown(ring_team(n), separate=False, **args)
+    required = outcome.schedule.scenario.separation_m
+    wider = [e for e in outcome.events if e.payload.get("resolution") == "offset"]
+    assert wider and not [e for e in outcome.events if e.kind == "alarm"], [
+        e.text for e in outcome.events
+    ]
+    found = _closest_pairs(outcome.schedule, at_s)
+    assert min(d for d, _ in found.values()) >= required - TOL_M
+    for e in wider:
+        vid = e.payload["pair"][0]
+        assert e.text.startswith(f"{vid} goes round the zone {e.payload['offset_m']:.0f} m wider")
+        vs, ref = outcome.schedule.vehicle(vid), reference.schedule.vehicle(vid)
+        assert vs.arrival_s == pytest.approx(ref.arrival_s, abs=0.05)
+        assert vs.path.length_m > ref.path.length_m
+
+        # Its least room from the zone's edge as it goes round: at least the offset (clear of
+        # the zone so widened), and more than the route first re-planned left.
+        def room_m(x: VehicleSchedule) -> float:
+            s = np.linspace(x.state_at(at_s)[1], x.path.length_m, 2000)
+            en = np.array([(p.east_m, p.north_m) for p in (x.path.pose_at(float(k)) for k in s)])
+            return float(
+                (np.hypot(en[:, 0] - centre_m[0], en[:, 1] - centre_m[1]) - radius_m).min()
+            )
+
+        assert room_m(vs) >= max(e.payload["offset_m"], room_m(ref)), (room_m(vs), room_m(ref))
+
+
+def test_a_vehicle_timed_apart_carries_the_place_and_time_its_flight_aims_at(
+    bunched: tuple[str, PopupOutcome, PopupOutcome],
+) -> None:
+    """A vehicle the re-plan timed apart passes the place of its closest approach earlier or
+    later: its schedule says where and when (``via``, which the flight aims at before its
+    slot), and by its own timing it is there then; the others are timed for their slots
+    alone (one timed again on a layer or round the zone wider, for its slot, too)."""
+    _, outcome, _ = bunched
+
+    def by(resolution: str) -> set[str]:
+        events = outcome.events
+        return {e.payload["pair"][0] for e in events if e.payload.get("resolution") == resolution}
+
+    timed = by("timing") - by("altitude") - by("offset")
+    assert timed
+    for vs in outcome.schedule.vehicles:
+        if vs.vehicle_id not in timed:
+            assert vs.via is None, vs.vehicle_id
+            continue
+        assert vs.via is not None, vs.vehicle_id
+        via_s_m, via_t_s = vs.via
+        assert vs.state_at(via_t_s)[1] == pytest.approx(via_s_m, abs=1.0), vs.vehicle_id

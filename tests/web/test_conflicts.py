@@ -110,7 +110,7 @@ async def test_the_console_draws_each_conflict_between_the_pair_and_lists_it(
     replanned = [
         e
         for e in record["separation_events"]
-        if e["kind"] == "unresolved" or e["action"].startswith(("timing", "altitude +"))
+        if e["kind"] == "unresolved" or e["action"].startswith(("timing", "offset", "altitude +"))
     ]
     assert replanned, record["separation_events"]
     assert not c.external(), c.external()

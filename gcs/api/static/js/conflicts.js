@@ -30,6 +30,9 @@ export function separationOf(ev) {
       const shift = Number(p.shift_s ?? 0);
       return { ...base, kind: "resolved", a, b, action: `timing ${shift >= 0 ? "+" : ""}${shift} s`, until_s: until };
     }
+    if (p.resolution === "offset") {
+      return { ...base, kind: "resolved", a, b, action: `offset ${Number(p.offset_m ?? 0)} m`, until_s: until };
+    }
     return { ...base, kind: "unresolved", a, b, action: "alarm", until_s: until };
   }
   if (p.other === undefined || !ev.vehicle) return null;
