@@ -10,8 +10,8 @@ The team is planned and scheduled, then the re-plan the coordinator runs when th
 appears (:func:`planner.popup.apply_popup`: the routes it touches planned again from where
 the vehicles will be, the team re-timed, and checked in 4-D from then on: pairs under d_s
 timed apart, routed round the zone wider, lifted onto altitude layers, or said) is timed,
-several times, each from its own seed. The re-plan is what stands between the threat and the uploads: the
-coordinator starts them as soon as it returns.
+several times, each from its own seed. The re-plan is what stands between the threat and the
+uploads: the coordinator starts them as soon as it returns.
 
     .venv/bin/python bench/bench_replan.py --vehicles 30 [--team ring|paper] [--radius-m M]
 """
