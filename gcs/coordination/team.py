@@ -67,7 +67,8 @@ SPEED_REFUSALS_ALARM = 3
 """Speed commands refused in a row that make an alarm: the speed is not under control."""
 GOAL_ALONG_SLACK_M = 500.0
 """A fix counts towards the arrival only when the route left (as last located) is within
-the arrival radius and this much more (a fix or two of travel)."""
+the arrival radius and this much more (a fix or two of travel); one going away from the goal
+is its passage only with no more than this of its route left."""
 
 
 RESOLVED_MARGIN = 1.1
@@ -1332,16 +1333,21 @@ class TeamController(ZoneGuard, TeamTime):
         d = math.hypot(e - m.goal_en_m[0], n - m.goal_en_m[1])
         # Near its goal along its route too (as last located, loiter turns ahead included): a
         # route that passes near its own goal on the way round (a re-plan around a zone), or
-        # a loiter circle that comes near it, is not arriving there.
+        # a loiter circle that comes near it, is not arriving there. Nor is one that leaves
+        # its goal behind with its route still ahead: a hook back into the goal's approach
+        # (the 60-vehicle crowd's R05, taken for its passage 53 s early).
         along_m = math.inf
         if m.s_m is not None and not m.in_loiter():
             along_m = m.track.remaining_m(m.s_m, m.loiters_done())
         if along_m > radius + GOAL_ALONG_SLACK_M:
             m.near_goal.clear()
             return
+        past = along_m <= GOAL_ALONG_SLACK_M
         if d > radius:
-            if m.near_goal:
+            if m.near_goal and past:
                 self._arrive(m, out)
+            elif not past:
+                m.near_goal.clear()  # out of the radius on its way round
             return
         m.near_goal.append(
             TruthSample(
@@ -1358,7 +1364,7 @@ class TeamController(ZoneGuard, TeamTime):
             prev = m.near_goal[-2]
             pe, pn = self.frame.to_local(prev.lat_deg, prev.lon_deg)
             d_prev = math.hypot(float(pe) - m.goal_en_m[0], float(pn) - m.goal_en_m[1])
-            if d > d_prev + 1.0:
+            if d > d_prev + 1.0 and past:
                 self._arrive(m, out)
 
     def _arrive(self, m: Member, out: list[act.Action]) -> None:

@@ -23,12 +23,12 @@ from gcs.coordination import actions as act
 from gcs.coordination.config import FlightConfig
 from gcs.coordination.events import EventKind, FlightEvent
 from gcs.coordination.member import Member, VehicleState
-from gcs.coordination.routetrack import LoiterSpec
+from gcs.coordination.routetrack import LoiterSpec, RouteTrack
 from gcs.coordination.separation import Position, SeparationWatch
 from gcs.coordination.team import TeamController, TeamTimeRefused
 from gcs.errors import GcsError
 from gcs.store.repository import EventWriter, Store
-from planner.flightpath import FlightPath
+from planner.flightpath import FlightPath, smooth_polyline
 from planner.mission import (
     MAV_CMD_DO_CHANGE_SPEED,
     MAV_CMD_NAV_LOITER_TURNS,
@@ -1604,6 +1604,47 @@ def test_passing_near_its_goal_on_the_way_round_is_not_the_arrival(team: TeamCon
     )
     said += reports(team.handle(past, t), EventKind.ARRIVED)
     assert len(said) == 1 and m.arrival_s == pytest.approx(t_end, abs=1.0)
+
+
+def test_a_hook_back_into_the_goals_approach_is_not_the_arrival(team: TeamController) -> None:
+    """A route re-planned round a zone may overshoot its goal and hook back into its approach
+    (the 60-vehicle crowd's R05): 500 m from the goal with 1.3 km of route left, then away from
+    it along the hook, is no passage (it was taken for one, 53 s early, and the vehicle was
+    left at its last speed, 2 s late); the passage at the route's end is, at the time the
+    fixes put it there (the test's own: 25 m/s along the route from the hook's start)."""
+    vid = "UAV1"
+    m, t0 = flying(team, vid, 600.0)
+    team.handle(fix(team, vid, 20_000.0, t0, 25.0), t0)  # on its route
+    assert m.phase == "route"
+    t0 += 1.0
+    ge, gn = m.goal_en_m
+    hook = [(-500.0, 1_700.0), (-500.0, 30.0), (-720.0, -380.0), (-340.0, -350.0), (0.0, 0.0)]
+    path = smooth_polyline([(ge + e, gn + n) for e, n in hook], 150.0)
+    m.track, m.s_m = RouteTrack(path), 0.0
+    m.goal_en_m = (path.end.east_m, path.end.north_m)
+    # The hook: a point of the route within 600 m of the goal with over 1.2 km of it left.
+    s_near = np.arange(0.0, path.length_m - 1_200.0, 10.0)
+    near_m = [math.dist((p.east_m, p.north_m), m.goal_en_m) for p in map(path.pose_at, s_near)]
+    assert min(near_m) < 600.0
+    said: list[act.Report] = []
+    gs = 25.0 * m.schedule.tas_per_eas(m.s_m or 0.0)
+    s_end = path.length_m
+    for s_m in np.arange(0.0, s_end + 400.0, 20.0):
+        pose = path.pose_at(min(float(s_m), s_end))
+        ahead = max(float(s_m) - s_end, 0.0)
+        e = pose.east_m + ahead * math.sin(pose.heading_rad)
+        n = pose.north_m + ahead * math.cos(pose.heading_rad)
+        lat, lon = team.frame.to_geodetic(e, n)
+        t = t0 + float(s_m) / gs
+        f = dataclasses.replace(
+            fix(team, vid, 20_000.0, t, 25.0), lat_deg=float(lat), lon_deg=float(lon),
+            ve_m_s=gs * math.sin(pose.heading_rad), vn_m_s=gs * math.cos(pose.heading_rad),
+            heading_deg=math.degrees(pose.heading_rad), mission_seq=None,
+        )  # fmt: skip
+        said += reports(team.handle(f, t), EventKind.ARRIVED)
+        if m.phase == "arrived":
+            break
+    assert len(said) == 1 and m.arrival_s == pytest.approx(t0 + s_end / gs, abs=1.0), said
 
 
 def test_a_vehicle_that_reports_its_wind_keeps_the_last_report_until_the_next_one(
