@@ -344,7 +344,8 @@ def apply_popup(
         if wider is None:
             return None
         vid = vs.vehicle_id
-        around = [t for t in threats if t.id != zone.id] + [wider]
+        # The zone itself kept beside it: a concave one's widening need not cover it.
+        around = [*threats, replace(wider, id=f"{zone.id} {by_m:g} m wider")]
         try:
             path = _replan(
                 world, around, scenario, current, [vid], at_s, method, rng, anchors,

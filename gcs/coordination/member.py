@@ -66,6 +66,11 @@ class VehicleState(enum.StrEnum):
     """Its progress along its route stalled for longer than ``stall_bound_s``."""
 
 
+VIA_SLOT_TOL_S = 0.5
+"""A place its schedule times a vehicle through is flown to while its slot is still the one
+so timed, within this (s)."""
+
+
 @dataclass(frozen=True)
 class Lost:
     """Why and when a vehicle was lost to the team (mission s)."""
@@ -214,6 +219,16 @@ class Member:
     def over(self) -> bool:
         """Neither timed nor watched: done, and down if it lands after its slot."""
         return self.phase in DONE and not (self.phase == "arrived" and self.landing_due)
+
+    def via_live(self) -> tuple[float, float] | None:
+        """The place and time its schedule times it through (:attr:`planner.schedule.
+        VehicleSchedule.via`) while its slot is still the one so timed (within
+        :data:`VIA_SLOT_TOL_S`): once the team time has moved, the pass no longer keeps what it
+        kept."""
+        via = self.schedule.via
+        if via is None or abs(self.target_s - self.schedule.arrival_s) > VIA_SLOT_TOL_S:
+            return None
+        return via
 
     def in_loiter(self) -> bool:
         seq = self.last_seq

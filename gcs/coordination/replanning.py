@@ -358,6 +358,7 @@ class MissionChanges:
                 m.schedule,
                 arrival_s=m.target_s,
                 wind=CALM if still_air else m.schedule.wind if m.wind is None else m.wind,
+                via=m.via_live(),  # timed for another slot: its slot alone
             )
             for m in (self.members[vs.vehicle_id] for vs in self.schedule.vehicles)
         )

@@ -87,9 +87,6 @@ LANDING_MARGIN_S = 120.0
 POPUP_SEEN_LATE_S = 5.0
 """A pop-up threat's re-plan is counted from its appearance when its tick saw it at most this
 late (mission s; :meth:`TeamController._popup_lead_s`)."""
-VIA_SLOT_TOL_S = 0.5
-"""A place its schedule times a vehicle through is flown to while its slot is still the one
-so timed, within this (s): the team time moved, the pass no longer keeps what it kept."""
 VIA_REACHED_M = 50.0
 """Within this of the place (m along its route) the pass is made: timed for its slot on."""
 
@@ -614,7 +611,8 @@ class TeamController(ZoneGuard, TeamTime):
             movable=not turning
             and track.length_m - m.s_m >= self.config.final_m
             and self._resolving_from(m) is None,
-            final_s=self.config.final_m / max(m.groundspeed_m_s, 1.0),
+            # (a fix without a ground speed: its airspeed)
+            final_s=self.config.final_m / max(m.groundspeed_m_s or m.level_m_s, 1.0),
             route_rise_m=rise_m,
         )
 
@@ -1070,17 +1068,12 @@ class TeamController(ZoneGuard, TeamTime):
         times it through at that time (a re-plan's separation by timing: the speed for the
         slot alone flew the pair together again), while it has still to pass it, its slot is
         the one it was so timed for, and that speed makes it there; else ``d``."""
-        vs = m.schedule
-        if (
-            vs.via is None
-            or abs(m.target_s - vs.arrival_s) > VIA_SLOT_TOL_S
-            or m.in_loiter()
-            or inputs["s_m"] > vs.via[0] - VIA_REACHED_M
-        ):
+        via = m.via_live()
+        if via is None or m.in_loiter() or inputs["s_m"] > via[0] - VIA_REACHED_M:
             return d
-        via_s_m, via_t_s = vs.via
+        via_s_m, via_t_s = via
         if m.via_track is None:
-            m.via_track = route_track(vs, via_s_m)
+            m.via_track = route_track(m.schedule, via_s_m)
         v = m.controller.decide(m.via_track, **(inputs | {"target_s": via_t_s}))
         if v.verdict != "on_time":
             return d
@@ -1600,6 +1593,10 @@ class TeamController(ZoneGuard, TeamTime):
             m.progress = m.still = None
         self.popups_done -= self.popups_running
         self.popups_running.clear()
+        # Forecasts made before the restart are stale (and a checkpoint kept before they had
+        # heights holds them in another layout).
+        old = self.forecasts
+        self.forecasts = Forecasts(list(self.members), old.look_ahead_s, old.response_s)
 
 
 def _neighbours(

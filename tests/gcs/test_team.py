@@ -944,6 +944,43 @@ def test_a_vehicle_that_left_its_loiter_unwatched_is_no_stall_after_a_restart(
     assert f"no progress along its route for {t - t1:.1f} s" in lost[0].reason
 
 
+def test_a_checkpoint_kept_before_forecasts_had_heights_is_flown_on_after_a_restart(
+    team: TeamController, paper: tuple[Scenario, World, Schedule]
+) -> None:
+    """A checkpoint from before the forecasts carried each vehicle's height ahead holds them
+    as east and north alone: taken on by a new process, the controller forecasts afresh (the
+    old ones are stale anyway) and resolves the vehicles' conflicts as before, not failing on
+    the first forecast."""
+    m1, t0 = flying(team, "UAV1", 600.0)
+    airborne(team, "UAV2", t0)
+    for vid in ("UAV1", "UAV2"):
+        team.handle(fix(team, vid, 20_000.0, t0, 25.0), t0)
+    team.forecasts._positions = team.forecasts._positions[..., :2].copy()  # the old layout
+    copy = pickle.loads(pickle.dumps(team))
+    copy.rebind_world(paper[1])
+    copy.restarted()
+    for k in range(1, 6):
+        t = t0 + 2.0 * k
+        for vid in ("UAV1", "UAV2"):
+            copy.handle(fix(copy, vid, 20_000.0 + 50.0 * k, t, 25.0), t)
+    assert copy.forecasts._positions.shape[-1] == 3 and set(copy.forecasts.ahead) >= {"UAV1"}
+
+
+def test_a_re_plan_starts_from_a_pass_only_while_the_slot_it_was_timed_for_stands(
+    team: TeamController,
+) -> None:
+    """The schedule a later re-plan starts from keeps a vehicle's pass (``via``) while its
+    slot is the one the pass was timed for; once the team time has moved it is timed for its
+    slot alone (else a vehicle the later re-plan leaves alone would fly the old pass again)."""
+    m = team.members["UAV1"]
+    m.schedule = dataclasses.replace(m.schedule, via=(30_000.0, m.target_s - 3_000.0))
+    assert team.current_schedule().vehicle("UAV1").via == m.schedule.via
+    assert m.via_live() == m.schedule.via
+    m.target_s += 20.0  # the team time moved
+    assert m.via_live() is None
+    assert team.current_schedule().vehicle("UAV1").via is None
+
+
 # -- supervision ---------------------------------------------------------------------------------
 
 
