@@ -951,7 +951,7 @@ def test_a_checkpoint_kept_before_forecasts_had_heights_is_flown_on_after_a_rest
     as east and north alone: taken on by a new process, the controller forecasts afresh (the
     old ones are stale anyway) and resolves the vehicles' conflicts as before, not failing on
     the first forecast."""
-    m1, t0 = flying(team, "UAV1", 600.0)
+    _, t0 = flying(team, "UAV1", 600.0)
     airborne(team, "UAV2", t0)
     for vid in ("UAV1", "UAV2"):
         team.handle(fix(team, vid, 20_000.0, t0, 25.0), t0)
