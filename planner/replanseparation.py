@@ -78,11 +78,13 @@ def _take(
     said: str,
     how: dict[str, object],
     current: dict[str, VehicleSchedule],
+    adjustments: dict[str, tuple[Adjustment, ...]],
     from_s: float,
 ) -> Event:
-    """``vid`` flies ``moved``'s schedule; the event that says so (``said``, then the pair
-    it was separated from and ``how``)."""
+    """``vid`` flies ``moved``'s schedule (its timing's adjustments kept); the event that
+    says so (``said``, then the pair it was separated from and ``how``)."""
     current[vid] = moved.schedule
+    adjustments[vid] = tuple(moved.chosen.retimed.adjustments)
     p = moved.conflict
     other = p.b if p.a == vid else p.a
     return Event(
@@ -158,8 +160,7 @@ def separate_replan(
                 f"{abs(shift):g} s {'later' if shift > 0 else 'earlier'} than timed"
             )
             how = {"resolution": "timing", "shift_s": shift}
-            events.append(_take(vid, m, said, how, current, from_s))
-            adjustments[vid] = tuple(m.chosen.retimed.adjustments)
+            events.append(_take(vid, m, said, how, current, adjustments, from_s))
             timed.append(vid)
     offset: list[str] = []
     if sep.conflicts and widen is not None and not up():
@@ -171,8 +172,7 @@ def separate_replan(
             by_m = o.chosen.by_m
             said = f"{vid} goes round the zone {by_m:.0f} m wider"
             how = {"resolution": "offset", "offset_m": by_m}
-            events.append(_take(vid, o, said, how, current, from_s))
-            adjustments[vid] = tuple(o.chosen.retimed.adjustments)
+            events.append(_take(vid, o, said, how, current, adjustments, from_s))
             offset.append(vid)
     layers_m = replan_layers_m(scenario)
     lifted: dict[str, Lifted[Retimed]] = {}
