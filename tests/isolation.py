@@ -176,7 +176,9 @@ async def _stream(c: _Client, flight_id: str, until: float) -> None:
 async def apply(url: str, token: str, flight_id: str, load: Load) -> LoadSeen:
     """The load, once each part, readers for :attr:`Load.read_s`; streams as long."""
     seen = LoadSeen()
-    limits = httpx.Limits(max_connections=load.readers + load.streams + 20)
+    limits = httpx.Limits(
+        max_connections=load.readers + load.streams + 20, keepalive_expiry=KEEP_ALIVE_S
+    )
     headers = {"Authorization": f"Bearer {token}"}
     async with httpx.AsyncClient(
         base_url=url, headers=headers, limits=limits, timeout=load.answer_s
@@ -198,6 +200,11 @@ def _run(url: str, token: str, flight_id: str, load: Load, out: Any) -> None:
 
 HEALTH_EVERY_S = 0.1
 """How often (wall s) the monitor asks ``/v1/health``."""
+KEEP_ALIVE_S = 2.0
+"""A kept connection idle this long (wall s) is let go: under the service's 5 s (uvicorn's
+default), so that no request goes out on a connection the service is closing at that moment
+(a client whose own process stalled some 5 s between requests would lose that race, a read
+error that is not the service's)."""
 
 
 def _monitor(url: str, answer_s: float | None, stop: Any, out: Any) -> None:
@@ -205,18 +212,25 @@ def _monitor(url: str, answer_s: float | None, stop: Any, out: Any) -> None:
     is set; put the answer times (ms) and any failure."""
     times: list[float] = []
     failures: list[str] = []
-    with httpx.Client(base_url=url, timeout=answer_s) as client:
+    limits = httpx.Limits(keepalive_expiry=KEEP_ALIVE_S)
+    last_s = time.perf_counter()
+    with httpx.Client(base_url=url, timeout=answer_s, limits=limits) as client:
         while not stop.is_set():
             t0 = time.perf_counter()
             try:
                 r = client.get("/v1/health")
             except httpx.HTTPError as err:
-                failures.append(f"GET /v1/health: {type(err).__name__}: {err}")
+                failures.append(
+                    f"GET /v1/health: {type(err).__name__}: {err} "
+                    f"({t0 - last_s:.2f} s after the last answer, {time.perf_counter() - t0:.2f} s"
+                    " asking)"
+                )
             else:
                 if r.status_code == 200:
                     times.append((time.perf_counter() - t0) * 1e3)
                 else:
                     failures.append(f"GET /v1/health: {r.status_code} {r.text[:200]}")
+            last_s = time.perf_counter()
             stop.wait(max(0.0, HEALTH_EVERY_S - (time.perf_counter() - t0)))
     out.put((times, failures))
 
