@@ -31,7 +31,7 @@ sys.path.insert(0, str(ROOT))  # the oracle lives with the tests
 from gcs.coordination.config import FlightConfig  # noqa: E402
 from gcs.rehearsal.rehearse import RehearsalOptions, rehearse  # noqa: E402
 from planner.scenario import load_scenario  # noqa: E402
-from tests.paperbounds import team_time_move_max_s  # noqa: E402
+from tests.paperbounds import team_time_move_max_s, widest_offset_m  # noqa: E402
 from tests.verdict import judge  # noqa: E402
 
 PAPER = ROOT / "scenarios" / "paper_three_uav.yaml"
@@ -56,7 +56,9 @@ def fly(wind_m_s: float, from_deg: float, args: argparse.Namespace) -> list[str]
             record,
             truth,
             tolerance_s=args.tolerance_s,
-            team_shift_max_s=team_time_move_max_s(wind_m_s, from_deg),
+            team_shift_max_s=team_time_move_max_s(
+                wind_m_s, from_deg, offset_m=widest_offset_m(record)
+            ),
             together_min_s=1_800.0,  # UAV3 up within 300 s, UAV1 from 300 s, arrivals after 5,000 s
         )
     said = Counter(

@@ -5,15 +5,16 @@ ring, 50 km across) with a forbidden disc that appears across the northernmost r
 out (the 30-vehicle pop-up rehearsal's zone); ``paper`` is the planner bench's team (the
 paper's 200 km map and static threats, launch sites on the west and south edges, goals
 3-15 km from the target) with a disc of 4 km that appears at 1,500 s where the vehicle
-nearest the team's middle will be at 3,000 s (across the routes that funnel together there).
-The team is planned and scheduled, then the re-plan the coordinator runs when the threat
-appears (:func:`planner.popup.apply_popup`: the routes it touches planned again from where
-the vehicles will be, the team re-timed, and checked in 4-D from then on: pairs under d_s
-timed apart, routed round the zone wider, lifted onto altitude layers, or said) is timed,
-several times, each from its own seed. The re-plan is what stands between the threat and the
-uploads: the coordinator starts them as soon as it returns.
+nearest the team's middle will be at 3,000 s (``--zone-at-s``: across the routes that funnel
+together there). The team is planned and scheduled, then the re-plan the coordinator runs
+when the threat appears (:func:`planner.popup.apply_popup`: the routes it touches planned
+again from where the vehicles will be, the team re-timed, and checked in 4-D from then on:
+pairs under d_s timed apart, routed round the zone wider, lifted onto altitude layers, or
+said) is timed, several times, each from its own seed. The re-plan is what stands between
+the threat and the uploads: the coordinator starts them as soon as it returns.
 
     .venv/bin/python bench/bench_replan.py --vehicles 30 [--team ring|paper] [--radius-m M]
+        [--zone-at-s S]
 """
 
 from __future__ import annotations
@@ -57,13 +58,19 @@ def main() -> None:
     parser.add_argument(
         "--radius-m", type=float, default=None, help="the zone's radius (default 2.5 / 4 km)"
     )
+    parser.add_argument(
+        "--zone-at-s",
+        type=float,
+        default=3_000.0,
+        help="paper: the zone is centred where the vehicle nearest the team's middle is then",
+    )
     args = parser.parse_args()
     if args.team == "ring":
         data = ring_team(args.vehicles)
         centre, radius_m, at_s = (30_000.0, 41_000.0), 2_500.0, 150.0
     else:
         data = team_scenario(args.vehicles)
-        centre, radius_m, at_s = _crowded_point(data, 3_000.0), 4_000.0, 1_500.0
+        centre, radius_m, at_s = _crowded_point(data, args.zone_at_s), 4_000.0, 1_500.0
     radius_m = args.radius_m or radius_m
     data["threats"].append(
         {

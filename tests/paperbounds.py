@@ -15,7 +15,9 @@ when a vehicle cannot make it even at its top speed:
 - the pop-up (POPUP1, a 15 km disc across UAV1's and UAV2's routes; 3.75 km across UAV2's in
   the compact form): going round the disc instead of across it is at most half its
   circumference instead of its diameter, (pi - 2) x its radius, flown at the slowest top speed
-  of the vehicles whose planned routes it crosses, straight into the wind;
+  of the vehicles whose planned routes it crosses, straight into the wind; a re-plan that
+  routed a vehicle round it wider to keep the separation (a ``conflict`` event of resolution
+  ``offset``, :func:`widest_offset_m`) goes round a disc that much wider;
 - ``SLACK_S`` for the late margin a moved team time keeps and the ETA estimates' error.
 """
 
@@ -23,6 +25,8 @@ from __future__ import annotations
 
 import functools
 import math
+from collections.abc import Mapping
+from typing import Any
 
 import numpy as np
 
@@ -92,11 +96,28 @@ def popup_crossed(scenario_name: str = "paper") -> tuple[float, list[str]]:
     return zone.radius_m, crossed
 
 
+def widest_offset_m(record: Mapping[str, Any]) -> float:
+    """How much wider (m) than the zone a flight's re-plans routed a vehicle round it, by its
+    record's ``conflict`` events of resolution ``offset`` (0 when none was)."""
+    return max(
+        (
+            float(e["payload"]["offset_m"])
+            for e in record["events"]
+            if e["kind"] == "conflict" and (e.get("payload") or {}).get("resolution") == "offset"
+        ),
+        default=0.0,
+    )
+
+
 def team_time_move_max_s(
-    wind_m_s: float = 0.0, wind_from_deg: float = 0.0, scenario_name: str = "paper"
+    wind_m_s: float = 0.0,
+    wind_from_deg: float = 0.0,
+    scenario_name: str = "paper",
+    offset_m: float = 0.0,
 ) -> float:
     """The most the team time may move later in a flight of the paper scenario (or the
-    compact one) in this wind (the module's list)."""
+    compact one) in this wind, its re-plan routed round POPUP1 ``offset_m`` wider (the
+    module's list)."""
     scenario, _ = paper_schedule(1, scenario_name)
     wind = max(
         0.0,
@@ -104,5 +125,5 @@ def team_time_move_max_s(
     )
     radius_m, crossed = popup_crossed(scenario_name)
     v_m_s = min(scenario.vehicle(v).speed_max_m_s for v in crossed)
-    popup = (math.pi - 2.0) * radius_m / (v_m_s - wind_m_s)
+    popup = (math.pi - 2.0) * (radius_m + offset_m) / (v_m_s - wind_m_s)
     return wind + popup + SLACK_S

@@ -614,6 +614,7 @@ class TeamController(ZoneGuard, TeamTime):
             # (a fix without a ground speed: its airspeed)
             final_s=self.config.final_m / max(m.groundspeed_m_s or m.level_m_s, 1.0),
             route_rise_m=rise_m,
+            wind=m.schedule.wind if m.wind is None else m.wind,
         )
 
     def _resolve_conflicts(self, m: Member, t: float, out: list[act.Action]) -> None:

@@ -7,7 +7,9 @@ Every verdict is the test's own arithmetic on the positions it flew, not the cod
 from __future__ import annotations
 
 import dataclasses
+import itertools
 import math
+from collections.abc import Callable
 from typing import Any
 
 import numpy as np
@@ -16,7 +18,7 @@ import pytest
 from gcs.coordination import actions as act
 from gcs.coordination.config import FlightConfig
 from gcs.coordination.events import EventKind
-from gcs.coordination.resolution import Ahead, Forecasts, resolve
+from gcs.coordination.resolution import Ahead, Forecasts, Resolution, resolve
 from gcs.coordination.routetrack import LoiterSpec, RouteTrack
 from gcs.coordination.team import TeamController
 from planner.deconflict import pair_separation
@@ -24,6 +26,7 @@ from planner.flightpath import straight
 from planner.plan import build_world, plan
 from planner.retime import build_schedule, retime_on_path
 from planner.scenario import parse_scenario
+from planner.wind import Wind
 from tests.gcs.test_team import START_UTC, airborne, fix, of, reports
 from tests.planner.conftest import crossing_scenario
 
@@ -373,3 +376,94 @@ def test_the_screen_for_a_change_of_height_finds_a_crossing_high_above() -> None
         forecasts.update(x, 0.0)
     assert forecasts.near("A", 300.0, 0.0) == []
     assert forecasts.near("A", 300.0, 0.0, heights=False) == ["B"]
+
+
+def _in_wind(vid: str, corners: list[tuple[float, float]], **kw: Any) -> Ahead:
+    """A route through ``corners`` (samples every 100 m or less) flown from its start at
+    30 m/s in a 10 m/s wind to the east, with a fix at 0 s and the ground speed its first
+    leg makes good (given as ``groundspeed_m_s``)."""
+    east, north = [corners[0][0]], [corners[0][1]]
+    for (e0, n0), (e1, n1) in itertools.pairwise(corners):
+        k = max(1, math.ceil(math.hypot(e1 - e0, n1 - n0) / 100.0))
+        east.extend(np.linspace(e0, e1, k + 1)[1:])
+        north.extend(np.linspace(n0, n1, k + 1)[1:])
+    e, n = np.array(east), np.array(north)
+    s = np.concatenate([[0.0], np.cumsum(np.hypot(np.diff(e), np.diff(n)))])
+    fields: dict[str, Any] = {
+        "vehicle": vid, "t_s": 0.0, "s_m": 0.0, "groundspeed_m_s": 40.0,
+        "airspeed_m_s": 30.0, "tas_per_eas": 1.0, "airspeed_min_m_s": 18.0,
+        "airspeed_max_m_s": 32.0, "alt_m": 500.0, "route_s_m": s, "route_east_m": e,
+        "route_north_m": n, "horizon_s": 3600.0, "wind": Wind(10.0, 0.0),
+    }  # fmt: skip
+    return Ahead(**(fields | kw))
+
+
+def _fly_in_wind(
+    a: Ahead, seconds: int, speed: Callable[[float], float], step_s: float = 0.02
+) -> list[tuple[float, float]]:
+    """Where ``a``'s route has it at each whole second after its fix, 0 to ``seconds``,
+    flown at ``speed(t)`` (true airspeed) in a 10 m/s wind to the east: the test's own steps,
+    each crabbed into the wind on the route's leg there (ground speed along +
+    sqrt(v^2 - across^2))."""
+    east, north = a.route_east_m, a.route_north_m
+    s, out = a.s_m, []
+    per_second = round(1.0 / step_s)
+    for k in range(seconds * per_second + 1):
+        if k % per_second == 0:
+            at = min(s, a.route_s_m[-1])
+            out.append(
+                (float(np.interp(at, a.route_s_m, east)), float(np.interp(at, a.route_s_m, north)))
+            )
+        i = min(int(np.searchsorted(a.route_s_m, s, side="right")) - 1, len(east) - 2)
+        de, dn = east[i + 1] - east[i], north[i + 1] - north[i]
+        length = math.hypot(de, dn)
+        along, across = 10.0 * de / length, 10.0 * dn / length
+        v = speed(k * step_s)
+        s += (along + math.sqrt(v * v - across * across)) * step_s
+    return out
+
+
+def test_a_forecast_in_the_wind_slows_where_the_route_turns_out_of_a_tailwind() -> None:
+    """4 km east (a tailwind: 40 m/s over the ground), then 8 km north (a crosswind: 28 m/s),
+    forecast against the test's own steps in the wind."""
+    a = _in_wind("A", [(-4_000.0, 0.0), (0.0, 0.0), (0.0, 8_000.0)])
+    times = np.array([30.0, 100.0, 200.0, 300.0])
+    as_flown = a.positions(times, 30.0, 5.0)
+    flown = _fly_in_wind(a, 300, lambda _t: 30.0)
+    for t, got in zip(times, as_flown, strict=True):
+        assert math.dist(got[:2], flown[int(t)]) < 3.0, (t, got, flown[int(t)])
+    # Slowed to 20 m/s from 5 s after the fix until 150 s, at 30 m/s again after.
+    slowed = a.positions(times, 20.0, 5.0, until_s=150.0)
+    flown_slowed = _fly_in_wind(a, 300, lambda u: 20.0 if 5.0 <= u < 150.0 else 30.0)
+    for t, got in zip(times, slowed, strict=True):
+        assert math.dist(got[:2], flown_slowed[int(t)]) < 3.0, (t, got, flown_slowed[int(t)])
+    # The tailwind leg's ground speed held all along would have it far up the crosswind leg.
+    calm = dataclasses.replace(a, wind=None).positions(times, 30.0, 5.0)
+    assert math.dist(calm[-1][:2], flown[300]) > 1_000.0
+
+
+def test_a_pair_resolved_in_the_wind_keeps_apart_as_flown_in_it() -> None:
+    """The paper's 10 m/s case: A turns out of a crosswind into a headwind across B's way,
+    and crosses 18 s ahead of B. Forecast at A's present ground speed, A would be across
+    in time and nothing is resolved, and as flown they come under the separation; forecast
+    in the wind, the resolution keeps them apart as flown (the test's own steps)."""
+    d_s = 500.0
+    gs = math.sqrt(30.0**2 - 10.0**2)  # north in a wind to the east
+    a = _in_wind("A", [(0.0, -3_000.0), (0.0, 0.0), (-8_000.0, 0.0)], groundspeed_m_s=gs)
+    b = _in_wind("B", [(-1_500.0, -5_630.0), (-1_500.0, 8_000.0)], groundspeed_m_s=gs)
+
+    def least_m(res: Resolution | None) -> float:
+        def speed(vid: str) -> Callable[[float], float]:
+            if res is None or res.vehicle != vid:
+                return lambda _u: 30.0
+            return lambda u: res.airspeed_m_s if 5.0 <= u < res.until_s else 30.0
+
+        flown = zip(_fly_in_wind(a, 400, speed("A")), _fly_in_wind(b, 400, speed("B")), strict=True)
+        return min(math.dist(p, q) for p, q in flown)
+
+    calm = [dataclasses.replace(x, wind=None) for x in (a, b)]
+    assert resolve(*calm, now_s=0.0, separation_m=d_s, look_ahead_s=300.0) is None
+    assert least_m(None) < d_s - 100.0
+    res = resolve(a, b, now_s=0.0, separation_m=d_s, look_ahead_s=300.0, response_s=5.0)
+    assert res is not None and res.keeps_separation, res
+    assert least_m(res) >= d_s, res
