@@ -1095,10 +1095,11 @@ class TeamController(ZoneGuard, TeamTime):
         even leaving now moves the team time now, for the route without the turns, while the
         others can still follow (for the turns left, when leaving would gain nothing).
 
-        One late that has flown all of its loiter by the count yet still circles (it lines up
-        with the route later than its entry let the count foresee: one that came to its turns
-        from a hold, off its route) is taken out of them: the way out at the roll limit is
-        never longer than the way round the circle to the same waypoint."""
+        One that has flown all of its loiter by the count yet still circles (it lines up with
+        the route later than its entry let the count foresee: one that came to its turns from
+        a hold, off its route) is timed by the way out, and taken out of them unless that
+        makes it early: the way out at the roll limit is never longer than the way round the
+        circle to the same waypoint."""
         if m.leaving_seq is not None:
             return  # being taken out of the turns: timed again once it is
         k = m.loiters_done()
@@ -1118,7 +1119,12 @@ class TeamController(ZoneGuard, TeamTime):
             tas_per_eas=m.tas_per_eas(lo.s_m),
         )
         top_m_s = m.limits.airspeed_max_m_s - self.config.speed_reserve_m_s
-        if d.verdict != "late" and d.required_m_s <= top_m_s:
+        # Its turns flown by the count, it circles on only to line up with the route: the
+        # timing with no turns left (from the waypoint after them) does not count that way
+        # round, the way out does (a spaced team's UAV3, timed so for 20 s, left 16 s later
+        # than that timing had it and arrived 1.04 s off its slot).
+        circling_on = m.loiter_flown_m >= lo.length_m
+        if not circling_on and d.verdict != "late" and d.required_m_s <= top_m_s:
             self._apply_decision(m, d, t, out)
             return
         # Late, or the rest of the turns would need it within the speed reserve of its top
@@ -1139,8 +1145,7 @@ class TeamController(ZoneGuard, TeamTime):
             loiters_done=k + 1,
             tas_per_eas=m.tas_per_eas(s),
         )
-        circling_on = m.loiter_flown_m >= lo.length_m
-        if left.eta_min_s >= d.eta_min_s and not (circling_on and d.verdict == "late"):
+        if left.eta_min_s >= d.eta_min_s and not circling_on:
             # Nothing to gain by leaving (its turns are as good as flown): late as anywhere.
             self._apply_decision(m, d, t, out)
             if d.verdict == "late":
@@ -1193,16 +1198,15 @@ class TeamController(ZoneGuard, TeamTime):
             if left.verdict == "late"
             else f"on time from there, {left.required_m_s:.2f} m/s required"
         )
-        stay = (
-            f"would make it {d.eta_min_s - m.target_s:.1f} s late even at {hi:g} m/s"
-            if d.verdict == "late"
-            else f"would need {d.required_m_s:.2f} m/s, within "
-            f"{self.config.speed_reserve_m_s:g} m/s of its top speed"
-        )
-        why = (
-            f"the rest of its loiter {stay}: out of the turns at {t:.1f} s, on to item "
-            f"{seq + 1} ({rest})"
-        )
+        if d.verdict == "late":
+            stay = f"the rest of its loiter would make it {d.eta_min_s - m.target_s:.1f} s late "
+            stay += f"even at {hi:g} m/s"
+        elif d.required_m_s > hi - self.config.speed_reserve_m_s:
+            stay = f"the rest of its loiter would need {d.required_m_s:.2f} m/s, within "
+            stay += f"{self.config.speed_reserve_m_s:g} m/s of its top speed"
+        else:
+            stay = "its turns flown, it circles on to line up with the route"
+        why = f"{stay}: out of the turns at {t:.1f} s, on to item {seq + 1} ({rest})"
         out.append(
             act.Report(
                 EventKind.LOITER,

@@ -4,7 +4,8 @@ another could not arrive that late (its minimum speed, and no loiter turns left 
 before its goal): then the late vehicle alone is released from its slot, with an alarm, and
 the others keep theirs; with arrival windows a late vehicle's own slot moves within its
 window. A lost vehicle can bring it earlier; the operator
-moves it (refused with the earliest feasible time). Ground vehicles re-time their takeoff.
+moves it (refused with the earliest feasible time). Ground vehicles re-time their takeoff, in
+the wind the airborne ones measure once one does (the schedule's forecast until then).
 
 :class:`TeamTime` is the part of :class:`~gcs.coordination.team.TeamController` that does
 this; it holds no state of its own.
@@ -14,6 +15,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Collection
+from dataclasses import replace
 
 from gcs.coordination import actions as act
 from gcs.coordination.arrival import Decision
@@ -23,6 +25,8 @@ from gcs.coordination.member import Member
 from gcs.errors import GcsError
 from planner.retime import earliest_from_ground_s, takeoff_for
 from planner.scenario import Scenario, Windows
+from planner.schedule import VehicleSchedule
+from planner.wind import Wind
 
 __all__ = ["TeamTime", "TeamTimeRefused", "names_of"]
 
@@ -273,10 +277,29 @@ class TeamTime:
             if other.phase == "ground":
                 self._retime_takeoff(other, t, out)
 
+    def _measured_wind(self) -> Wind | None:
+        """The wind the vehicles in the air measure (the mean of their estimates); None while
+        none does."""
+        aloft = (x for x in self.members.values() if x.phase != "ground")
+        winds = [x.wind for x in aloft if x.wind is not None]
+        if not winds:
+            return None
+        return Wind(
+            sum(w.to_east_m_s for w in winds) / len(winds),
+            sum(w.to_north_m_s for w in winds) / len(winds),
+        )
+
+    def _from_ground(self, m: Member) -> VehicleSchedule:
+        """The schedule a vehicle on the ground is timed with: its own, in the wind measured
+        aloft once there is one (scheduled in a calm forecast, the paper's UAV1 took off 349 s
+        too late for the 10 m/s its team was already flying in)."""
+        wind = self._measured_wind()
+        return m.schedule if wind is None else replace(m.schedule, wind=wind)
+
     def _retime_takeoff(self, m: Member, t: float, out: list[act.Action]) -> None:
         v = self.scenario.vehicle(m.vehicle_id)
         window = (max(v.takeoff_window_s[0], t), max(v.takeoff_window_s[1], t))
-        new = takeoff_for(v, m.schedule, m.target_s, window)
+        new = takeoff_for(v, self._from_ground(m), m.target_s, window)
         if abs(new - m.takeoff_s) > 0.5:
             m.takeoff_s = new
             out.append(
@@ -300,7 +323,7 @@ class TeamTime:
             if m.phase == "ground":
                 v = self.scenario.vehicle(m.vehicle_id)
                 t0 = max(now_s, v.takeoff_window_s[0])
-                earliest = earliest_from_ground_s(v, m.schedule, t0)
+                earliest = earliest_from_ground_s(v, self._from_ground(m), t0)
                 why = (
                     f"on the ground: taking off at {t0:.0f} s, climbing out and flying at top speed"
                 )

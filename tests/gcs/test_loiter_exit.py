@@ -189,6 +189,38 @@ def test_a_late_vehicle_whose_turns_are_as_good_as_flown(
     assert "late even at" in said.reason, said.reason
 
 
+def test_a_vehicle_circling_on_past_its_turns_is_timed_by_the_way_out_and_taken_out(
+    team: TeamController,
+) -> None:
+    """All of its turns flown by the count, on the circle behind its entry point (lining up
+    with the route later than the count foresaw), on time: timed from the waypoint after the
+    turns it would need little speed, but the way round to it is half the circle more. Timed
+    by the way out instead, it is taken out of the turns at once, and the team time stays."""
+    vid = "UAV3"
+    m, lo, k, t1, on_circle = _in_turns(team, vid)
+    i = SETTLED + 1
+    m.loiter_flown_m = lo.length_m
+    p = m.schedule.path.pose_at(lo.s_m)
+    e = lo.centre_east_m - lo.radius_m * math.sin(p.heading_rad)
+    n = lo.centre_north_m - lo.radius_m * math.cos(p.heading_rad)
+    lat, lon = team.frame.to_geodetic(e, n)
+    behind = dataclasses.replace(on_circle(i), lat_deg=float(lat), lon_deg=float(lon))
+    t = t1 + 2.0 * i
+    ratio = m.schedule.tas_per_eas(lo.s_m)
+    v_mid = (m.limits.airspeed_min_m_s + m.limits.airspeed_max_m_s) / 2.0 * ratio
+    route_m = m.track.length_m - lo.s_m
+    # On time at the middle of its speeds by the way round the circle's half and the route.
+    _retarget(team, t + (route_m + math.pi * lo.radius_m) / v_mid - m.offset_s)
+    from_waypoint_m_s = route_m / (m.target_s - t) / ratio
+    assert from_waypoint_m_s < m.limits.airspeed_max_m_s - team.config.speed_reserve_m_s - 2.0
+    out = team.handle(behind, t)
+    (leave,) = of(out, act.LeaveLoiter)
+    assert leave.seq == k + 1
+    (said,) = [r for r in reports(out, EventKind.LOITER) if r.payload["action"] == "leave"]
+    assert "circles on to line up" in said.reason, said.reason
+    assert reports(out, EventKind.ARRIVAL) == []
+
+
 def test_a_vehicle_its_turns_would_leave_without_a_speed_reserve_is_taken_out_of_them(
     team: TeamController,
 ) -> None:

@@ -500,6 +500,59 @@ def test_a_late_vehicle_moves_the_team_time_with_the_reason_and_re_times_the_gro
     assert (cmds[0].airspeed_m_s if cmds else m.level_m_s) == v_max
 
 
+def _takeoff_in_wind_s(team: TeamController, vid: str, wind_to: tuple[float, float]) -> float:
+    """When ``vid`` takes off to arrive on its slot at its cruise speed in this wind (m/s to
+    east and north): its climb-out as scheduled, then the rest of its path in 20 m pieces,
+    each at the ground speed the wind triangle gives on its track there (the test's own
+    arithmetic)."""
+    m = team.members[vid]
+    vs = m.schedule
+    cruise = team.scenario.vehicle(vid).cruise_m_s
+    edges = np.linspace(vs.climb_s_m, vs.path.length_m, int(vs.path.length_m / 20.0) + 2)
+    flying_s = 0.0
+    for a, b in itertools.pairwise(edges):
+        mid = (a + b) / 2.0
+        h = vs.path.pose_at(float(mid)).heading_rad
+        along = wind_to[0] * math.sin(h) + wind_to[1] * math.cos(h)
+        cross = wind_to[0] * math.cos(h) - wind_to[1] * math.sin(h)
+        tas = cruise * vs.tas_per_eas(float(mid))
+        flying_s += (b - a) / (along + math.sqrt(tas * tas - cross * cross))
+    return m.target_s - (vs.climb_end_s - vs.takeoff_s) - flying_s
+
+
+def test_a_vehicle_on_the_ground_is_re_timed_in_the_wind_measured_aloft(
+    team: TeamController,
+) -> None:
+    """The team time moved while one vehicle flies in 10 m/s and says so: those still on the
+    ground take off for their slots in that wind, not in the schedule's calm forecast (here a
+    tailwind for one of them: timed in the calm it would arrive many minutes early)."""
+    vid = "UAV2"
+    m = team.members[vid]
+    airborne(team, vid, m.takeoff_s)
+    ground = [x.vehicle_id for x in team.members.values() if x.phase == "ground"]
+    assert ground
+    g = team.members[ground[0]]
+    start, end = g.schedule.path.pose_at(0.0), g.schedule.path.pose_at(g.schedule.path.length_m)
+    # Along the ground vehicle's way: from its start towards its goal.
+    to_deg = math.degrees(math.atan2(end.east_m - start.east_m, end.north_m - start.north_m))
+    wind_to = (10.0 * math.sin(math.radians(to_deg)), 10.0 * math.cos(math.radians(to_deg)))
+    t0 = m.takeoff_s + 120.0
+    heard = dataclasses.replace(
+        fix(team, vid, 1_000.0, t0, 25.0), wind_speed_m_s=10.0, wind_from_deg=(to_deg + 180) % 360
+    )
+    team.handle(heard, t0)
+    ref = team.team_ref_s
+    assert ref is not None
+    out = team.move_team_time(ref + 600.0, t0)
+    (retimed,) = [r for r in reports(out, EventKind.TAKEOFF) if r.vehicle == g.vehicle_id]
+    # Within 10 s, 0.2 % of its flight: eq. 5 takes one mean ratio of ground speed to airspeed
+    # over the rest of the path, the test each 20 m at its own.
+    want_s = _takeoff_in_wind_s(team, g.vehicle_id, wind_to)
+    assert retimed.value == pytest.approx(want_s, abs=10.0)
+    calm_s = _takeoff_in_wind_s(team, g.vehicle_id, (0.0, 0.0))
+    assert retimed.value > calm_s + 60.0, (retimed.value, calm_s)
+
+
 def test_a_vehicle_late_after_another_arrived_is_an_alarm_and_the_team_time_stays(
     team: TeamController,
 ) -> None:
