@@ -154,6 +154,16 @@ def test_a_vehicle_not_taken_out_of_its_turns_says_so_and_is_asked_again(
     assert again.seq == k + 1
 
 
+def _behind_entry(team: TeamController, m: Member, lo: LoiterSpec, at: act.Fix) -> act.Fix:
+    """``at`` moved to the point of ``lo``'s circle opposite the one the route enters it by
+    (half a circle from its way on)."""
+    p = m.schedule.path.pose_at(lo.s_m)
+    e = lo.centre_east_m - lo.radius_m * math.sin(p.heading_rad)
+    n = lo.centre_north_m - lo.radius_m * math.cos(p.heading_rad)
+    lat, lon = team.frame.to_geodetic(e, n)
+    return dataclasses.replace(at, lat_deg=float(lat), lon_deg=float(lon))
+
+
 @pytest.mark.parametrize("short_m", [100.0, 0.0], ids=["100 m left", "all flown"])
 def test_a_late_vehicle_whose_turns_are_as_good_as_flown(
     team: TeamController, short_m: float
@@ -170,11 +180,7 @@ def test_a_late_vehicle_whose_turns_are_as_good_as_flown(
     m, lo, k, t1, on_circle = _in_turns(team, vid)
     i = SETTLED + 1
     m.loiter_flown_m = lo.length_m - short_m
-    p = m.schedule.path.pose_at(lo.s_m)
-    e = lo.centre_east_m - lo.radius_m * math.sin(p.heading_rad)
-    n = lo.centre_north_m - lo.radius_m * math.cos(p.heading_rad)
-    lat, lon = team.frame.to_geodetic(e, n)
-    behind = dataclasses.replace(on_circle(i), lat_deg=float(lat), lon_deg=float(lon))
+    behind = _behind_entry(team, m, lo, on_circle(i))
     t = t1 + 2.0 * i
     _retarget(team, t + 60.0)
     out = team.handle(behind, t)
@@ -200,11 +206,7 @@ def test_a_vehicle_circling_on_past_its_turns_is_timed_by_the_way_out_and_taken_
     m, lo, k, t1, on_circle = _in_turns(team, vid)
     i = SETTLED + 1
     m.loiter_flown_m = lo.length_m
-    p = m.schedule.path.pose_at(lo.s_m)
-    e = lo.centre_east_m - lo.radius_m * math.sin(p.heading_rad)
-    n = lo.centre_north_m - lo.radius_m * math.cos(p.heading_rad)
-    lat, lon = team.frame.to_geodetic(e, n)
-    behind = dataclasses.replace(on_circle(i), lat_deg=float(lat), lon_deg=float(lon))
+    behind = _behind_entry(team, m, lo, on_circle(i))
     t = t1 + 2.0 * i
     ratio = m.schedule.tas_per_eas(lo.s_m)
     v_mid = (m.limits.airspeed_min_m_s + m.limits.airspeed_max_m_s) / 2.0 * ratio
