@@ -3,7 +3,8 @@
 Each vehicle's next seconds are predicted along its own route (not in a straight line: the
 routes turn), its loiter turns included, from its last fix: in its wind estimate at the ground
 speed its true airspeed makes good on each leg (a turn from a tailwind into a crosswind slows
-it), else at its present ground speed. A
+it), with what it makes good beyond that at its fix counted on every leg (so that in still air
+it is its present ground speed all along, as it is without a wind estimate). A
 pair predicted to come closer than the separation within the look-ahead is resolved by one of
 the two flying the slowest or the fastest airspeed of its range until their closest approach
 has passed: of the four choices, the one predicted to keep them farthest apart (the smaller
@@ -106,15 +107,32 @@ class Ahead:
             track = track[idx]
         return ds, track
 
+    @functools.cached_property
+    def _made_good_error_m_s(self) -> float:
+        """Its ground speed at the fix less the one its airspeed makes good in :attr:`wind` on
+        the leg it flies (an airspeed not yet reached, an estimate's error): counted on every
+        leg, so that in still air the forecast is the one at its present ground speed."""
+        assert self.wind is not None
+        ds, track = self._legs
+        if ds.size == 0:
+            return 0.0
+        leg = int(
+            np.clip(np.searchsorted(self.route_s_m, self.s_m, side="right") - 1, 0, ds.size - 1)
+        )
+        tas = self.airspeed_m_s * self.tas_per_eas
+        return self.groundspeed_m_s - groundspeed_m_s(tas, float(track[leg]), self.wind)
+
     def _clock(self, airspeed_m_s: float) -> FloatArray:
         """When (s, from the flight's first sample) each sample is passed flying
-        ``airspeed_m_s`` (commanded) in :attr:`wind` (a leg it cannot make good at 1 m/s)."""
+        ``airspeed_m_s`` (commanded) in :attr:`wind`, with the error made good at the fix (a
+        leg it cannot make good at 1 m/s)."""
         cache = self.__dict__.setdefault("_clocks", {})
         clock: FloatArray | None = cache.get(airspeed_m_s)
         if clock is None:
             assert self.wind is not None
             ds, track = self._legs
             gs = groundspeed_m_s(airspeed_m_s * self.tas_per_eas, track, self.wind)
+            gs += self._made_good_error_m_s
             clock = np.empty(ds.size + 1)
             clock[0] = 0.0
             np.cumsum(ds / np.maximum(gs, 1.0), out=clock[1:])
