@@ -25,11 +25,12 @@ from __future__ import annotations
 
 import functools
 import math
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from typing import Any
 
 import numpy as np
 
+from planner.flightpath import FlightPath
 from planner.plan import build_world, plan
 from planner.retime import build_schedule
 from planner.scenario import Radar, Scenario, load_scenario, parse_scenario
@@ -56,26 +57,40 @@ def paper_schedule(seed: int = 1, scenario_name: str = "paper") -> tuple[Scenari
     return scenario, build_schedule(scenario, p, world=world)
 
 
+def time_in_wind_s(
+    path: FlightPath,
+    from_m: float,
+    tas_m_s: Callable[[float], float],
+    wind_to_m_s: tuple[float, float],
+) -> float:
+    """How long (s) ``path`` takes from ``from_m`` to its end at the true airspeed
+    ``tas_m_s(s)`` in a steady wind (m/s to the east and to the north): every 20 m of it at
+    the ground speed the wind triangle gives on its heading there (crabbed into the wind:
+    sqrt(v^2 - across^2) + along)."""
+    length_m = path.length_m
+    edges = np.linspace(from_m, length_m, int((length_m - from_m) / 20.0) + 2)
+    ds = np.diff(edges)
+    middle = edges[:-1] + ds / 2
+    heading = np.array([path.pose_at(float(s)).heading_rad for s in middle])
+    tas = np.array([tas_m_s(float(s)) for s in middle])
+    we, wn = wind_to_m_s
+    along = we * np.sin(heading) + wn * np.cos(heading)
+    cross = we * np.cos(heading) - wn * np.sin(heading)
+    return float((ds / (np.sqrt(tas**2 - cross**2) + along)).sum())
+
+
 def wind_cost_s(
     vehicle_id: str, wind_m_s: float, wind_from_deg: float, scenario_name: str = "paper"
 ) -> float:
     """How much longer (s; negative: shorter) the vehicle's planned route takes at its top
-    airspeed in the wind than in still air: every 20 m of it at the ground speed the wind
-    triangle gives on its heading there."""
+    airspeed in the wind than in still air (:func:`time_in_wind_s`)."""
     scenario, schedule = paper_schedule(1, scenario_name)
     vs = schedule.vehicle(vehicle_id)
     assert vs is not None, vehicle_id
     v_m_s = scenario.vehicle(vehicle_id).speed_max_m_s
-    length_m = vs.path.length_m
-    edges = np.linspace(0.0, length_m, int(length_m / 20.0) + 2)
-    ds = np.diff(edges)
-    heading = np.array([vs.path.pose_at(float(s)).heading_rad for s in edges[:-1] + ds / 2])
     to_rad = math.radians(wind_from_deg + 180.0)
-    we, wn = wind_m_s * math.sin(to_rad), wind_m_s * math.cos(to_rad)
-    along = we * np.sin(heading) + wn * np.cos(heading)
-    cross = we * np.cos(heading) - wn * np.sin(heading)
-    ground = np.sqrt(v_m_s**2 - cross**2) + along
-    return float((ds / ground).sum() - length_m / v_m_s)
+    wind_to = (wind_m_s * math.sin(to_rad), wind_m_s * math.cos(to_rad))
+    return time_in_wind_s(vs.path, 0.0, lambda _s: v_m_s, wind_to) - vs.path.length_m / v_m_s
 
 
 def popup_crossed(scenario_name: str = "paper") -> tuple[float, list[str]]:

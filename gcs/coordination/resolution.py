@@ -88,7 +88,7 @@ class Ahead:
     where R00's new mission took it, and they came 289 m apart."""
     wind: Wind | None = None
     """Its wind estimate: each leg ahead flown at the ground speed its true airspeed makes
-    good there (None: at its present ground speed all along). In 10 m/s across the paper's
+    good there (None or calm: at its present ground speed all along). In 10 m/s across the paper's
     routes a vehicle that turned from a 37 m/s tailwind leg into a 30 m/s crosswind was
     forecast 300 m ahead of where it flew, and a pair resolved to pass 700 m apart came 418 m
     apart."""
@@ -160,10 +160,12 @@ class Ahead:
         changes ahead (:attr:`route_rise_m`)."""
         dt = t_s - self.t_s
         held = max(until_s - self.t_s, response_s)
-        if self.wind is not None:
-            s = self._along_in_wind(dt, airspeed_m_s, response_s, held)
-        else:
+        if self.wind is None or self.wind.calm:
+            # In still air the leg-by-leg forecast is this one (the present ground speed all
+            # along), done without a table of the legs: this runs at every forecast.
             s = self._along(dt, airspeed_m_s, response_s, held)
+        else:
+            s = self._along_in_wind(dt, airspeed_m_s, response_s, held)
         out = np.empty((*s.shape, 3))
         out[..., 0] = np.interp(s, self.route_s_m, self.route_east_m)
         out[..., 1] = np.interp(s, self.route_s_m, self.route_north_m)

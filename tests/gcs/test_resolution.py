@@ -444,13 +444,17 @@ def test_a_forecast_in_the_wind_slows_where_the_route_turns_out_of_a_tailwind() 
 
 def test_a_forecast_in_still_air_is_the_one_at_the_present_ground_speed() -> None:
     """A vehicle making good 27 m/s at 25 m/s of airspeed (a bias, a speed not yet reached):
-    forecast in a calm wind estimate as it is without one, at its speed and at another."""
+    forecast in a calm wind estimate as it is without one, at its speed and at another; and
+    on its straight route in a steady wind, at its own speed, too (what it makes good beyond
+    its airspeed at the fix is counted on every leg, and every leg is the same)."""
     a = _straight("A", (0.0, 0.0), 60.0, groundspeed_m_s=27.0)
     times = np.arange(0.0, 300.0, 10.0)
     for speed, until_s in ((25.0, math.inf), (18.0, 120.0), (30.0, 40.0)):
         calm = dataclasses.replace(a, wind=Wind()).positions(times, speed, 5.0, until_s)
         without = a.positions(times, speed, 5.0, until_s)
         assert np.allclose(calm, without, atol=1e-6), (speed, until_s)
+    steady = dataclasses.replace(a, wind=Wind(5.0, -3.0)).positions(times, 25.0, 5.0)
+    assert np.allclose(steady, a.positions(times, 25.0, 5.0), atol=1e-6)
 
 
 def test_a_pair_resolved_in_the_wind_keeps_apart_as_flown_in_it() -> None:

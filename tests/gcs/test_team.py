@@ -42,6 +42,7 @@ from planner.schedule import Event, Schedule
 from planner.schedulefile import PathMission
 from planner.threats import build_threats
 from tests.gcs.conftest import START_UTC
+from tests.paperbounds import time_in_wind_s
 from tests.planner.test_loiterflight import _flown_out_m
 
 
@@ -502,22 +503,13 @@ def test_a_late_vehicle_moves_the_team_time_with_the_reason_and_re_times_the_gro
 
 def _takeoff_in_wind_s(team: TeamController, vid: str, wind_to: tuple[float, float]) -> float:
     """When ``vid`` takes off to arrive on its slot at its cruise speed in this wind (m/s to
-    east and north): its climb-out as scheduled, then the rest of its path in 20 m pieces,
-    each at the ground speed the wind triangle gives on its track there (the test's own
+    east and north): its climb-out as scheduled, then the rest of its path by the wind
+    triangle every 20 m (:func:`tests.paperbounds.time_in_wind_s`, the test's own
     arithmetic)."""
-    m = team.members[vid]
-    vs = m.schedule
+    vs = team.members[vid].schedule
     cruise = team.scenario.vehicle(vid).cruise_m_s
-    edges = np.linspace(vs.climb_s_m, vs.path.length_m, int(vs.path.length_m / 20.0) + 2)
-    flying_s = 0.0
-    for a, b in itertools.pairwise(edges):
-        mid = (a + b) / 2.0
-        h = vs.path.pose_at(float(mid)).heading_rad
-        along = wind_to[0] * math.sin(h) + wind_to[1] * math.cos(h)
-        cross = wind_to[0] * math.cos(h) - wind_to[1] * math.sin(h)
-        tas = cruise * vs.tas_per_eas(float(mid))
-        flying_s += (b - a) / (along + math.sqrt(tas * tas - cross * cross))
-    return m.target_s - (vs.climb_end_s - vs.takeoff_s) - flying_s
+    flying_s = time_in_wind_s(vs.path, vs.climb_s_m, lambda s: cruise * vs.tas_per_eas(s), wind_to)
+    return team.members[vid].target_s - (vs.climb_end_s - vs.takeoff_s) - flying_s
 
 
 def test_a_vehicle_on_the_ground_is_re_timed_in_the_wind_measured_aloft(
