@@ -43,6 +43,8 @@ FloatArray = NDArray[np.float64]
 MIN_GAIN_FRACTION = 0.1
 """A choice that keeps less than the whole separation is taken only if it opens the pair's
 closest approach by this fraction of the separation or more (:func:`resolve`)."""
+CLOCK_FIRST_LEGS = 64
+"""The legs of a forecast's first window in the wind (:meth:`Ahead._clock`)."""
 RECOVERY_SHARE = 0.5
 """A resolution is held only as long as its mover's arrival can make up with this share of the
 speed range on the other side of its speed (:func:`longest_hold_s`); the rest is left for
@@ -94,11 +96,27 @@ class Ahead:
     apart."""
 
     @functools.cached_property
-    def _legs(self) -> tuple[FloatArray, FloatArray]:
-        """Each leg between the flight's samples: its length (m) and its ground track (rad;
-        a leg of no length takes the one before it)."""
-        de, dn = np.diff(self.route_east_m), np.diff(self.route_north_m)
-        ds = np.diff(self.route_s_m)
+    def _first(self) -> int:
+        """The first sample of the legs its forecast in the wind needs: the one the fix's leg
+        starts at, or the last that moves before it (a leg that does not move, a loiter's
+        detour held at its point, takes the track of the one before it)."""
+        n = self.route_s_m.size
+        if n < 2:
+            return 0
+        first = int(np.clip(np.searchsorted(self.route_s_m, self.s_m, side="right") - 1, 0, n - 2))
+        e, nn = self.route_east_m, self.route_north_m
+        while first > 0 and math.hypot(e[first + 1] - e[first], nn[first + 1] - nn[first]) < 1e-9:
+            first -= 1
+        return first
+
+    def _legs(self, last: int) -> tuple[FloatArray, FloatArray]:
+        """The legs from sample :attr:`_first` to sample ``last``: their lengths (m) and
+        ground tracks (rad; a leg of no length takes the one before it)."""
+        lo = self._first
+        e = self.route_east_m[lo : last + 1]
+        n = self.route_north_m[lo : last + 1]
+        de, dn = np.diff(e), np.diff(n)
+        ds = np.diff(self.route_s_m[lo : last + 1])
         track = np.arctan2(de, dn)
         flat = np.hypot(de, dn) < 1e-9
         if flat.any():
@@ -113,39 +131,53 @@ class Ahead:
         the leg it flies (an airspeed not yet reached, an estimate's error): counted on every
         leg, so that in still air the forecast is the one at its present ground speed."""
         assert self.wind is not None
-        ds, track = self._legs
-        if ds.size == 0:
+        if self.route_s_m.size < 2:
             return 0.0
-        leg = int(
-            np.clip(np.searchsorted(self.route_s_m, self.s_m, side="right") - 1, 0, ds.size - 1)
-        )
+        leg = int(np.clip(np.searchsorted(self.route_s_m, self.s_m, side="right") - 1, 0, None))
+        leg = min(leg, self.route_s_m.size - 2)
+        _, track = self._legs(leg + 1)
         tas = self.airspeed_m_s * self.tas_per_eas
-        return self.groundspeed_m_s - groundspeed_m_s(tas, float(track[leg]), self.wind)
+        return self.groundspeed_m_s - groundspeed_m_s(tas, float(track[-1]), self.wind)
 
-    def _clock(self, airspeed_m_s: float) -> FloatArray:
-        """When (s, from the flight's first sample) each sample is passed flying
-        ``airspeed_m_s`` (commanded) in :attr:`wind`, with the error made good at the fix (a
-        leg it cannot make good at 1 m/s)."""
+    def _clock(self, airspeed_m_s: float, s_m: float, dt_s: float) -> tuple[FloatArray, FloatArray]:
+        """The flight's samples from :attr:`_first` on (m along it) and when (s, from the
+        first of them) each is passed flying ``airspeed_m_s`` (commanded) in :attr:`wind`,
+        with the error made good at the fix (a leg it cannot make good at 1 m/s): as far as
+        ``dt_s`` after it passes ``s_m``, or to the flight's end. The legs are taken in
+        windows, each twice the last, from the fix on: a forecast reaches a minute or two
+        ahead of a route of thousands of samples, and it is made at every fix."""
         cache = self.__dict__.setdefault("_clocks", {})
-        clock: FloatArray | None = cache.get(airspeed_m_s)
-        if clock is None:
+        last_sample = self.route_s_m.size - 1
+        hit: tuple[FloatArray, FloatArray] | None = cache.get(airspeed_m_s)
+        while True:
+            if hit is not None:
+                along, clock = hit
+                if along.size - 1 + self._first == last_sample or (
+                    along[-1] >= s_m and clock[-1] >= float(np.interp(s_m, along, clock)) + dt_s
+                ):
+                    return hit
+                legs = 2 * (along.size - 1)
+            else:
+                legs = CLOCK_FIRST_LEGS
             assert self.wind is not None
-            ds, track = self._legs
+            last = min(self._first + legs, last_sample)
+            ds, track = self._legs(last)
             gs = groundspeed_m_s(airspeed_m_s * self.tas_per_eas, track, self.wind)
             gs += self._made_good_error_m_s
             clock = np.empty(ds.size + 1)
             clock[0] = 0.0
             np.cumsum(ds / np.maximum(gs, 1.0), out=clock[1:])
-            cache[airspeed_m_s] = clock
-        return clock
+            hit = cache[airspeed_m_s] = (self.route_s_m[self._first : last + 1], clock)
 
     def _flown(self, s_m: FloatArray, dt_s: FloatArray, airspeed_m_s: float) -> FloatArray:
         """Where along the flight (m) a vehicle at ``s_m`` is ``dt_s`` later at that airspeed
         in :attr:`wind` (at the flight's ends at most)."""
-        clock = self._clock(airspeed_m_s)
-        at = np.interp(s_m, self.route_s_m, clock)
+        if not s_m.size:
+            return s_m.copy()
+        along, clock = self._clock(airspeed_m_s, float(s_m.max()), float(dt_s.max()))
+        at = np.interp(s_m, along, clock)
         at += dt_s
-        return np.interp(at, clock, self.route_s_m)
+        return np.interp(at, clock, along)
 
     def positions(
         self,

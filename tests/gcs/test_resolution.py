@@ -442,6 +442,23 @@ def test_a_forecast_in_the_wind_slows_where_the_route_turns_out_of_a_tailwind() 
     assert math.dist(calm[-1][:2], flown[300]) > 1_000.0
 
 
+def test_a_forecast_in_the_wind_far_along_a_long_route_is_the_one_flown() -> None:
+    """A 30 km zig-zag sampled every 100 m, the fix 2 km along it: forecast 15 minutes ahead
+    (past the first hundreds of its samples, to its end) against the test's own steps in the
+    wind, at its airspeed and slowed for a while; past its end it is at its end."""
+    corners = [(0.0, 0.0), (6_000.0, 0.0), (6_000.0, 6_000.0), (0.0, 6_000.0), (0.0, 12_000.0)]
+    a = dataclasses.replace(_in_wind("A", [*corners, (6_000.0, 12_000.0)]), s_m=2_000.0)
+    times = np.array([10.0, 150.0, 400.0, 700.0, 950.0, 1_100.0])
+    flown = _fly_in_wind(a, 1_100, lambda _t: 30.0)
+    for t, got in zip(times, a.positions(times, 30.0, 5.0), strict=True):
+        assert math.dist(got[:2], flown[int(t)]) < 3.0, (t, got, flown[int(t)])
+    assert math.dist(flown[1_100], (6_000.0, 12_000.0)) < 1.0  # the route flown to its end
+    slowed = a.positions(times, 20.0, 5.0, until_s=500.0)
+    flown_slowed = _fly_in_wind(a, 1_100, lambda u: 20.0 if 5.0 <= u < 500.0 else 30.0)
+    for t, got in zip(times, slowed, strict=True):
+        assert math.dist(got[:2], flown_slowed[int(t)]) < 3.0, (t, got, flown_slowed[int(t)])
+
+
 def test_a_forecast_in_still_air_is_the_one_at_the_present_ground_speed() -> None:
     """A vehicle making good 27 m/s at 25 m/s of airspeed (a bias, a speed not yet reached):
     forecast in a calm wind estimate as it is without one, at its speed and at another; and
