@@ -12,12 +12,15 @@ the ones before it leave under ``d_s``, while the re-plan's wall time lasts:
 
 1. timing (:func:`planner.replantiming.time_apart`): a re-routed vehicle passes the place
    where it would come too close earlier or later, and still arrives at its slot;
-2. a lateral offset (:func:`planner.replanoffset.offset_apart`): a re-routed vehicle goes
-   round the zone wider, beside the track it shares with another, timed for its slot;
-3. altitude layers (:func:`planner.layers.lift_team`): one of the pair flies a layer higher
+2. altitude layers (:func:`planner.layers.lift_team`): one of the pair flies a layer higher
    over the stretch where they meet, only where its new mission flies (past the waypoint it
    is spliced at), timed again for its slot. The scenario's layers, or without any, the
-   heights the in-flight resolution climbs by (:func:`planner.layers.replan_layers_m`).
+   heights the in-flight resolution climbs by (:func:`planner.layers.replan_layers_m`);
+3. a lateral offset (:func:`planner.replanoffset.offset_apart`): a re-routed vehicle goes
+   round the zone wider, beside the track it shares with another, timed for its slot. It is
+   the last means as it is the dearest: a route search for each vehicle it tries (of 14
+   routes re-planned round one zone, 12 were searched wider for one taken), where a lift
+   is a re-timing.
 
 What none of them separates is said before it is installed: a ``conflict`` event with the
 pair, when and how close, and an ``alarm``.
@@ -162,18 +165,6 @@ def separate_replan(
             how = {"resolution": "timing", "shift_s": shift}
             events.append(_take(vid, m, said, how, current, adjustments, from_s))
             timed.append(vid)
-    offset: list[str] = []
-    if sep.conflicts and widen is not None and not up():
-        wider, sep = offset_apart(
-            [current[vid] for vid in order], required, from_s=from_s, movable=movable,
-            widen=widen, time_up=up,
-        )  # fmt: skip
-        for vid, o in wider.items():
-            by_m = o.chosen.by_m
-            said = f"{vid} goes round the zone {by_m:.0f} m wider"
-            how = {"resolution": "offset", "offset_m": by_m}
-            events.append(_take(vid, o, said, how, current, adjustments, from_s))
-            offset.append(vid)
     layers_m = replan_layers_m(scenario)
     lifted: dict[str, Lifted[Retimed]] = {}
     if sep.conflicts and not up():
@@ -207,6 +198,19 @@ def separate_replan(
                     },
                 )
             )
+    offset: list[str] = []
+    if sep.conflicts and widen is not None and not up():
+        wider, sep = offset_apart(
+            # A lifted vehicle keeps its layer: its other still may go round wider.
+            [current[vid] for vid in order], required, from_s=from_s,
+            movable=[vid for vid in movable if vid not in lifted], widen=widen, time_up=up,
+        )  # fmt: skip
+        for vid, o in wider.items():
+            by_m = o.chosen.by_m
+            said = f"{vid} goes round the zone {by_m:.0f} m wider"
+            how = {"resolution": "offset", "offset_m": by_m}
+            events.append(_take(vid, o, said, how, current, adjustments, from_s))
+            offset.append(vid)
     conflicts = tuple(p for p in sep.conflicts if math.isfinite(p.distance_m))
     for p in conflicts:
         why = (

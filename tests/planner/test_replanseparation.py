@@ -215,17 +215,30 @@ def test_a_pair_on_the_zones_edge_that_no_timing_separates_is_routed_round_it_wi
     monkeypatch: pytest.MonkeyPatch,
 ) -> None:
     """The wide disc sends R01 and R02 (and R28 and R29) round one edge of it, together: with
-    the timing stage left out, one of each pair goes round the zone wider (the zone widened
-    for its route search alone) and keeps its slot. By the test's own samples every pair
-    keeps d_s from the re-plan's start; the vehicle routed wider keeps that much more room
-    from the zone as it goes round."""
+    the timing and layer stages left out, one of each pair goes round the zone wider (the
+    zone widened for its route search alone) and keeps its slot. By the test's own samples
+    every pair keeps d_s from the re-plan's start; the vehicle routed wider keeps that much
+    more room from the zone as it goes round."""
 
     def untimed(
         team: list[VehicleSchedule], required_m: float, *, from_s: float, **_: object
     ) -> tuple[dict[str, object], object]:
         return {}, separation(list(team), required_m, from_s=from_s)
 
+    def unlifted(
+        team: list[VehicleSchedule],
+        _planned: object,
+        _vehicles: object,
+        _heights_m: object,
+        required_m: float,
+        *_: object,
+        from_s: float,
+        **__: object,
+    ) -> tuple[dict[str, object], object]:
+        return {}, separation(list(team), required_m, from_s=from_s)
+
     monkeypatch.setattr(replanseparation, "time_apart", untimed)
+    monkeypatch.setattr(replanseparation, "lift_team", unlifted)
     n, centre_m, radius_m, at_s = BUNCHED["30, wide disc"]
     args = {"centre_m": centre_m, "radius_m": radius_m, "at_s": at_s, "seed": 1}
     _, outcome = _flown(ring_team(n), **args)
