@@ -19,6 +19,7 @@ from __future__ import annotations
 import argparse
 import asyncio
 import math
+import shutil
 import sys
 import tempfile
 import time
@@ -46,6 +47,7 @@ def main() -> int:
     ap.add_argument("--speedup", type=float, default=100.0)
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--json", type=Path, help="keep the flight record (tcgcs-flight/1) here")
+    ap.add_argument("--truth", type=Path, help="keep the simulator's truth log (JSON lines) here")
     args = ap.parse_args()
     data = ring_team(args.vehicles)
     b = math.radians(args.zone_bearing_deg)
@@ -72,6 +74,8 @@ def main() -> int:
         )  # fmt: skip
         wall_s = time.perf_counter() - t0
         verdict = judge(record, truth, tolerance_s=1.0, team_shift_max_s=600.0, together_min_s=60.0)
+        if args.truth is not None:
+            shutil.copyfile(truth, args.truth)
     events = record["events"]
     replanned = sorted(
         {v for e in events if e["kind"] == "replan" for v in e["reason"].split(" around ")[0].

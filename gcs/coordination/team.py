@@ -558,11 +558,12 @@ class TeamController(ZoneGuard, TeamTime):
                 )
             )
 
-    def _ahead(self, m: Member) -> Ahead | None:
+    def _ahead(self, m: Member, *, strengthening: bool = False) -> Ahead | None:
         """The member's flight ahead for resolving conflicts, if it is predictable: on its
         route, joined, timed (not holding or being re-planned), with a fresh fix, its loiter
         turns still to fly on the way (:meth:`RouteTrack.flight_samples`); movable unless in
-        its turns or on its final approach."""
+        its turns, on its final approach or flying a resolution (but for ``strengthening``
+        the one it flies)."""
         if (
             m.phase != "route"
             or m.over
@@ -610,7 +611,7 @@ class TeamController(ZoneGuard, TeamTime):
             horizon_s=max(m.target_s - m.last_fix_s, 0.0),
             movable=not turning
             and track.length_m - m.s_m >= self.config.final_m
-            and self._resolving_from(m) is None,
+            and (strengthening or self._resolving_from(m) is None),
             # (a fix without a ground speed: its airspeed)
             final_s=self.config.final_m / max(m.groundspeed_m_s or m.level_m_s, 1.0),
             route_rise_m=rise_m,
@@ -658,6 +659,7 @@ class TeamController(ZoneGuard, TeamTime):
             return
         forecasts.update(mine, t)
         if busy:
+            self._strengthen(m, t, out)
             return
         # Screened and resolved with the margin a forecast minutes ahead needs (a pair
         # forecast 5-10 % over the separation came under it as flown).
@@ -720,6 +722,34 @@ class TeamController(ZoneGuard, TeamTime):
             self._fly_resolution(mover, t, out)
             self._forecast_again(mover, t)
             return
+
+    def _strengthen(self, m: Member, t: float, out: list[act.Action]) -> None:
+        """``m`` flies a height resolution, and the pair is forecast to come under the
+        separation all the same (a forecast minutes ahead knows nothing of the speeds the
+        slots will ask on the way: a pair resolved to pass 343 m apart came 282 m apart):
+        a layer more, for it or for the other if that one flies no resolution of its own
+        (TCAS's strengthened advisory)."""
+        man = self.vertical.flying.get(m.vehicle_id)
+        if man is None or self.config.vertical_horizon_s <= 0.0:
+            return
+        other = man.resolution.other
+        x = self.members.get(other)
+        theirs = self.forecasts.ahead.get(other)
+        if x is None or x.over or theirs is None:
+            return
+        if other not in self.forecasts.near(m.vehicle_id, self.scenario.separation_m, t):
+            return
+        mine = self._ahead(m, strengthening=True)
+        if mine is None:
+            return
+        pair = (m.vehicle_id, other)
+        d_s = RESOLVED_MARGIN * self.scenario.separation_m
+        over = _neighbours(self.forecasts, pair, NEIGHBOUR_SEPARATIONS * d_s, t, heights=False)
+        up = self._resolve_vertically(mine, theirs, t, over)
+        if up is None or (up.vehicle == other and self._resolving_from(x) is not None):
+            return
+        self.vertical.start(self.members[up.vehicle], up, t, out)
+        self._forecast_again(self.members[up.vehicle], t)
 
     def _keeps(self, res: Resolution | None) -> bool:
         """Whether a speed resolution keeps the pair apart with :data:`RESOLVED_MARGIN` to

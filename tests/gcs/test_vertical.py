@@ -237,7 +237,7 @@ class _Flown:
     arrived: dict[str, float] = dataclasses.field(default_factory=dict)
 
 
-def _fly_heights(team: TeamController, slowed: float = 1.0) -> _Flown:
+def _fly_heights(team: TeamController, slowed: float = 1.0, drift_m: float = 0.0) -> _Flown:
     """Fly the team to the goals, fixes every 0.5 s from this test's kinematics: still air,
     a commanded airspeed flown 3 s after its command, and heights as ArduPlane takes
     DO_CHANGE_ALTITUDE (ArduPlane/GCS_Mavlink.cpp handle_command_int_DO_CHANGE_ALTITUDE):
@@ -245,7 +245,9 @@ def _fly_heights(team: TeamController, slowed: float = 1.0) -> _Flown:
     brings the mission's altitude back; the aircraft goes towards its target at CLIMB_M_S.
     The distances are the test's own, in 3-D, from the positions and heights it flew.
     ``slowed``: once a height resolution is said, both fly that fraction of their commanded
-    airspeed (what the coordinator does not foresee: the encounter comes later)."""
+    airspeed (what the coordinator does not foresee: the encounter comes later); ``drift_m``:
+    the first vehicle that is not asked a height then goes that far above its profile (an
+    unforeseen change of height, towards the mover)."""
     ids = list(team.members)
     t0 = max(m.schedule.climb_end_s for m in team.members.values()) + 1.0
     s, level, z, target, seq = {}, {}, {}, {}, {}
@@ -269,7 +271,10 @@ def _fly_heights(team: TeamController, slowed: float = 1.0) -> _Flown:
             if vid in flown.arrived:
                 continue
             m = team.members[vid]
-            manoeuvred = any((r.payload or {}).get("resolution") == "altitude" for r in flown.said)
+            movers = [
+                r.vehicle for r in flown.said if (r.payload or {}).get("resolution") == "altitude"
+            ]
+            manoeuvred = bool(movers)
             flown_m_s = level[vid] * (slowed if manoeuvred else 1.0)
             s[vid] += flown_m_s * m.schedule.tas_per_eas(s[vid]) * dt
             if s[vid] >= m.track.length_m:
@@ -278,6 +283,8 @@ def _fly_heights(team: TeamController, slowed: float = 1.0) -> _Flown:
             if seq_ahead(team, vid, s[vid]) != seq[vid]:
                 seq[vid], target[vid] = seq_ahead(team, vid, s[vid]), None  # the next waypoint
             want = m.schedule.alt_at(s[vid]) if target[vid] is None else target[vid]
+            if manoeuvred and vid not in movers:
+                want += drift_m
             z[vid] += float(np.clip(want - z[vid], -CLIMB_M_S * dt, CLIMB_M_S * dt))
             flown.heights[vid].append(z[vid])
             f = dataclasses.replace(fix(team, vid, s[vid], t, flown_m_s), alt_amsl_m=z[vid])
@@ -333,6 +340,35 @@ def test_a_head_on_pair_in_flight_is_kept_apart_by_height_and_both_make_their_sl
     flown = _fly_heights(off)
     assert not flown.asked and flown.closest_m < d_s
     assert [r for r in flown.said if r.kind is EventKind.ALARM]
+
+
+def test_a_height_resolution_the_pair_closes_in_on_is_strengthened(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """Once the mover is asked its height, the other goes 250 m above its profile, towards it
+    (unforeseen): forecast to come under the separation all the same, the mover is asked a
+    layer more, and the pair keeps the separation in 3-D (the test's own distances), within
+    the mover's room, both on their slots. Not strengthened, the same flight loses it."""
+    team = _head_on_team()
+    d_s = team.scenario.separation_m
+    flown = _fly_heights(team, drift_m=250.0)
+    moved = [r for r in flown.said if (r.payload or {}).get("resolution") == "altitude"]
+    assert len(moved) == 2 and moved[0].vehicle == moved[1].vehicle, [r.reason for r in moved]
+    # A layer further from the other's way: the same sense, from the height it was asked.
+    assert float(moved[1].payload["offset_m"]) * float(moved[0].payload["offset_m"]) > 0.0
+    assert flown.closest_flat_m < 0.5 * d_s, flown.closest_flat_m  # they met over the ground
+    assert flown.closest_m >= d_s, f"{flown.closest_m:.0f} m"
+    mover = moved[0].vehicle
+    assert mover is not None
+    v = team.scenario.vehicle(mover)
+    assert 100.0 + v.clearance_m <= min(flown.heights[mover])
+    assert max(flown.heights[mover]) <= v.alt_max_m
+    for vid, m in team.members.items():
+        assert flown.arrived[vid] == pytest.approx(m.target_s, abs=1.0), vid
+
+    monkeypatch.setattr(TeamController, "_strengthen", lambda *_: None)
+    weak = _fly_heights(_head_on_team(), drift_m=250.0)
+    assert weak.closest_m < d_s, f"{weak.closest_m:.0f} m"
 
 
 def test_a_height_resolution_is_kept_until_the_pair_is_past_when_the_encounter_comes_late() -> None:
