@@ -523,7 +523,7 @@ class TeamController(ZoneGuard, TeamTime):
         ]
         shortfalls = watch.update(m.vehicle_id, pos, flying)
         ahead = {
-            vid: min(self.config.conflict_horizon_s, max(x.target_s - t, 0.0))
+            vid: min(self.config.conflict_horizon_s, max(x.target_s - t, 0.0) + self._runout_s(x))
             for vid in flying
             if not (x := self.members[vid]).over and not x.in_loiter() and x.hold_zone is None
         }
@@ -557,6 +557,14 @@ class TeamController(ZoneGuard, TeamTime):
                     payload={"other": sf.other, "distance_m": round(sf.distance_m, 1)},
                 )
             )
+
+    def _runout_s(self, m: Member) -> float:
+        """How long the vehicle flies on past its goal before its hold (its mission's run-out,
+        straight on: none with a landing), at its ground speed: two run into adjacent goals
+        from either side, head-on, come closest there, after their slots."""
+        if self.scenario.landing is not None:
+            return 0.0
+        return self.config.runout_m / max(m.groundspeed_m_s or m.level_m_s or 1.0, 1.0)
 
     def _ahead(self, m: Member, *, strengthening: bool = False) -> Ahead | None:
         """The member's flight ahead for resolving conflicts, if it is predictable: on its

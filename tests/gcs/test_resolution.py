@@ -28,7 +28,7 @@ from planner.retime import build_schedule, retime_on_path
 from planner.scenario import parse_scenario
 from planner.wind import Wind
 from tests.gcs.test_team import START_UTC, airborne, fix, of, reports
-from tests.planner.conftest import crossing_scenario
+from tests.planner.conftest import crossing_scenario, small_scenario
 
 
 def _straight(vid: str, start: tuple[float, float], heading_deg: float, **kw: Any) -> Ahead:
@@ -499,3 +499,46 @@ def test_a_pair_resolved_in_the_wind_keeps_apart_as_flown_in_it() -> None:
     res = resolve(a, b, now_s=0.0, separation_m=d_s, look_ahead_s=300.0, response_s=5.0)
     assert res is not None and res.keeps_separation, res
     assert least_m(res) >= d_s, res
+
+
+@pytest.mark.parametrize("runout_m", [300.0, 0.0])
+def test_a_pair_that_meets_in_its_run_outs_past_the_slots_is_predicted_before_them(
+    runout_m: float,
+) -> None:
+    """A east and B west on lines 100 m apart, their goals 500 m apart either side of where
+    they would meet: 500 m apart at their slots, they meet 100 m apart 250 m into the
+    run-outs they fly straight on past the goals (``runout_m``). Five seconds before the
+    slots the watch predicts it (its look-ahead runs through the run-outs), 10 s after the
+    slots, 100 m apart (worked out here from the fixes' positions and velocities); with no
+    run-out nothing is foreseen past the slots."""
+    data = small_scenario(threats=[], arrival={"kind": "simultaneous", "required_s": 1500})
+    for v, (e0, n0, e1, n1) in zip(
+        data["vehicles"], ((2000, 20000, 19750, 20000), (38000, 20100, 20250, 20100)), strict=True
+    ):
+        v["start"] = {"east_m": e0, "north_m": n0, "alt_m": 500}
+        v["goal"] = {"east_m": e1, "north_m": n1, "alt_m": 500}
+    team = timed_alike(data)
+    team.config = FlightConfig(runout_m=runout_m)
+    a, b = (team.members[vid] for vid in ("A", "B"))
+    for x in (a, b):
+        airborne(team, x.vehicle_id, x.takeoff_s)
+    t = a.target_s - 5.0
+    said: list[act.Report] = []
+    fixes = {}
+    for x in (a, b):
+        _, s_m, level = x.schedule.state_at(t)
+        fixes[x.vehicle_id] = f = fix(team, x.vehicle_id, s_m, t, level)
+        said += reports(team.handle(f, t), EventKind.CONFLICT)
+    predicted = [r for r in said if r.reason.startswith("predicted")]
+    if runout_m == 0.0:
+        assert not predicted, [r.reason for r in said]
+        return
+    (p,) = predicted
+    fa, fb = fixes["A"], fixes["B"]
+    (ea, na), (eb, nb) = (team.frame.to_local(f.lat_deg, f.lon_deg) for f in (fa, fb))
+    assert fa.ve_m_s is not None and fb.ve_m_s is not None
+    closing = fa.ve_m_s - fb.ve_m_s
+    meet_s = t + float(eb - ea) / closing
+    assert meet_s > a.target_s + 5.0  # past the slots
+    assert p.payload["at_s"] == pytest.approx(meet_s, abs=0.5)
+    assert p.payload["distance_m"] == pytest.approx(float(nb - na), abs=1.0)
