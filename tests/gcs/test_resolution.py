@@ -314,6 +314,7 @@ def _fly(team: TeamController) -> tuple[float, list[act.Report], dict[str, float
     return closest, said, arrived
 
 
+@pytest.mark.slow  # several seconds: left out of make test-quick
 def test_two_aircraft_scheduled_to_meet_are_kept_apart_in_flight_and_still_arrive_on_time() -> None:
     """With the resolution off (``resolve_horizon_s=0``) the same flight brings them within
     the separation: what the resolution prevents is there."""

@@ -189,6 +189,7 @@ def test_min_separation_aligns_samples_within_half_a_period() -> None:
     assert min_separation({1: a, 2: late}) is None
 
 
+@pytest.mark.slow  # several seconds: left out of make test-quick
 def test_min_separation_on_long_tracks_finds_the_start_where_they_are_closest() -> None:
     """Three 20,000-sample straight tracks (the kernel ``bench/bench_geometry.py`` times),
     against the least distance between their local positions worked out here."""

@@ -307,6 +307,7 @@ def _fly_heights(team: TeamController, slowed: float = 1.0, drift_m: float = 0.0
     return flown
 
 
+@pytest.mark.slow  # several seconds: left out of make test-quick
 def test_a_head_on_pair_in_flight_is_kept_apart_by_height_and_both_make_their_slots() -> None:
     team = _head_on_team()
     d_s = team.scenario.separation_m
@@ -342,6 +343,7 @@ def test_a_head_on_pair_in_flight_is_kept_apart_by_height_and_both_make_their_sl
     assert [r for r in flown.said if r.kind is EventKind.ALARM]
 
 
+@pytest.mark.slow  # several seconds: left out of make test-quick
 def test_a_height_resolution_the_pair_closes_in_on_is_strengthened(
     monkeypatch: pytest.MonkeyPatch,
 ) -> None:
@@ -371,6 +373,7 @@ def test_a_height_resolution_the_pair_closes_in_on_is_strengthened(
     assert weak.closest_m < d_s, f"{weak.closest_m:.0f} m"
 
 
+@pytest.mark.slow  # several seconds: left out of make test-quick
 def test_a_height_resolution_is_kept_until_the_pair_is_past_when_the_encounter_comes_late() -> None:
     """Once the height resolution is said, both fly 20 % slower than asked (a bias the
     coordinator has not learnt): they meet some 30 s after the end the resolution was given.

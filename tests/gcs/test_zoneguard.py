@@ -120,6 +120,7 @@ def answer(team: TeamController, actions: Sequence[act.Action], t: float) -> lis
     return [*actions, *out]
 
 
+@pytest.mark.slow  # several seconds: left out of make test-quick
 def test_a_re_plan_that_comes_back_after_the_vehicles_would_enter_holds_them_short_in_time_and_the_late_route_resumes_them(  # noqa: E501
     team: TeamController,
 ) -> None:
@@ -222,6 +223,7 @@ def test_a_re_plan_that_comes_back_after_the_vehicles_would_enter_holds_them_sho
             assert inside(zone, p.east_m, p.north_m) < 0.0, (vid, s)
 
 
+@pytest.mark.slow  # several seconds: left out of make test-quick
 def test_a_failed_upload_of_the_route_around_the_zone_falls_back_to_the_hold(
     team: TeamController,
 ) -> None:
@@ -257,6 +259,7 @@ def test_a_failed_upload_of_the_route_around_the_zone_falls_back_to_the_hold(
     assert set(flight.held) == {"UAV1"}
 
 
+@pytest.mark.slow  # several seconds: left out of make test-quick
 def test_a_route_clear_of_the_zone_is_never_held(team: TeamController) -> None:
     _, t_p = popup(team)
     flight = Flight(team, t_p - 2.0)

@@ -49,6 +49,7 @@ def test_the_clock_file_is_shared_and_an_old_acknowledgement_holds_nothing(
         Lockstep(tmp_path / "short")
 
 
+@pytest.mark.slow  # several seconds: left out of make test-quick
 async def test_the_simulation_waits_for_the_ground_station_then_runs_on_without_it(
     tmp_path: Path,
 ) -> None:
