@@ -1,11 +1,12 @@
 """The team's arrival time: who moves it and how. A vehicle late even at its top speed moves
 it later (to its earliest arrival plus a margin), unless another has already arrived, or
 another could not arrive that late (its minimum speed, and no loiter turns left to splice in
-before its goal): then the late vehicle alone is released from its slot, with an alarm, and
-the others keep theirs; with arrival windows a late vehicle's own slot moves within its
-window. A lost vehicle can bring it earlier; the operator
-moves it (refused with the earliest feasible time). Ground vehicles re-time their takeoff, in
-the wind the airborne ones measure once one does (the schedule's forecast until then).
+before its goal; or on its final approach, where no speed is asked): then the late vehicle
+alone is released from its slot, with an alarm, and the others keep theirs; with arrival
+windows a late vehicle's own slot moves within its window. A lost vehicle can bring it
+earlier; the operator moves it (refused with the earliest feasible time). Ground vehicles
+re-time their takeoff, in the wind the airborne ones measure once one does (the schedule's
+forecast until then).
 
 :class:`TeamTime` is the part of :class:`~gcs.coordination.team.TeamController` that does
 this; it holds no state of its own.
@@ -104,13 +105,32 @@ class TeamTime:
             return math.inf
         return m.last_decision.eta_max_s
 
+    def on_final_eta_s(self, m: Member) -> float | None:
+        """When a vehicle on its final approach (within ``final_m`` of its goal, where no
+        speed is asked any more) arrives: its last fix plus the rest at its ground speed; None
+        for one that is not on it. It follows no move of the team time: a move 0.66 s later,
+        8 s before the slot, left one that was to fly its minimum speed by its last decision
+        1.07 s early."""
+        if m.phase != "route" or m.s_m is None or m.last_fix_s is None or m.in_loiter():
+            return None
+        rest_m = m.track.length_m - m.s_m
+        if rest_m >= self.config.final_m:
+            return None
+        return m.last_fix_s + max(rest_m, 0.0) / max(m.groundspeed_m_s, 1.0)
+
     def _cannot_follow(self, new_ref: float, movers: Collection[str]) -> list[tuple[str, float]]:
         """The vehicles other than ``movers`` (the late ones) that a team time of ``new_ref``
-        would make early whatever they do, each with the latest team time it can follow."""
+        would make early whatever they do, each with the latest team time it can follow (one
+        on its final approach: its arrival as it flies)."""
         out = []
         tolerance_s = self.config.tolerance_s
         for other in self.members.values():
             if other.vehicle_id in movers or other.done:
+                continue
+            final_s = self.on_final_eta_s(other)
+            if final_s is not None:
+                if new_ref > final_s - other.offset_s + tolerance_s:
+                    out.append((other.vehicle_id, final_s - other.offset_s))
                 continue
             d = other.last_decision
             slower_s = math.inf if other.phase == "ground" or d is None else d.eta_max_s
@@ -327,6 +347,9 @@ class TeamTime:
                 why = (
                     f"on the ground: taking off at {t0:.0f} s, climbing out and flying at top speed"
                 )
+            elif (final_s := self.on_final_eta_s(m)) is not None:
+                earliest = final_s
+                why = "on its final approach, at the speed it flies"
             elif m.last_decision is not None:
                 # The ETA at top speed from its last decision, moved on to now.
                 earliest = m.last_decision.eta_min_s
@@ -372,13 +395,12 @@ class TeamTime:
         stuck = self._cannot_follow(arrival_s, ()) if arrival_s > self.team_ref_s else []
         if stuck:
             vid, latest = min(stuck, key=lambda x: x[1])
-            raise TeamTimeRefused(
-                arrival_s,
-                None,
-                vid,
-                "at its minimum speed, with no loiter turns left to splice in before its goal",
-                latest_s=latest,
+            why = (
+                "on its final approach, at the speed it flies"
+                if self.on_final_eta_s(self.members[vid]) is not None
+                else "at its minimum speed, with no loiter turns left to splice in before its goal"
             )
+            raise TeamTimeRefused(arrival_s, None, vid, why, latest_s=latest)
         out: list[act.Action] = []
         old = self.team_ref_s
         self._set_team_time(

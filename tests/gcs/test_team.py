@@ -1821,6 +1821,49 @@ def test_a_late_vehicle_the_others_cannot_wait_for_is_released_from_its_slot_wit
     assert first.target_s == pytest.approx(ref + first.offset_s)
 
 
+def test_a_team_time_move_a_vehicle_on_its_final_approach_cannot_follow_is_not_made(
+    team: TeamController,
+) -> None:
+    """UAV1 decided on time at 25 m/s 160 m from its goal (its minimum speed from there
+    would let it arrive 1.5 s later), then flies into its final approach, where no speed
+    is asked any more. UAV2 is found late by 1.2 s at its top speed: moving the team time
+    so would leave UAV1 early by more than the tolerance as it flies (worked out here from
+    its fix), so the team time stays, and UAV2 alone is released from its slot with an
+    alarm naming UAV1."""
+    first = team.members["UAV1"]
+    for vid in ("UAV1", "UAV2", "UAV3"):
+        airborne(team, vid, team.members[vid].takeoff_s)
+    v = 25.0
+    length = first.track.length_m
+    tas = first.schedule.tas_per_eas(length)
+    t_decided = first.target_s - 160.0 / (v * tas)
+    team.handle(fix(team, "UAV1", length - 160.0, t_decided, v), t_decided)
+    d = first.last_decision
+    assert d is not None and d.eta_max_s > first.target_s + 1.4  # room by that decision
+    t = first.target_s - 100.0 / (v * tas)
+    team.handle(fix(team, "UAV1", length - 100.0, t, v), t)
+    assert first.last_decision is d  # no decision on the final approach
+    eta_first = t + 100.0 / (v * tas)  # as it flies: the test's own arithmetic
+    ref, version = team.team_ref_s, team.version
+    assert ref is not None
+    late = team.members["UAV2"]
+    v_max = late.limits.airspeed_max_m_s
+    # UAV2 where its top speed brings it 1.2 s after its slot (still air, its route's TAS).
+    rest = (late.target_s + 1.2 - t) * v_max * late.schedule.tas_per_eas(late.track.length_m)
+    s_late = late.track.length_m - rest
+    rest = (late.target_s + 1.2 - t) * v_max * late.schedule.tas_per_eas(s_late)
+    out = team.handle(fix(team, "UAV2", late.track.length_m - rest, t, v_max), t)
+    assert late.last_decision is not None and late.last_decision.verdict == "late"
+    would_be = late.last_decision.eta_min_s - late.offset_s
+    assert would_be + first.offset_s - eta_first > team.config.tolerance_s
+    assert team.team_ref_s == ref and team.version == version
+    assert not reports(out, EventKind.ARRIVAL)
+    (alarm,) = reports(out, EventKind.ALARM)
+    assert alarm.vehicle == "UAV2" and "the team time stays" in alarm.reason
+    assert "UAV1 (at most" in alarm.reason, alarm.reason
+    assert first.target_s == pytest.approx(ref + first.offset_s)
+
+
 def _last_heard_200_s_ago(team: TeamController, vid: str) -> tuple[Member, float]:
     """``vid`` airborne and last heard 200 s before ``t0`` (600 s after its takeoff): its
     member and ``t0``."""
