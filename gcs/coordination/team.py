@@ -791,8 +791,10 @@ class TeamController(ZoneGuard, TeamTime):
     def _past(self, m: Member, t: float, other: str) -> bool:
         """``m`` is past ``other`` as they fly now (the separation watch's latest positions and
         velocities): apart horizontally by :data:`RESOLVED_MARGIN` separations and not
-        closing; or ``other`` no longer flying its mission (arrived, lost, aborted) or never
-        heard."""
+        closing, nor forecast along their routes to come that near over the ground within
+        the forecasts' look-ahead (a pair released as apart and not closing came 270 m
+        apart 50 s later, its mover back at its profile's height); or ``other`` no longer
+        flying its mission (arrived, lost, aborted) or never heard."""
         x = self.members.get(other)
         if x is None or x.over:
             return True
@@ -804,7 +806,10 @@ class TeamController(ZoneGuard, TeamTime):
         be, bn, _ = b.at(t)
         de, dn = be - ae, bn - an
         closing = de * (b.ve_m_s - a.ve_m_s) + dn * (b.vn_m_s - a.vn_m_s) < 0.0
-        return not closing and math.hypot(de, dn) >= RESOLVED_MARGIN * self.scenario.separation_m
+        d_s = RESOLVED_MARGIN * self.scenario.separation_m
+        if closing or math.hypot(de, dn) < d_s:
+            return False
+        return other not in self.forecasts.near(m.vehicle_id, d_s, t, heights=False)
 
     def _resolving_from(self, m: Member) -> str | None:
         """The vehicle ``m`` flies a resolution (speed or height) to keep apart from."""
