@@ -16,6 +16,7 @@ from gcs.coordination import actions as act
 from gcs.coordination.config import FlightConfig
 from gcs.coordination.events import EventKind
 from gcs.coordination.resolution import Ahead, Resolution, resolve
+from gcs.coordination.separation import Position
 from gcs.coordination.team import TeamController
 from gcs.coordination.vertical import Room, resolve_vertical
 from tests.gcs.test_resolution import timed_alike
@@ -392,6 +393,39 @@ def test_a_height_resolution_is_kept_until_the_pair_is_past_when_the_encounter_c
     assert len(back) == 1 and back[0].t_s is not None
     assert back[0].t_s > flown.met_s, (back[0].t_s, flown.met_s)
     assert flown.closest_m >= d_s, f"{flown.closest_m:.0f} m"
+
+
+def test_a_pair_apart_and_not_closing_now_but_forecast_to_meet_is_not_past() -> None:
+    """A and B head-on, 3 km apart along their routes, both forecast along them: B's fix says
+    it flies east ahead of A, faster (apart and opening, as the separation watch sees them),
+    but their routes bring them together within the look-ahead, so A is not past B; with
+    B's forecast dropped (nothing foreseen), it would be."""
+    team = _head_on_team()
+    a, b = team.members["A"], team.members["B"]
+    t = max(m.schedule.climb_end_s for m in team.members.values()) + 1.0
+    for x in (a, b):
+        airborne(team, x.vehicle_id, x.takeoff_s)
+    meet_s = next(
+        k
+        for k in np.arange(t, 1500.0, 1.0)
+        if abs(a.schedule.position_at(float(k))[0] - b.schedule.position_at(float(k))[0]) < 3_000.0
+    )
+    fixes = {}
+    for x in (a, b):
+        _, s_m, level = x.schedule.state_at(float(meet_s))
+        fixes[x.vehicle_id] = fix(team, x.vehicle_id, s_m, float(meet_s), level)
+        team.handle(fixes[x.vehicle_id], float(meet_s))
+    assert "B" in team.forecasts.ahead and "A" in team.forecasts.ahead
+    f = fixes["B"]
+    assert f.ve_m_s is not None and f.ve_m_s < 0.0  # flying west, towards A
+    e, n = (float(x) for x in team.frame.to_local(f.lat_deg, f.lon_deg))
+    assert f.alt_amsl_m is not None
+    # As though it had turned east, ahead of A and faster: apart, and opening.
+    turned = Position(float(meet_s), e, n, f.alt_amsl_m, 5.0 - f.ve_m_s, 0.0)
+    team.separation.update("B", turned, ["A", "B"])
+    assert not team._past(a, float(meet_s), "B")
+    team.forecasts.drop("B")
+    assert team._past(a, float(meet_s), "B")
 
 
 @pytest.mark.parametrize("hold_end", ["to come", "come"])
