@@ -230,6 +230,11 @@ class Member:
             return None
         return via
 
+    def on_final(self, final_m: float) -> bool:
+        """Within ``final_m`` of its goal along its route: its final approach, where no speed
+        is asked any more."""
+        return self.s_m is not None and self.track.length_m - self.s_m < final_m
+
     def in_loiter(self) -> bool:
         seq = self.last_seq
         if seq is None:

@@ -96,14 +96,19 @@ class Ahead:
     apart."""
 
     @functools.cached_property
+    def _fix_leg(self) -> int:
+        """The leg the fix is on (the index of the sample it starts at; 0 for a flight of one
+        sample)."""
+        n = self.route_s_m.size
+        leg = int(np.searchsorted(self.route_s_m, self.s_m, side="right")) - 1
+        return max(min(leg, n - 2), 0)
+
+    @functools.cached_property
     def _first(self) -> int:
         """The first sample of the legs its forecast in the wind needs: the one the fix's leg
         starts at, or the last that moves before it (a leg that does not move, a loiter's
         detour held at its point, takes the track of the one before it)."""
-        n = self.route_s_m.size
-        if n < 2:
-            return 0
-        first = int(np.clip(np.searchsorted(self.route_s_m, self.s_m, side="right") - 1, 0, n - 2))
+        first = self._fix_leg
         e, nn = self.route_east_m, self.route_north_m
         while first > 0 and math.hypot(e[first + 1] - e[first], nn[first + 1] - nn[first]) < 1e-9:
             first -= 1
@@ -133,9 +138,7 @@ class Ahead:
         assert self.wind is not None
         if self.route_s_m.size < 2:
             return 0.0
-        leg = int(np.clip(np.searchsorted(self.route_s_m, self.s_m, side="right") - 1, 0, None))
-        leg = min(leg, self.route_s_m.size - 2)
-        _, track = self._legs(leg + 1)
+        _, track = self._legs(self._fix_leg + 1)
         tas = self.airspeed_m_s * self.tas_per_eas
         return self.groundspeed_m_s - groundspeed_m_s(tas, float(track[-1]), self.wind)
 

@@ -497,7 +497,7 @@ class TeamController(ZoneGuard, TeamTime):
             return
         if not seq_changed and t < m.next_decision_s:
             return
-        if m.track.length_m - s < self.config.final_m:
+        if m.on_final(self.config.final_m):
             if item_speed:
                 self._keep_commanded_speed(m, t, out)
             return
@@ -618,7 +618,7 @@ class TeamController(ZoneGuard, TeamTime):
             north_m,
             horizon_s=max(m.target_s - m.last_fix_s, 0.0),
             movable=not turning
-            and track.length_m - m.s_m >= self.config.final_m
+            and not m.on_final(self.config.final_m)
             and (strengthening or self._resolving_from(m) is None),
             # (a fix without a ground speed: its airspeed)
             final_s=self.config.final_m / max(m.groundspeed_m_s or m.level_m_s, 1.0),

@@ -31,6 +31,9 @@ from planner.wind import Wind
 
 __all__ = ["TeamTime", "TeamTimeRefused", "names_of"]
 
+ON_FINAL = "on its final approach, at the speed it flies"
+"""Why a vehicle on its final approach arrives when it does (:meth:`TeamTime.on_final_eta_s`)."""
+
 
 class TeamTimeRefused(GcsError):
     """A team arrival time that some vehicle cannot make: names the earliest feasible time
@@ -113,10 +116,9 @@ class TeamTime:
         1.07 s early."""
         if m.phase != "route" or m.s_m is None or m.last_fix_s is None or m.in_loiter():
             return None
-        rest_m = m.track.length_m - m.s_m
-        if rest_m >= self.config.final_m:
+        if not m.on_final(self.config.final_m):
             return None
-        return m.last_fix_s + max(rest_m, 0.0) / max(m.groundspeed_m_s, 1.0)
+        return m.last_fix_s + max(m.track.length_m - m.s_m, 0.0) / max(m.groundspeed_m_s, 1.0)
 
     def _cannot_follow(self, new_ref: float, movers: Collection[str]) -> list[tuple[str, float]]:
         """The vehicles other than ``movers`` (the late ones) that a team time of ``new_ref``
@@ -349,7 +351,7 @@ class TeamTime:
                 )
             elif (final_s := self.on_final_eta_s(m)) is not None:
                 earliest = final_s
-                why = "on its final approach, at the speed it flies"
+                why = ON_FINAL
             elif m.last_decision is not None:
                 # The ETA at top speed from its last decision, moved on to now.
                 earliest = m.last_decision.eta_min_s
@@ -396,7 +398,7 @@ class TeamTime:
         if stuck:
             vid, latest = min(stuck, key=lambda x: x[1])
             why = (
-                "on its final approach, at the speed it flies"
+                ON_FINAL
                 if self.on_final_eta_s(self.members[vid]) is not None
                 else "at its minimum speed, with no loiter turns left to splice in before its goal"
             )
