@@ -11,6 +11,7 @@ from __future__ import annotations
 import math
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, replace
+from functools import cache, partial
 
 import numpy as np
 
@@ -60,7 +61,7 @@ def _touches(vs: VehicleSchedule, s0: float, zone: ThreatZone, margin_m: float) 
         return False
     n = max(2, int(math.ceil((vs.path.length_m - s0) / 200.0)) + 1)
     s = np.linspace(s0, vs.path.length_m, n)
-    pts = np.array([[p.east_m, p.north_m] for p in (vs.path.pose_at(float(x)) for x in s)])
+    pts = vs.path.poses_at(s)
     alt = np.interp(s, vs.wp_s_m, vs.wp_alt_m)
     d = zone.distance_m(pts[:, 0], pts[:, 1])
     below = alt < zone.ceiling_m
@@ -283,10 +284,13 @@ def apply_popup(
         same_time = abs(targets.get(v.id, vs.arrival_s) - vs.arrival_s) < 0.05
         if v.id not in targets or (v.id not in affected and same_time):
             continue
-        tracks = TeamTracks.of([x for k, x in final.items() if k != vid], t_at[vid])
+        # The others' tracks are made when a loiter is first tried, for those that need one.
+        tracks = cache(partial(TeamTracks.of, [x for k, x in final.items() if k != vid], t_at[vid]))
 
-        def keep_clear(e: float, n: float, radius_m: float, tracks: TeamTracks = tracks) -> bool:
-            return tracks.clearance(e, n, radius_m)[0] >= required
+        def keep_clear(
+            e: float, n: float, radius_m: float, tracks: Callable[[], TeamTracks] = tracks
+        ) -> bool:
+            return tracks().clearance(e, n, radius_m)[0] >= required
 
         r: Retimed | None = None
         for check in (keep_clear, None):  # where they fit when nowhere keeps clear

@@ -28,9 +28,9 @@ with a score of other timings, cost seconds rather than minutes.
 from __future__ import annotations
 
 import math
-from collections.abc import Callable, Iterable, Mapping, Sequence
+from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
 from dataclasses import dataclass
-from typing import Generic, TypeVar
+from typing import Any, Generic, TypeVar
 
 import numpy as np
 from numpy.typing import NDArray
@@ -100,6 +100,7 @@ def sequence_team(
     """
     if len(timed) < 2:
         return {}, separation(timed, required_m, from_s=from_s)
+    alternatives = _Remembered(alternatives)  # the first pass's, again in the repair
     samples = TeamSamples(timed, required_m, from_s=from_s)
     first = separation(timed, required_m, samples)
     if not first.conflicts:
@@ -150,6 +151,29 @@ def sequence_team(
         moved[vid] = Moved(repaired, made, conflict)
     team = [current[vs.vehicle_id] for vs in timed]
     return moved, separation(team, required_m, samples)
+
+
+class _Remembered(Generic[T]):
+    """A vehicle's alternatives made once: asked again, those made already come back as
+    they were, and the rest are made as they are reached (each may be a re-timing)."""
+
+    def __init__(self, make: Callable[[str], Iterable[tuple[VehicleSchedule, T]]]) -> None:
+        self._make = make
+        self._made: dict[str, tuple[list[tuple[VehicleSchedule, T]], Iterator[Any]]] = {}
+
+    def __call__(self, vid: str) -> Iterator[tuple[VehicleSchedule, T]]:
+        if vid not in self._made:
+            self._made[vid] = ([], iter(self._make(vid)))
+        made, rest = self._made[vid]
+        i = 0
+        while True:
+            if i == len(made):
+                item = next(rest, None)
+                if item is None:
+                    return
+                made.append(item)
+            yield made[i]
+            i += 1
 
 
 def _repair(

@@ -10,7 +10,7 @@ from __future__ import annotations
 import itertools
 import math
 import sys
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import Any
 
@@ -303,3 +303,26 @@ def test_a_tracks_shortfall_from_the_team_is_the_sum_over_every_sample(below_m: 
         assert samples.too_close(vs, below_m) == {
             samples.ids[i] for i in np.flatnonzero(gaps < below_m)
         }
+
+
+def test_a_vehicles_alternatives_asked_again_are_made_once_and_come_in_the_same_order() -> None:
+    """The first pass asks for a vehicle's timings until one is clear, the repair for all of
+    them: each timing is made once (a re-plan's is a re-timing), as many as are reached, and
+    both see them in the caller's order."""
+    made: list[tuple[str, int]] = []
+
+    def alternatives(vid: str) -> Iterator[tuple[Any, int]]:
+        for k in range(4):
+            made.append((vid, k))
+            yield object(), k
+
+    remembered = sequencing._Remembered(alternatives)
+    first = remembered("A")
+    assert [next(first)[1], next(first)[1]] == [0, 1]  # the first pass stops at a clear one
+    assert made == [("A", 0), ("A", 1)]
+    again = [chosen for _, chosen in remembered("A")]
+    assert again == [0, 1, 2, 3] and made == [("A", k) for k in range(4)]
+    assert [chosen for _, chosen in remembered("A")] == [0, 1, 2, 3] and len(made) == 4
+    assert next(remembered("B"))[1] == 0 and made[-1] == ("B", 0)
+    objects = [o for o, _ in remembered("A")]
+    assert objects == [o for o, _ in remembered("A")]  # the very same timings
