@@ -11,10 +11,17 @@ the predicted true airspeed ``T`` and the reported wind ``w``, the air mass mode
 
     v - w = k * T * (sin psi, cos psi) + dw
 
-with three unknowns: the airspeed scale ``k`` and the wind error ``dw`` (east, north). They are
-found by least squares over the recent fixes (exponential forgetting with
-``time_constant_s``), regularised towards ``k = 1, dw = 0`` so that a straight leg, which
-cannot separate ``k`` from the wind along it, still predicts that leg right. Fixes taken while
+with the airspeed scale ``k`` and the wind error ``dw`` (east, north) unknown. The error is not
+taken as fixed: an autopilot's estimate drifts (ArduPlane's turns by up to half a degree a
+second in still air, as the stub's does: ``sitl_stub.wind_estimate``), so ``dw`` is a line in
+time, ``dw(t) = dw + (t - now) * dw_rate``, and what counts is its value now. A report that
+turns while what the aircraft makes good does not is thus not believed, and one that turns
+with it (the wind changing) is; a fixed error left the prediction the report's drift over
+the time constant (3 % of a vehicle's minimum speed: 2.3 s early on its last minute). The
+five unknowns are found by least squares over the recent fixes (exponential forgetting with
+``time_constant_s``), regularised towards ``k = 1, dw = 0, dw_rate = 0`` so that a straight
+leg, which cannot separate ``k`` from the wind along it, still predicts that leg right. Fixes
+taken while
 the airspeed is settling after a change, or while climbing or descending steeply, are not used;
 on a gentler climb or descent (a final approach sinking to its goal) the horizontal speed is
 ``T cos(gamma)``.
@@ -26,6 +33,8 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+
+import numpy as np
 
 from planner.wind import Wind
 
@@ -44,7 +53,7 @@ class BiasConfig:
     vehicle had learnt in a 250 s restart fell to 1.5 % of its weight, and the first fix after
     it, pulled towards the prior, moved the team time by a minute."""
     prior_fixes: float = 4.0
-    """The pull towards ``k = 1, dw = 0``, as that many fixes' worth of evidence."""
+    """The pull towards ``k = 1, dw = 0, dw_rate = 0``, as that many fixes' worth of evidence."""
     scale_bounds: tuple[float, float] = (0.85, 1.15)
     """The airspeed scale is kept in this range (a larger error is a fault, not a bias)."""
     max_wind_error_m_s: float = 4.0
@@ -61,11 +70,11 @@ class SpeedBiasEstimator:
 
     def __init__(self, config: BiasConfig | None = None) -> None:
         self.config = config or BiasConfig()
-        # The normal equations of theta = (k, dwe, dwn), each fix's rows being
-        # (tas sin h, 1, 0) and (tas cos h, 0, 1): their matrix is
-        # [[aa, a, b], [a, n, 0], [b, 0, n]], kept as those four sums, and its right side.
-        self._aa = self._a = self._b = self._n = 0.0
-        self._vec = [0.0, 0.0, 0.0]
+        # The normal equations of theta = (k, dwe, dwn, dwe_rate, dwn_rate), each fix's rows
+        # being (tas sin h, 1, 0, tau, 0) and (tas cos h, 0, 1, 0, tau), tau its time less the
+        # latest fix's: their matrix and right side, decayed and moved on at each fix.
+        self._normal = np.zeros((5, 5))
+        self._rhs = np.zeros(5)
         self._last_t_s: float | None = None
         self._scale = 1.0
         self._wind_error = (0.0, 0.0)
@@ -121,12 +130,12 @@ class SpeedBiasEstimator:
             return False
         if self._last_t_s is not None:
             dt = min(max(t_s - self._last_t_s, 0.0), cfg.max_gap_s)
+            # The fixes so far are dt older: each row's tau less dt (row @ shift).
+            shift = np.eye(5)
+            shift[1, 3] = shift[2, 4] = -dt
             decay = math.exp(-dt / cfg.time_constant_s)
-            self._aa *= decay
-            self._a *= decay
-            self._b *= decay
-            self._n *= decay
-            self._vec = [v * decay for v in self._vec]
+            self._normal = decay * (shift.T @ self._normal @ shift)
+            self._rhs = decay * (shift.T @ self._rhs)
         self._last_t_s = t_s
         self._ref_tas_m_s = predicted_tas_m_s
         # Along a climb or a descent the horizontal speed is the true airspeed times the cosine
@@ -135,12 +144,16 @@ class SpeedBiasEstimator:
         tas = math.sqrt(max(predicted_tas_m_s**2 - climb**2, 0.0))
         a, b = tas * math.sin(heading_rad), tas * math.cos(heading_rad)
         re, rn = ve_m_s - wind.to_east_m_s, vn_m_s - wind.to_north_m_s
-        self._aa += a * a + b * b
-        self._a += a
-        self._b += b
-        self._n += 1.0
-        v = self._vec
-        self._vec = [v[0] + a * re + b * rn, v[1] + re, v[2] + rn]
+        # This fix's rows, at tau 0: (a, 1, 0, 0, 0) and (b, 0, 1, 0, 0).
+        m = self._normal
+        m[0, 0] += a * a + b * b
+        m[0, 1] += a
+        m[1, 0] += a
+        m[0, 2] += b
+        m[2, 0] += b
+        m[1, 1] += 1.0
+        m[2, 2] += 1.0
+        self._rhs[:3] += (a * re + b * rn, re, rn)
         self.used += 1
         self._solve()
         return True
@@ -148,19 +161,27 @@ class SpeedBiasEstimator:
     def _solve(self) -> None:
         cfg = self.config
         tas = self._ref_tas_m_s
-        # (normal matrix + diag(p tas^2, p, p)) theta = vec + (p tas^2, 0, 0): the last two
-        # rows give dwe and dwn from k, the first then k alone.
-        p = cfg.prior_fixes
-        d = self._n + p
-        v1, v2, v3 = self._vec
-        k = (v1 + p * tas * tas - (self._a * v2 + self._b * v3) / d) / (
-            self._aa + p * tas * tas - (self._a * self._a + self._b * self._b) / d
-        )
+        # (normal matrix + prior) theta = rhs + prior @ (1, 0, 0, 0, 0); the prior is that many
+        # fixes' worth of no bias, of no drift over a time constant and of no wind error at
+        # the fixes' mean time (held at the latest fix's, it tilted a steady error by the
+        # prior's pull, to that fix's cost).
+        p, tc = cfg.prior_fixes, cfg.time_constant_s
+        lhs = self._normal + np.diag([p * tas * tas, p, p, p * tc * tc, p * tc * tc])
+        weight = self._normal[1, 1]
+        mean_tau = self._normal[1, 3] / weight if weight > 0.0 else 0.0
+        for error, rate in ((1, 3), (2, 4)):
+            lhs[error, rate] += p * mean_tau
+            lhs[rate, error] += p * mean_tau
+            lhs[rate, rate] += p * mean_tau * mean_tau
+        rhs = self._rhs.copy()
+        rhs[0] += p * tas * tas
+        k = float(np.linalg.solve(lhs, rhs)[0])
         lo, hi = cfg.scale_bounds
         self._scale = float(min(max(k, lo), hi))
         # The wind error fitted for the scale the predictions use (at its bound, if there).
         k = self._scale
-        de, dn = (v2 - self._a * k) / d, (v3 - self._b * k) / d
+        rest = np.linalg.solve(lhs[1:, 1:], rhs[1:] - lhs[1:, 0] * k)
+        de, dn = float(rest[0]), float(rest[1])
         norm = math.hypot(de, dn)
         if norm > cfg.max_wind_error_m_s:
             de, dn = de * cfg.max_wind_error_m_s / norm, dn * cfg.max_wind_error_m_s / norm
