@@ -88,6 +88,14 @@ class Ahead:
     lifts a vehicle over part of its route, and a pair judged at their present heights was
     resolved onto one height: the 60-vehicle crowd's R59 climbed 450 m away from R00 to
     where R00's new mission took it, and they came 289 m apart."""
+    until_s: float = math.inf
+    """Flying a speed resolution (:attr:`airspeed_m_s`): when it is released. Flown as it
+    flies, it is forecast at :attr:`resume_m_s` after it."""
+    resume_m_s: float | None = None
+    """The airspeed it flies for its slot once its resolution is released (None: it flies
+    none). Forecast at its resolution's speed all along, a vehicle released to slow for its
+    slot was forecast far ahead of where it flew: another was sped into it, and the pair came
+    193 m apart, no speed or height left to part them."""
     wind: Wind | None = None
     """Its wind estimate: each leg ahead flown at the ground speed its true airspeed makes
     good there (None or calm: at its present ground speed all along). In 10 m/s across the paper's
@@ -191,16 +199,20 @@ class Ahead:
     ) -> FloatArray:
         """(east, north, height AMSL) at the times ``t_s`` flying ``airspeed_m_s`` from its fix
         (reached ``response_s`` after it) until ``until_s``, at its present speed again after
-        it; NaN past its look-ahead. The height is its present one, changed as its profile
-        changes ahead (:attr:`route_rise_m`)."""
+        it; flown as it flies (at :attr:`airspeed_m_s`), a resolution's until its release
+        and :attr:`resume_m_s` after it. NaN past its look-ahead. The height is its present
+        one, changed as its profile changes ahead (:attr:`route_rise_m`)."""
         dt = t_s - self.t_s
+        after = self.airspeed_m_s
+        if airspeed_m_s == self.airspeed_m_s and self.resume_m_s is not None:
+            until_s, after = self.until_s, self.resume_m_s
         held = max(until_s - self.t_s, response_s)
         if self.wind is None or self.wind.calm:
             # In still air the leg-by-leg forecast is this one (the present ground speed all
             # along), done without a table of the legs: this runs at every forecast.
-            s = self._along(dt, airspeed_m_s, response_s, held)
+            s = self._along(dt, airspeed_m_s, response_s, held, after)
         else:
-            s = self._along_in_wind(dt, airspeed_m_s, response_s, held)
+            s = self._along_in_wind(dt, airspeed_m_s, response_s, held, after)
         out = np.empty((*s.shape, 3))
         out[..., 0] = np.interp(s, self.route_s_m, self.route_east_m)
         out[..., 1] = np.interp(s, self.route_s_m, self.route_north_m)
@@ -213,26 +225,28 @@ class Ahead:
         return out
 
     def _along_in_wind(
-        self, dt: FloatArray, airspeed_m_s: float, response_s: float, held_s: float
+        self, dt: FloatArray, airspeed_m_s: float, response_s: float, held_s: float, after: float
     ) -> FloatArray:
         """Along the flight (m) ``dt`` after the fix: its airspeed until ``response_s``,
-        ``airspeed_m_s`` until ``held_s``, its airspeed again after, each leg at the ground
-        speed that makes good in :attr:`wind`."""
+        ``airspeed_m_s`` until ``held_s``, ``after`` then, each leg at the ground speed that
+        makes good in :attr:`wind`."""
         own = self.airspeed_m_s
         start = np.full(dt.shape, self.s_m)
-        if airspeed_m_s == own:
+        if airspeed_m_s == own == after:
             return self._flown(start, dt, own)
         s = self._flown(start, np.minimum(dt, response_s), own)
         s = self._flown(s, np.clip(dt - response_s, 0.0, held_s - response_s), airspeed_m_s)
-        return self._flown(s, np.maximum(dt - held_s, 0.0), own)
+        return self._flown(s, np.maximum(dt - held_s, 0.0), after)
 
     def _along(
-        self, dt: FloatArray, airspeed_m_s: float, response_s: float, held: float
+        self, dt: FloatArray, airspeed_m_s: float, response_s: float, held: float, after: float
     ) -> FloatArray:
         """Along the flight (m) ``dt`` after the fix at its present ground speed, changed by
-        the change of airspeed from ``response_s`` until ``held``."""
+        the change of airspeed from ``response_s`` until ``held``, and to ``after`` then."""
         gs = self.groundspeed_m_s
         new_gs = max(gs + (airspeed_m_s - self.airspeed_m_s) * self.tas_per_eas, 0.0)
+        if after != self.airspeed_m_s:
+            return self._along_steps(dt, (gs, new_gs), response_s, held, after)
         # s_m + gs (min(dt, response) + max(dt - held, 0)) + new_gs clip(dt - response, 0,
         # held - response), clipped to the route: the same operations on the same values,
         # done in place, and np.clip as maximum then minimum (its values, without its
@@ -248,6 +262,46 @@ class Ahead:
         s += part
         np.minimum(np.maximum(s, self.route_s_m[0], out=s), self.route_s_m[-1], out=s)
         return s
+
+    def _along_steps(
+        self,
+        dt: FloatArray,
+        speeds_m_s: tuple[float, float],
+        response_s: float,
+        held: float,
+        after: float,
+    ) -> FloatArray:
+        """:meth:`_along` with ``after`` flown once ``held`` is over (a resolution released):
+        its ground speed, the changed one from ``response_s``, and the one ``after`` makes
+        good from ``held``."""
+        gs, new_gs = speeds_m_s
+        after_gs = max(gs + (after - self.airspeed_m_s) * self.tas_per_eas, 0.0)
+        s = gs * np.minimum(dt, response_s)
+        s += new_gs * np.clip(dt - response_s, 0.0, max(held - response_s, 0.0))
+        s += after_gs * np.maximum(dt - max(held, response_s), 0.0)
+        s += self.s_m
+        return np.clip(s, self.route_s_m[0], self.route_s_m[-1])
+
+    def slot_airspeed_m_s(self, from_s: float) -> float:
+        """The airspeed (commanded) that flies it from where it is at ``from_s`` (flying as
+        it does) to the end of its flight at its slot (its horizon), in its range: what it
+        is timed to once a resolution is released. The ground made good per unit of airspeed
+        is the fix's."""
+        dt = np.array([max(from_s - self.t_s, 0.0)])
+        there = float(self._along_now(dt)[0])
+        left_s = self.t_s + self.horizon_s - max(from_s, self.t_s)
+        if left_s <= 0.0:
+            return self.airspeed_min_m_s
+        per_airspeed = self.groundspeed_m_s / max(self.airspeed_m_s, 1.0)
+        wanted = (float(self.route_s_m[-1]) - there) / left_s / max(per_airspeed, 1e-3)
+        return min(max(wanted, self.airspeed_min_m_s), self.airspeed_max_m_s)
+
+    def _along_now(self, dt: FloatArray) -> FloatArray:
+        """Along the flight (m) ``dt`` after the fix, flying its airspeed all along."""
+        if self.wind is None or self.wind.calm:
+            s = self.s_m + self.groundspeed_m_s * dt
+            return np.clip(s, self.route_s_m[0], self.route_s_m[-1])
+        return self._flown(np.full(dt.shape, self.s_m), dt, self.airspeed_m_s)
 
 
 @dataclass(frozen=True)
@@ -373,20 +427,21 @@ def resolve(
 
 def longest_hold_s(mover: Ahead, airspeed_m_s: float, now_s: float, spare_s: float = 0.0) -> float:
     """How long (s) ``mover`` may fly ``airspeed_m_s`` from ``now_s`` and still make its slot
-    (``horizon_s`` after its fix): the distance it gains or loses meanwhile made up over the
-    rest of the way but its last ``spare_s`` (its final approach, the response to the speed
-    that takes the resolution back) with :data:`RECOVERY_SHARE` of the room its speed range
-    leaves on the other side of its present airspeed (``H * |change| <= share * room *
-    (left - H)``). Made up over the whole rest, a crowd's resolution held to 6 s before the
-    slot left its mover 1.7 s early."""
+    (``horizon_s`` after its fix): the distance it gains or loses on the mean airspeed its
+    slot asks from now (:meth:`Ahead.slot_airspeed_m_s`) made up over the rest of the way but
+    its last ``spare_s`` (its final approach, the response to the speed that takes the
+    resolution back) with :data:`RECOVERY_SHARE` of the room its speed range leaves on the
+    other side of that mean (``H * |change| <= share * room * (left - H)``). Made up over the
+    whole rest, a crowd's resolution held to 6 s before the slot left its mover 1.7 s early;
+    judged on the airspeed it flew, one flying slowly to the place a re-plan timed it
+    through, its slot asking its top speed after it, was held at its minimum and arrived
+    6.6 s late."""
     left_s = mover.t_s + mover.horizon_s - now_s - spare_s
-    change = abs(airspeed_m_s - mover.airspeed_m_s)
+    mean = mover.slot_airspeed_m_s(now_s)
+    change = abs(airspeed_m_s - mean)
     if left_s <= 0.0 or change < 1e-9:
         return max(left_s, 0.0)
-    if airspeed_m_s > mover.airspeed_m_s:
-        room = mover.airspeed_m_s - mover.airspeed_min_m_s
-    else:
-        room = mover.airspeed_max_m_s - mover.airspeed_m_s
+    room = mean - mover.airspeed_min_m_s if airspeed_m_s > mean else mover.airspeed_max_m_s - mean
     recover = RECOVERY_SHARE * max(room, 0.0)
     return left_s * recover / (change + recover)
 

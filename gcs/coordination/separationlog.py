@@ -17,7 +17,8 @@ Kinds:
   onto an altitude layer (``altitude``);
 - ``released``: a speed or height resolution is over;
 - ``unresolved``: a re-plan left the pair under the separation (said before its missions
-  were sent, with an alarm);
+  were sent, with an alarm), or in flight no speed or height of either parts a pair
+  forecast under it (said once, with an alarm);
 - ``loss``: the pair came under the separation (the alarm).
 
 Pure: no clock, no I/O.

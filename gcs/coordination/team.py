@@ -39,7 +39,7 @@ from gcs.coordination.arrival import ArrivalController, Decision, SpeedLimits
 from gcs.coordination.config import FlightConfig
 from gcs.coordination.events import EventKind
 from gcs.coordination.member import Lost, LostCause, Member, path_en, route_track
-from gcs.coordination.resolution import Ahead, Forecasts, Resolution, resolve
+from gcs.coordination.resolution import Ahead, Forecasts, Resolution, closest_m, resolve
 from gcs.coordination.separation import Position, SeparationWatch
 from gcs.coordination.teamtime import TeamTime, TeamTimeRefused
 from gcs.coordination.tracks import TruthSample, closest_approach
@@ -185,6 +185,9 @@ class TeamController(ZoneGuard, TeamTime):
         """Each vehicle's flight ahead along its route, for resolving conflicts."""
         self.vertical = VerticalFlight()
         """The vertical resolutions being flown."""
+        self.unresolved: set[frozenset[str]] = set()
+        """The pairs forecast under the separation that neither speed nor height resolves,
+        said once (until they are no longer forecast so, or one of them is resolved)."""
         for vs in schedule.vehicles:
             v = scenario.vehicle(vs.vehicle_id)
             limits = SpeedLimits(v.speed_min_m_s, v.speed_max_m_s, schedule.step_m_s)
@@ -566,12 +569,16 @@ class TeamController(ZoneGuard, TeamTime):
             return 0.0
         return self.config.runout_m / max(m.groundspeed_m_s or m.level_m_s or 1.0, 1.0)
 
-    def _ahead(self, m: Member, *, strengthening: bool = False) -> Ahead | None:
+    def _ahead(
+        self, m: Member, *, strengthening: bool = False, released_s: float | None = None
+    ) -> Ahead | None:
         """The member's flight ahead for resolving conflicts, if it is predictable: on its
         route, joined, timed (not holding or being re-planned), with a fresh fix, its loiter
         turns still to fly on the way (:meth:`RouteTrack.flight_samples`); movable unless in
         its turns, on its final approach or flying a resolution (but for ``strengthening``
-        the one it flies)."""
+        the one it flies). Flying a speed resolution, it flies for its slot once released:
+        at ``released_s`` when given, else at the resolution's end, or, held on past it, as
+        late as its slot allows."""
         if (
             m.phase != "route"
             or m.over
@@ -602,7 +609,7 @@ class TeamController(ZoneGuard, TeamTime):
             vs = m.schedule
             rise_m = np.interp(track.flight_route_s_m(done), vs.wp_s_m, vs.wp_alt_m)
             rise_m -= vs.alt_at(here_m)
-        return Ahead(
+        ahead = Ahead(
             m.vehicle_id,
             m.last_fix_s,
             at_m,
@@ -625,6 +632,26 @@ class TeamController(ZoneGuard, TeamTime):
             route_rise_m=rise_m,
             wind=m.schedule.wind if m.wind is None else m.wind,
         )
+        r = m.resolving
+        if r is None:
+            return ahead
+        if released_s is not None:
+            return self._released(ahead, released_s)
+        # Released, it flies for its slot again: at its end, or held on past it as late as its
+        # slot allows if, released then, it would come near the other again (:meth:`_past`;
+        # forecast released at the end, one held on 76 s past it was flown into).
+        at_end = self._released(ahead, max(r.until_s, m.last_fix_s))
+        if (
+            self._apart_m(at_end, r.other, at_end.until_s)
+            >= RESOLVED_MARGIN * self.scenario.separation_m
+        ):
+            return at_end
+        return self._released(ahead, r.hold_end_s)
+
+    @staticmethod
+    def _released(ahead: Ahead, at_s: float) -> Ahead:
+        """``ahead`` flying its resolution until ``at_s``, then for its slot."""
+        return replace(ahead, until_s=at_s, resume_m_s=ahead.slot_airspeed_m_s(at_s))
 
     def _resolve_conflicts(self, m: Member, t: float, out: list[act.Action]) -> None:
         """Keep a resolution flown until it is over; every ``resolve_period_s``, forecast
@@ -634,10 +661,12 @@ class TeamController(ZoneGuard, TeamTime):
         resolve`, or by height)."""
         cfg = self.config
         r = m.resolving
+        released = False
         if r is not None:
             if t >= r.until_s and (self._past(m, t, r.other) or t >= r.hold_end_s):
                 m.resolving = None
                 m.next_decision_s = -math.inf
+                released = True
                 out.append(
                     act.Report(
                         EventKind.CONFLICT,
@@ -652,6 +681,12 @@ class TeamController(ZoneGuard, TeamTime):
         if m.vehicle_id in self.vertical:
             self.vertical.fly(m, t, functools.partial(self._manoeuvre_over, m, t), out)
         busy = self._resolving_from(m) is not None
+        if released:
+            # Screened again at its next fix, once it is timed for its slot: screened now, it
+            # is forecast at its resolution's speed (one was said to meet another it was
+            # slowing away from).
+            m.next_resolve_s = -math.inf
+            return
         if cfg.resolve_horizon_s <= 0.0 or t < m.next_resolve_s:
             return
         m.next_resolve_s = t + cfg.resolve_period_s
@@ -668,11 +703,16 @@ class TeamController(ZoneGuard, TeamTime):
         forecasts.update(mine, t)
         if busy:
             self._strengthen(m, t, out)
+            self._screen_busy(m, t, out)
             return
         # Screened and resolved with the margin a forecast minutes ahead needs (a pair
         # forecast 5-10 % over the separation came under it as flown).
         d_s = RESOLVED_MARGIN * self.scenario.separation_m
-        for other in forecasts.near(m.vehicle_id, d_s, t):
+        near = forecasts.near(m.vehicle_id, d_s, t)
+        self.unresolved -= {p for p in self.unresolved if m.vehicle_id in p} - {
+            frozenset((m.vehicle_id, other)) for other in near
+        }
+        for other in near:
             x = self.members[other]
             if x.over or self._resolving_from(x) == m.vehicle_id:
                 continue  # over, or resolving this very pair already
@@ -684,6 +724,7 @@ class TeamController(ZoneGuard, TeamTime):
                 mine, theirs, now_s=t, separation_m=d_s, look_ahead_s=cfg.resolve_horizon_s,
                 response_s=cfg.resolve_response_s, neighbours=neighbours,
             )  # fmt: skip
+            waits = False  # for a speed that keeps them apart, flown once within its horizon
             if not self._keeps(res) and cfg.vertical_horizon_s > 0.0:
                 # Would a speed keep them apart over the longer horizon? Then it is flown once
                 # they are within the speed's; else one of them changes height now.
@@ -693,7 +734,8 @@ class TeamController(ZoneGuard, TeamTime):
                     neighbours=neighbours,
                 ) if res is None else res  # fmt: skip
                 up = None
-                if not self._keeps(later):
+                waits = res is None and self._keeps(later)
+                if not waits:
                     # Those a change of height could bring either near: near over the
                     # ground, whatever their heights (one 450 m above was 21 m once climbed to).
                     over = _neighbours(
@@ -705,7 +747,10 @@ class TeamController(ZoneGuard, TeamTime):
                     self._forecast_again(self.members[up.vehicle], t)
                     return
             if res is None:
+                if not waits:
+                    self._say_unresolved(mine, theirs, t, out)
                 continue
+            self.unresolved.discard(frozenset(pair))
             mover = self.members[res.vehicle]
             mover.resolving = res
             out.append(
@@ -730,6 +775,68 @@ class TeamController(ZoneGuard, TeamTime):
             self._fly_resolution(mover, t, out)
             self._forecast_again(mover, t)
             return
+
+    def _screen_busy(self, m: Member, t: float, out: list[act.Action]) -> None:
+        """``m`` flies a resolution: the pairs no one else screens are screened here, those
+        with the others that fly one too, of another pair (neither screens the other: two
+        resolved from a third each, at their top speeds, closed to 83 m unseen), and its
+        own pair if it flies a speed resolution from it (one resolved at its top speed
+        from another that was held on at its own, past the release it was forecast, came
+        101 m apart). One forecast under the separation is resolved by height (a speed
+        resolution is flown on at the height asked), by one that flies no height
+        resolution yet, else said."""
+        d_s = RESOLVED_MARGIN * self.scenario.separation_m
+        for other in self.forecasts.near(m.vehicle_id, d_s, t):
+            x = self.members[other]
+            theirs_from = self._resolving_from(x)
+            if x.over or theirs_from == m.vehicle_id:
+                continue  # over, or it resolves from this one: screened at its fixes
+            if theirs_from is None and self._resolving_from(m) != other:
+                continue  # it screens the pair itself
+            if m.resolving is None and self._resolving_from(m) == other:
+                continue  # a height resolution from it: strengthened (_strengthen)
+            pair = (m.vehicle_id, other)
+            a, b = (self._ahead(v, strengthening=True) for v in (m, x))
+            if a is None or b is None:
+                continue
+            mine, theirs = (
+                replace(v, movable=v.movable and v.vehicle not in self.vertical) for v in (a, b)
+            )
+            over = _neighbours(self.forecasts, pair, NEIGHBOUR_SEPARATIONS * d_s, t, heights=False)
+            up = self._resolve_vertically(mine, theirs, t, over)
+            if up is None:
+                self._say_unresolved(mine, theirs, t, out)
+                continue
+            self.unresolved.discard(frozenset(pair))
+            self.vertical.start(self.members[up.vehicle], up, t, out)
+            self._forecast_again(self.members[up.vehicle], t)
+            return
+
+    def _say_unresolved(self, a: Ahead, b: Ahead, t: float, out: list[act.Action]) -> None:
+        """A pair forecast under the separation that no speed or height parts: said (a
+        conflict event and an alarm), once (one such was left in silence for 40 s, until it
+        came under the separation)."""
+        pair = frozenset((a.vehicle, b.vehicle))
+        if pair in self.unresolved:
+            return
+        self.unresolved.add(pair)
+        cfg = self.config
+        # Over twice the screen's horizon, as resolutions are judged: where they meet.
+        times = np.arange(t, t + 2.0 * self._screen_horizon_s() + 1.0)
+        d, when = closest_m(a, b, times, a.airspeed_m_s, b.airspeed_m_s, cfg.resolve_response_s)
+        text = (
+            f"{a.vehicle} and {b.vehicle} forecast {d:.0f} m apart at {when:.1f} s "
+            f"(d_s {self.scenario.separation_m:g} m): no speed or height of either keeps them "
+            "apart"
+        )
+        payload = {
+            "pair": [a.vehicle, b.vehicle],
+            "resolution": "none",
+            "distance_m": round(d, 1),
+            "at_s": round(when, 1),
+        }
+        for kind in (EventKind.CONFLICT, EventKind.ALARM):
+            out.append(act.Report(kind, text, a.vehicle, t_s=t, payload=payload))
 
     def _strengthen(self, m: Member, t: float, out: list[act.Action]) -> None:
         """``m`` flies a height resolution, and the pair is forecast to come under the
@@ -809,7 +916,29 @@ class TeamController(ZoneGuard, TeamTime):
         d_s = RESOLVED_MARGIN * self.scenario.separation_m
         if closing or math.hypot(de, dn) < d_s:
             return False
-        return other not in self.forecasts.near(m.vehicle_id, d_s, t, heights=False)
+        return self._forecast_apart_m(m, t, other) >= d_s
+
+    def _forecast_apart_m(self, m: Member, t: float, other: str) -> float:
+        """How near ``m``, released from its resolution now (flying for its slot), and
+        ``other`` as forecast come over the ground within the forecasts' look-ahead, m (inf
+        when either is not forecast: off its route, or its forecast stale)."""
+        mine = self._ahead(m, released_s=t)
+        return math.inf if mine is None else self._apart_m(mine, other, t)
+
+    def _apart_m(self, mine: Ahead, other: str, t: float) -> float:
+        """How near ``mine`` and ``other`` as forecast come over the ground from ``t`` on,
+        within the forecasts' look-ahead, m (inf when ``other`` is not forecast, or its
+        forecast is stale)."""
+        forecasts = self.forecasts
+        theirs = forecasts.ahead.get(other)
+        if theirs is None or t - theirs.t_s > forecasts.stale_s + max(t - mine.t_s, 0.0):
+            return math.inf
+        times = math.ceil(t) + np.arange(forecasts.steps, dtype=np.float64)
+        response = forecasts.response_s
+        pa = mine.positions(times, mine.airspeed_m_s, response)
+        pb = theirs.positions(times, theirs.airspeed_m_s, response)
+        apart = np.hypot(pa[:, 0] - pb[:, 0], pa[:, 1] - pb[:, 1])
+        return float(np.nanmin(apart)) if not np.isnan(apart).all() else math.inf
 
     def _resolving_from(self, m: Member) -> str | None:
         """The vehicle ``m`` flies a resolution (speed or height) to keep apart from."""

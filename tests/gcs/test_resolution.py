@@ -18,7 +18,7 @@ import pytest
 from gcs.coordination import actions as act
 from gcs.coordination.config import FlightConfig
 from gcs.coordination.events import EventKind
-from gcs.coordination.resolution import Ahead, Forecasts, Resolution, resolve
+from gcs.coordination.resolution import Ahead, Forecasts, Resolution, longest_hold_s, resolve
 from gcs.coordination.routetrack import LoiterSpec, RouteTrack
 from gcs.coordination.team import TeamController
 from planner.deconflict import pair_separation
@@ -32,10 +32,12 @@ from tests.planner.conftest import crossing_scenario, small_scenario
 
 
 def _straight(vid: str, start: tuple[float, float], heading_deg: float, **kw: Any) -> Ahead:
-    """A 40 km straight route from ``start`` on ``heading_deg``, flown from its start at
-    25 m/s (still air, commanded = true airspeed) with a fix at 0 s."""
+    """A straight route from ``start`` on ``heading_deg``, flown from its start at 25 m/s
+    (still air, commanded = true airspeed) with a fix at 0 s, its slot an hour ahead: the
+    route ends where its ground speed takes it by its slot (the goal its slot asks that
+    speed for)."""
     h = math.radians(heading_deg)
-    s = np.array([0.0, 40_000.0])
+    s = np.array([0.0, kw.get("groundspeed_m_s", 25.0) * kw.get("horizon_s", 3600.0)])
     fields: dict[str, Any] = {
         "vehicle": vid, "t_s": 0.0, "s_m": 0.0, "groundspeed_m_s": 25.0,
         "airspeed_m_s": 25.0, "tas_per_eas": 1.0, "airspeed_min_m_s": 18.0,
@@ -543,3 +545,47 @@ def test_a_pair_that_meets_in_its_run_outs_past_the_slots_is_predicted_before_th
     assert meet_s > a.target_s + 5.0  # past the slots
     assert p.payload["at_s"] == pytest.approx(meet_s, abs=0.5)
     assert p.payload["distance_m"] == pytest.approx(float(nb - na), abs=1.0)
+
+
+def test_a_vehicle_flying_a_resolution_is_forecast_slowing_for_its_slot_once_released() -> None:
+    """B flies a resolution at 30 m/s until 20 s; its slot then asks 20 m/s (5.4 km left in
+    270 s, by this test's arithmetic). Forecast as it flies, it is there at 30 m/s until its
+    release and at 20 m/s after it; A, 500 m behind on B's route at 25 m/s, is forecast to
+    come up behind it (at 25 - 20 m/s: within 330 m 54 s after B's release). Forecast
+    at 30 m/s all along, as before, B drew away from A and the two were never screened."""
+    b0 = _straight("B", (0.0, 500.0), 0.0, groundspeed_m_s=30.0, airspeed_m_s=30.0)
+    b0 = dataclasses.replace(b0, horizon_s=20.0 + (6_000.0 - 20.0 * 30.0) / 20.0)
+    b0 = dataclasses.replace(
+        b0,
+        route_s_m=np.array([0.0, 6_000.0]),
+        route_east_m=np.array([0.0, 0.0]),
+        route_north_m=np.array([500.0, 6_500.0]),
+    )
+    resume = b0.slot_airspeed_m_s(20.0)
+    assert resume == pytest.approx(20.0, abs=1e-6)
+    b = dataclasses.replace(b0, until_s=20.0, resume_m_s=resume)
+    t = np.array([10.0, 20.0, 120.0])
+    north = b.positions(t, b.airspeed_m_s, 5.0)[:, 1]
+    assert north == pytest.approx([500.0 + 300.0, 500.0 + 600.0, 500.0 + 600.0 + 2_000.0])
+    a = _straight("A", (0.0, 0.0), 0.0)  # 25 m/s, 500 m behind
+    for forecast_b, screened in ((b, True), (b0, False)):
+        screen = Forecasts(["A", "B"], look_ahead_s=240.0, response_s=5.0)
+        screen.update(a, 0.0)
+        screen.update(forecast_b, 0.0)
+        assert (screen.near("A", 330.0, 0.0) == ["B"]) is screened
+
+
+def test_a_resolution_is_held_as_long_as_the_slot_can_be_made_from_the_speed_it_asks() -> None:
+    """A flies 19 m/s towards the place a re-plan timed it through; its slot, 150 s ahead
+    along 3,750 m, asks 25 m/s on the mean. Held at its lowest speed (18 m/s), the rest of
+    the way is flown, in this test's own arithmetic, within half the room its range leaves
+    above that mean. Judged on the 19 m/s it flew (1 m/s from its lowest, 11 m/s of room
+    above), it was held 127 s and was left 63 m/s to fly."""
+    a = _straight("A", (0.0, 0.0), 0.0, airspeed_m_s=19.0, groundspeed_m_s=19.0, horizon_s=150.0)
+    a = dataclasses.replace(a, route_s_m=np.array([0.0, 3_750.0]))
+    a = dataclasses.replace(a, route_north_m=np.array([0.0, 3_750.0]))
+    assert a.slot_airspeed_m_s(0.0) == pytest.approx(25.0)
+    held_s = longest_hold_s(a, a.airspeed_min_m_s, 0.0)
+    needed_m_s = (3_750.0 - 18.0 * held_s) / (150.0 - held_s)
+    assert needed_m_s <= 25.0 + 0.5 * (30.0 - 25.0) + 1e-6
+    assert held_s > 30.0  # and it is held, as long as that allows

@@ -336,12 +336,19 @@ def test_a_head_on_pair_in_flight_is_kept_apart_by_height_and_both_make_their_sl
         assert flown.arrived[vid] == pytest.approx(m.target_s, abs=1.0), vid
 
     # With no resolution by height (``vertical_horizon_s=0``) the same flight loses the
-    # separation, alarmed: what the height prevents is there.
+    # separation, alarmed: what the height prevents is there. That no speed parts them is
+    # said once, as soon as they are forecast so, before the separation is lost.
     off = _head_on_team()
     off.config = FlightConfig(vertical_horizon_s=0.0)
     flown = _fly_heights(off)
     assert not flown.asked and flown.closest_m < d_s
-    assert [r for r in flown.said if r.kind is EventKind.ALARM]
+    unresolved = [r for r in flown.said if (r.payload or {}).get("resolution") == "none"]
+    assert [r.kind for r in unresolved] == [EventKind.CONFLICT, EventKind.ALARM]
+    lost = [
+        r for r in flown.said if r.kind is EventKind.ALARM and r.reason.startswith("separation")
+    ]
+    assert lost and unresolved[0].t_s is not None and lost[0].t_s is not None
+    assert unresolved[0].t_s < lost[0].t_s
 
 
 @pytest.mark.slow  # several seconds: left out of make test-quick
@@ -426,6 +433,56 @@ def test_a_pair_apart_and_not_closing_now_but_forecast_to_meet_is_not_past() -> 
     assert not team._past(a, float(meet_s), "B")
     team.forecasts.drop("B")
     assert team._past(a, float(meet_s), "B")
+
+
+@pytest.mark.parametrize(
+    "resolving_from", [{"A": "Z", "B": "Z"}, {"A": "B"}], ids=["both from a third", "A from B"]
+)
+def test_a_pair_that_flies_speed_resolutions_no_one_screens_is_parted_by_height(
+    resolving_from: dict[str, str],
+) -> None:
+    """A and B head-on, each flying a speed resolution from some third vehicle (Z), or A one
+    from B that does not part them (a speed cannot, head-on): no one screens the pair as
+    they fly, yet their forecasts meet. One of them is asked a height (a speed resolution
+    flown on), said with the pair; with heights switched off (``vertical_horizon_s=0``) the
+    pair is said to be unresolved, once."""
+
+    def fly_busy(team: TeamController) -> list[act.Report]:
+        a, b = team.members["A"], team.members["B"]
+        t = max(m.schedule.climb_end_s for m in team.members.values()) + 1.0
+        for x in (a, b):
+            airborne(team, x.vehicle_id, x.takeoff_s)
+        meet_s = next(
+            float(k)
+            for k in np.arange(t, 1500.0, 1.0)
+            if abs(a.schedule.position_at(float(k))[0] - b.schedule.position_at(float(k))[0])
+            < 10_000.0  # about 3.5 minutes before they meet
+        )
+        said: list[act.Report] = []
+        for k in range(6):  # fixes over the next few seconds, each vehicle resolving from Z
+            now = meet_s + k
+            for x in (a, b):
+                _, s_m, level = x.schedule.state_at(now)
+                other = resolving_from.get(x.vehicle_id)
+                if other is not None:
+                    x.resolving = Resolution(
+                        x.vehicle_id, other, level, now + 300.0, 400.0, 100.0, now
+                    )
+                out = team.handle(fix(team, x.vehicle_id, s_m, now, level), now)
+                said += reports(out, EventKind.CONFLICT) + reports(out, EventKind.ALARM)
+        return said
+
+    said = fly_busy(_head_on_team())
+    heights = [r for r in said if (r.payload or {}).get("resolution") == "altitude"]
+    assert len(heights) == 1 and heights[0].vehicle in ("A", "B"), [r.reason for r in said]
+    assert (heights[0].payload or {}).get("other") in ("A", "B")
+    off = _head_on_team()
+    off.config = FlightConfig(vertical_horizon_s=0.0, resolve_horizon_s=240.0)
+    said = fly_busy(off)
+    assert not [r for r in said if (r.payload or {}).get("resolution") == "altitude"]
+    unresolved = [r for r in said if (r.payload or {}).get("resolution") == "none"]
+    assert [r.kind for r in unresolved] == [EventKind.CONFLICT, EventKind.ALARM]
+    assert set((unresolved[0].payload or {})["pair"]) == {"A", "B"}
 
 
 @pytest.mark.parametrize("hold_end", ["to come", "come"])
