@@ -100,17 +100,14 @@ def offset_apart(
     The vehicles routed wider (by id) and the team's separation so, from ``from_s`` on.
     """
     by_id = {vs.vehicle_id: vs for vs in team}
-    # A route search each: the placement's repair rounds ask a vehicle for its routes again.
-    searched: dict[tuple[str, float], Retimed | None] = {}
 
     def alternatives(vid: str) -> Iterator[tuple[VehicleSchedule, Offset]]:
+        # A route search each, made once: the placement's repair asks again for those made.
         for k in OFFSETS:
+            if time_up():
+                return
             by_m = k * required_m
-            if (vid, by_m) not in searched:
-                if time_up():
-                    return
-                searched[vid, by_m] = widen(by_id[vid], by_m)
-            r = searched[vid, by_m]
+            r = widen(by_id[vid], by_m)
             if r is not None:
                 yield r.schedule, Offset(by_m, r)
 

@@ -1,9 +1,9 @@
 // Conflicts between aircraft, read from the flight's events as the flight record's
 // `separation_events` reads them (gcs.coordination.separationlog): predicted, resolved (by
-// speed, by height, or by an altitude layer in a re-plan), released, unresolved (a re-plan's, alarmed)
-// and loss (under the separation). Each encounter is shown from its event to a minute past
-// when the event expects the pair closest; the map draws a line between the pair, the panel
-// lists them.
+// speed, by height, or by an altitude layer in a re-plan), released, unresolved (a re-plan's,
+// or one in flight that no speed or height parts; alarmed) and loss (under the separation).
+// Each encounter is shown from its event to a minute past when the event expects the pair
+// closest; the map draws a line between the pair, the panel lists them.
 
 import { num } from "./format.js";
 
