@@ -485,6 +485,43 @@ def test_a_pair_that_flies_speed_resolutions_no_one_screens_is_parted_by_height(
     assert set((unresolved[0].payload or {})["pair"]) == {"A", "B"}
 
 
+def test_a_speed_resolution_is_past_only_if_released_now_it_keeps_clear() -> None:
+    """A flies its top speed, a speed resolution from B whose time is over; B follows on A's
+    route 600 m behind at 2 m/s more than A's slot asks, slower than A flies now (apart and
+    opening, as the separation watch sees them). Released now, A slows for its slot and B
+    comes up behind it: not past. Forecast at its resolution's speed, A stays ahead: the
+    pair would have been released as past."""
+    team = _head_on_team()
+    a = team.members["A"]
+    t = max(m.schedule.climb_end_s for m in team.members.values()) + 60.0
+    airborne(team, "A", a.takeoff_s)
+    _, s_m, _ = a.schedule.state_at(t)
+    top = a.limits.airspeed_max_m_s
+    team.handle(fix(team, "A", s_m, t, top), t)
+    a.resolving = Resolution("A", "B", top, t - 1.0, 400.0, 100.0, t - 30.0, True, t + 600.0)
+    mine = team._ahead(a)
+    assert mine is not None and mine.airspeed_m_s == top
+    slot_m_s = mine.slot_airspeed_m_s(t)
+    assert slot_m_s < top - 3.0
+    gs = (slot_m_s + 2.0) * mine.tas_per_eas
+    b = dataclasses.replace(
+        mine, vehicle="B", s_m=s_m - 600.0, groundspeed_m_s=gs, airspeed_m_s=slot_m_s + 2.0,
+        until_s=math.inf, resume_m_s=None, movable=True,
+    )  # fmt: skip
+    team.forecasts.ahead["B"] = b
+    pa, pb = a.schedule.path.pose_at(s_m), a.schedule.path.pose_at(s_m - 600.0)
+    h = pa.heading_rad
+    fast = top * mine.tas_per_eas
+    alt = float(a.schedule.alt_at(s_m))
+    for vid, p, v in (("A", pa, fast), ("B", pb, gs)):
+        pos = Position(t, p.east_m, p.north_m, alt, v * math.sin(h), v * math.cos(h))
+        team.separation.update(vid, pos, ["A", "B"])
+    assert not team._past(a, t, "B")
+    d_s = 1.1 * team.scenario.separation_m
+    flown_on = team._ahead(a, released_s=t + 10_000.0)
+    assert flown_on is not None and team._apart_m(flown_on, "B", t) >= d_s
+
+
 @pytest.mark.parametrize("hold_end", ["to come", "come"])
 def test_a_speed_resolution_not_yet_past_is_held_on_only_while_its_slot_can_still_be_made(
     hold_end: str,
