@@ -34,8 +34,6 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-import numpy as np
-
 from planner.wind import Wind
 
 __all__ = ["BiasConfig", "SpeedBiasEstimator"]
@@ -72,9 +70,13 @@ class SpeedBiasEstimator:
         self.config = config or BiasConfig()
         # The normal equations of theta = (k, dwe, dwn, dwe_rate, dwn_rate), each fix's rows
         # being (tas sin h, 1, 0, tau, 0) and (tas cos h, 0, 1, 0, tau), tau its time less the
-        # latest fix's: their matrix and right side, decayed and moved on at each fix.
-        self._normal = np.zeros((5, 5))
-        self._rhs = np.zeros(5)
+        # latest fix's, decayed and moved on at each fix. Their matrix is kept as its sums:
+        # [[aa, a, b, a_tau, b_tau], [a, n, 0, tau, 0], [b, 0, n, 0, tau],
+        #  [a_tau, tau, 0, tau2, 0], [b_tau, 0, tau, 0, tau2]]; east and north are alike but
+        # for the scale's column. Its right side: (a re + b rn, re, rn, tau re, tau rn).
+        self._aa = self._a = self._b = self._a_tau = self._b_tau = 0.0
+        self._n = self._tau = self._tau2 = 0.0
+        self._vec = [0.0, 0.0, 0.0, 0.0, 0.0]
         self._last_t_s: float | None = None
         self._scale = 1.0
         self._wind_error = (0.0, 0.0)
@@ -130,12 +132,21 @@ class SpeedBiasEstimator:
             return False
         if self._last_t_s is not None:
             dt = min(max(t_s - self._last_t_s, 0.0), cfg.max_gap_s)
-            # The fixes so far are dt older: each row's tau less dt (row @ shift).
-            shift = np.eye(5)
-            shift[1, 3] = shift[2, 4] = -dt
             decay = math.exp(-dt / cfg.time_constant_s)
-            self._normal = decay * (shift.T @ self._normal @ shift)
-            self._rhs = decay * (shift.T @ self._rhs)
+            # The fixes so far are dt older: each row's tau less dt.
+            self._tau2 = decay * (self._tau2 - 2.0 * dt * self._tau + dt * dt * self._n)
+            self._tau = decay * (self._tau - dt * self._n)
+            self._a_tau = decay * (self._a_tau - dt * self._a)
+            self._b_tau = decay * (self._b_tau - dt * self._b)
+            self._aa *= decay
+            self._a *= decay
+            self._b *= decay
+            self._n *= decay
+            v = self._vec
+            self._vec = [
+                decay * v[0], decay * v[1], decay * v[2],
+                decay * (v[3] - dt * v[1]), decay * (v[4] - dt * v[2]),
+            ]  # fmt: skip
         self._last_t_s = t_s
         self._ref_tas_m_s = predicted_tas_m_s
         # Along a climb or a descent the horizontal speed is the true airspeed times the cosine
@@ -145,15 +156,14 @@ class SpeedBiasEstimator:
         a, b = tas * math.sin(heading_rad), tas * math.cos(heading_rad)
         re, rn = ve_m_s - wind.to_east_m_s, vn_m_s - wind.to_north_m_s
         # This fix's rows, at tau 0: (a, 1, 0, 0, 0) and (b, 0, 1, 0, 0).
-        m = self._normal
-        m[0, 0] += a * a + b * b
-        m[0, 1] += a
-        m[1, 0] += a
-        m[0, 2] += b
-        m[2, 0] += b
-        m[1, 1] += 1.0
-        m[2, 2] += 1.0
-        self._rhs[:3] += (a * re + b * rn, re, rn)
+        self._aa += a * a + b * b
+        self._a += a
+        self._b += b
+        self._n += 1.0
+        v = self._vec
+        v[0] += a * re + b * rn
+        v[1] += re
+        v[2] += rn
         self.used += 1
         self._solve()
         return True
@@ -164,24 +174,35 @@ class SpeedBiasEstimator:
         # (normal matrix + prior) theta = rhs + prior @ (1, 0, 0, 0, 0); the prior is that many
         # fixes' worth of no bias, of no drift over a time constant and of no wind error at
         # the fixes' mean time (held at the latest fix's, it tilted a steady error by the
-        # prior's pull, to that fix's cost).
+        # prior's pull, to that fix's cost). Each of east and north is a 2x2 block
+        # [[p_, q_], [q_, r_]] (its error and its rate), the same for both, joined to the
+        # other only through the scale: the scale from its Schur complement, then each
+        # block for that scale.
         p, tc = cfg.prior_fixes, cfg.time_constant_s
-        lhs = self._normal + np.diag([p * tas * tas, p, p, p * tc * tc, p * tc * tc])
-        weight = self._normal[1, 1]
-        mean_tau = self._normal[1, 3] / weight if weight > 0.0 else 0.0
-        for error, rate in ((1, 3), (2, 4)):
-            lhs[error, rate] += p * mean_tau
-            lhs[rate, error] += p * mean_tau
-            lhs[rate, rate] += p * mean_tau * mean_tau
-        rhs = self._rhs.copy()
-        rhs[0] += p * tas * tas
-        k = float(np.linalg.solve(lhs, rhs)[0])
+        mean_tau = self._tau / self._n if self._n > 0.0 else 0.0
+        p_ = self._n + p
+        q_ = self._tau + p * mean_tau
+        r_ = self._tau2 + p * tc * tc + p * mean_tau * mean_tau
+        det = p_ * r_ - q_ * q_
+
+        def inv(x: tuple[float, float], y: tuple[float, float]) -> float:
+            """``x`` times the block's inverse times ``y``."""
+            return (r_ * x[0] * y[0] - q_ * (x[0] * y[1] + x[1] * y[0]) + p_ * x[1] * y[1]) / det
+
+        east, north = (self._a, self._a_tau), (self._b, self._b_tau)
+        v = self._vec
+        east_rhs, north_rhs = (v[1], v[3]), (v[2], v[4])
+        k = (v[0] + p * tas * tas - inv(east, east_rhs) - inv(north, north_rhs)) / (
+            self._aa + p * tas * tas - inv(east, east) - inv(north, north)
+        )
         lo, hi = cfg.scale_bounds
         self._scale = float(min(max(k, lo), hi))
         # The wind error fitted for the scale the predictions use (at its bound, if there).
         k = self._scale
-        rest = np.linalg.solve(lhs[1:, 1:], rhs[1:] - lhs[1:, 0] * k)
-        de, dn = float(rest[0]), float(rest[1])
+        de, dn = (
+            (r_ * (rhs[0] - k * col[0]) - q_ * (rhs[1] - k * col[1])) / det
+            for col, rhs in ((east, east_rhs), (north, north_rhs))
+        )
         norm = math.hypot(de, dn)
         if norm > cfg.max_wind_error_m_s:
             de, dn = de * cfg.max_wind_error_m_s / norm, dn * cfg.max_wind_error_m_s / norm
