@@ -207,12 +207,7 @@ class Ahead:
         if airspeed_m_s == self.airspeed_m_s and self.resume_m_s is not None:
             until_s, after = self.until_s, self.resume_m_s
         held = max(until_s - self.t_s, response_s)
-        if self.wind is None or self.wind.calm:
-            # In still air the leg-by-leg forecast is this one (the present ground speed all
-            # along), done without a table of the legs: this runs at every forecast.
-            s = self._along(dt, airspeed_m_s, response_s, held, after)
-        else:
-            s = self._along_in_wind(dt, airspeed_m_s, response_s, held, after)
+        s = self._along_any(dt, airspeed_m_s, response_s, held, after)
         out = np.empty((*s.shape, 3))
         out[..., 0] = np.interp(s, self.route_s_m, self.route_east_m)
         out[..., 1] = np.interp(s, self.route_s_m, self.route_north_m)
@@ -223,6 +218,17 @@ class Ahead:
             out[..., 2] += self.alt_m
         out[dt > self.horizon_s] = np.nan
         return out
+
+    def _along_any(
+        self, dt: FloatArray, airspeed_m_s: float, response_s: float, held: float, after: float
+    ) -> FloatArray:
+        """Along the flight (m) ``dt`` after the fix: its airspeed until ``response_s``,
+        ``airspeed_m_s`` until ``held`` (no earlier), ``after`` then."""
+        if self.wind is None or self.wind.calm:
+            # In still air the leg-by-leg forecast is this one (the present ground speed all
+            # along), done without a table of the legs: this runs at every forecast.
+            return self._along(dt, airspeed_m_s, response_s, held, after)
+        return self._along_in_wind(dt, airspeed_m_s, response_s, held, after)
 
     def _along_in_wind(
         self, dt: FloatArray, airspeed_m_s: float, response_s: float, held_s: float, after: float
@@ -245,16 +251,21 @@ class Ahead:
         the change of airspeed from ``response_s`` until ``held``, and to ``after`` then."""
         gs = self.groundspeed_m_s
         new_gs = max(gs + (airspeed_m_s - self.airspeed_m_s) * self.tas_per_eas, 0.0)
-        if after != self.airspeed_m_s:
-            return self._along_steps(dt, (gs, new_gs), response_s, held, after)
-        # s_m + gs (min(dt, response) + max(dt - held, 0)) + new_gs clip(dt - response, 0,
-        # held - response), clipped to the route: the same operations on the same values,
-        # done in place, and np.clip as maximum then minimum (its values, without its
-        # Python wrapper): this runs at every forecast.
+        # s_m + gs min(dt, response) + after_gs max(dt - held, 0) + new_gs clip(dt - response,
+        # 0, held - response), clipped to the route (after_gs the ground speed ``after`` makes
+        # good: gs itself when it is its airspeed, the two terms of gs then summed first):
+        # done in place, and np.clip as maximum then minimum (its values, without its Python
+        # wrapper): this runs at every forecast.
         s = np.minimum(dt, response_s)
         part = dt - held
-        s += np.maximum(part, 0.0, out=part)
-        s *= gs
+        np.maximum(part, 0.0, out=part)
+        if after == self.airspeed_m_s:
+            s += part
+            s *= gs
+        else:
+            s *= gs
+            part *= max(gs + (after - self.airspeed_m_s) * self.tas_per_eas, 0.0)
+            s += part
         s += self.s_m
         np.subtract(dt, response_s, out=part)
         np.minimum(np.maximum(part, 0.0, out=part), held - response_s, out=part)
@@ -263,45 +274,20 @@ class Ahead:
         np.minimum(np.maximum(s, self.route_s_m[0], out=s), self.route_s_m[-1], out=s)
         return s
 
-    def _along_steps(
-        self,
-        dt: FloatArray,
-        speeds_m_s: tuple[float, float],
-        response_s: float,
-        held: float,
-        after: float,
-    ) -> FloatArray:
-        """:meth:`_along` with ``after`` flown once ``held`` is over (a resolution released):
-        its ground speed, the changed one from ``response_s``, and the one ``after`` makes
-        good from ``held``."""
-        gs, new_gs = speeds_m_s
-        after_gs = max(gs + (after - self.airspeed_m_s) * self.tas_per_eas, 0.0)
-        s = gs * np.minimum(dt, response_s)
-        s += new_gs * np.clip(dt - response_s, 0.0, max(held - response_s, 0.0))
-        s += after_gs * np.maximum(dt - max(held, response_s), 0.0)
-        s += self.s_m
-        return np.clip(s, self.route_s_m[0], self.route_s_m[-1])
-
     def slot_airspeed_m_s(self, from_s: float) -> float:
         """The airspeed (commanded) that flies it from where it is at ``from_s`` (flying as
         it does) to the end of its flight at its slot (its horizon), in its range: what it
         is timed to once a resolution is released. The ground made good per unit of airspeed
         is the fix's."""
         dt = np.array([max(from_s - self.t_s, 0.0)])
-        there = float(self._along_now(dt)[0])
+        own = self.airspeed_m_s
+        there = float(self._along_any(dt, own, 0.0, 0.0, own)[0])
         left_s = self.t_s + self.horizon_s - max(from_s, self.t_s)
         if left_s <= 0.0:
             return self.airspeed_min_m_s
         per_airspeed = self.groundspeed_m_s / max(self.airspeed_m_s, 1.0)
         wanted = (float(self.route_s_m[-1]) - there) / left_s / max(per_airspeed, 1e-3)
         return min(max(wanted, self.airspeed_min_m_s), self.airspeed_max_m_s)
-
-    def _along_now(self, dt: FloatArray) -> FloatArray:
-        """Along the flight (m) ``dt`` after the fix, flying its airspeed all along."""
-        if self.wind is None or self.wind.calm:
-            s = self.s_m + self.groundspeed_m_s * dt
-            return np.clip(s, self.route_s_m[0], self.route_s_m[-1])
-        return self._flown(np.full(dt.shape, self.s_m), dt, self.airspeed_m_s)
 
 
 @dataclass(frozen=True)

@@ -28,7 +28,6 @@ from __future__ import annotations
 
 import functools
 import math
-from collections.abc import Mapping, Sequence
 from dataclasses import replace
 from typing import Any
 
@@ -736,15 +735,9 @@ class TeamController(ZoneGuard, TeamTime):
                 up = None
                 waits = res is None and self._keeps(later)
                 if not waits:
-                    # Those a change of height could bring either near: near over the
-                    # ground, whatever their heights (one 450 m above was 21 m once climbed to).
-                    over = _neighbours(
-                        forecasts, pair, NEIGHBOUR_SEPARATIONS * d_s, t, heights=False
-                    )
-                    up = self._resolve_vertically(mine, theirs, t, over)
+                    up = self._resolve_vertically(mine, theirs, t)
                 if up is not None:
-                    self.vertical.start(self.members[up.vehicle], up, t, out)
-                    self._forecast_again(self.members[up.vehicle], t)
+                    self._fly_height(up, t, out)
                     return
             if res is None:
                 if not waits:
@@ -802,14 +795,12 @@ class TeamController(ZoneGuard, TeamTime):
             mine, theirs = (
                 replace(v, movable=v.movable and v.vehicle not in self.vertical) for v in (a, b)
             )
-            over = _neighbours(self.forecasts, pair, NEIGHBOUR_SEPARATIONS * d_s, t, heights=False)
-            up = self._resolve_vertically(mine, theirs, t, over)
+            up = self._resolve_vertically(mine, theirs, t)
             if up is None:
                 self._say_unresolved(mine, theirs, t, out)
                 continue
             self.unresolved.discard(frozenset(pair))
-            self.vertical.start(self.members[up.vehicle], up, t, out)
-            self._forecast_again(self.members[up.vehicle], t)
+            self._fly_height(up, t, out)
             return
 
     def _say_unresolved(self, a: Ahead, b: Ahead, t: float, out: list[act.Action]) -> None:
@@ -857,14 +848,16 @@ class TeamController(ZoneGuard, TeamTime):
         mine = self._ahead(m, strengthening=True)
         if mine is None:
             return
-        pair = (m.vehicle_id, other)
-        d_s = RESOLVED_MARGIN * self.scenario.separation_m
-        over = _neighbours(self.forecasts, pair, NEIGHBOUR_SEPARATIONS * d_s, t, heights=False)
-        up = self._resolve_vertically(mine, theirs, t, over)
+        up = self._resolve_vertically(mine, theirs, t)
         if up is None or (up.vehicle == other and self._resolving_from(x) is not None):
             return
-        self.vertical.start(self.members[up.vehicle], up, t, out)
-        self._forecast_again(self.members[up.vehicle], t)
+        self._fly_height(up, t, out)
+
+    def _fly_height(self, up: VerticalResolution, t: float, out: list[act.Action]) -> None:
+        """Its mover flies the height resolution ``up`` from now, forecast so for the others."""
+        mover = self.members[up.vehicle]
+        self.vertical.start(mover, up, t, out)
+        self._forecast_again(mover, t)
 
     def _keeps(self, res: Resolution | None) -> bool:
         """Whether a speed resolution keeps the pair apart with :data:`RESOLVED_MARGIN` to
@@ -954,16 +947,23 @@ class TeamController(ZoneGuard, TeamTime):
         if ahead is not None:
             self.forecasts.update(ahead, t)
 
-    def _resolve_vertically(
-        self, a: Ahead, b: Ahead, t: float, neighbours: Mapping[str, Sequence[Ahead]]
-    ) -> VerticalResolution | None:
+    def _resolve_vertically(self, a: Ahead, b: Ahead, t: float) -> VerticalResolution | None:
         """What no speed resolves, by height (:func:`gcs.coordination.vertical.
         resolve_vertical`): each of the pair within its room over the look-ahead, climbing or
-        descending no steeper than the slower of the two may, and not into its neighbours."""
+        descending no steeper than the slower of the two may, and not into its neighbours
+        (those a change of height could bring either near: near over the ground, whatever
+        their heights; one 450 m above was 21 m once climbed to)."""
         cfg = self.config
         if self.world is None:
             return None
         d_s = self.scenario.separation_m
+        neighbours = _neighbours(
+            self.forecasts,
+            (a.vehicle, b.vehicle),
+            NEIGHBOUR_SEPARATIONS * (RESOLVED_MARGIN * d_s),
+            t,
+            heights=False,
+        )
         layer_m = cfg.vertical_layer_m or layer_step_m(self.scenario)
         rooms: dict[str, Room] = {}
         rates: list[float] = []
