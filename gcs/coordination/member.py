@@ -110,6 +110,8 @@ class Member:
     east_m: float | None = None
     north_m: float | None = None
     alt_amsl_m: float | None = None
+    climb_m_s: float = 0.0
+    """Its vertical speed at its last fix (up +), m/s."""
     heading_deg: float | None = None
     joining: bool = False
     """Off its route by more than ``off_route_m`` when last late (said once per episode)."""

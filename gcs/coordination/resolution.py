@@ -88,6 +88,13 @@ class Ahead:
     lifts a vehicle over part of its route, and a pair judged at their present heights was
     resolved onto one height: the 60-vehicle crowd's R59 climbed 450 m away from R00 to
     where R00's new mission took it, and they came 289 m apart."""
+    off_profile_m: float = 0.0
+    """How far it is above (+) or below (-) its profile where it is, m (with
+    :attr:`route_rise_m`): its autopilot flies it back at :attr:`return_rate_m_s`. Back from
+    a height resolution, the crowd's R00 was 215 m above its profile and sank to it at 5 m/s;
+    forecast to keep that height, it was forecast 320 m from R59 beneath and came 186 m."""
+    return_rate_m_s: float = 5.0
+    """How fast it climbs or sinks back to its profile, m/s."""
     until_s: float = math.inf
     """Flying a speed resolution (:attr:`airspeed_m_s`): when it is released. Flown as it
     flies, it is forecast at :attr:`resume_m_s` after it."""
@@ -201,7 +208,8 @@ class Ahead:
         (reached ``response_s`` after it) until ``until_s``, at its present speed again after
         it; flown as it flies (at :attr:`airspeed_m_s`), a resolution's until its release
         and :attr:`resume_m_s` after it. NaN past its look-ahead. The height is its present
-        one, changed as its profile changes ahead (:attr:`route_rise_m`)."""
+        one, changed as its profile changes ahead (:attr:`route_rise_m`), and back on its
+        profile as fast as it returns to it (:attr:`off_profile_m`)."""
         dt = t_s - self.t_s
         after = self.airspeed_m_s
         if airspeed_m_s == self.airspeed_m_s and self.resume_m_s is not None:
@@ -216,6 +224,11 @@ class Ahead:
         else:
             out[..., 2] = np.interp(s, self.route_s_m, self.route_rise_m)
             out[..., 2] += self.alt_m
+            if self.off_profile_m:
+                back = np.minimum(
+                    np.maximum(dt, 0.0) * self.return_rate_m_s, abs(self.off_profile_m)
+                )
+                out[..., 2] -= math.copysign(1.0, self.off_profile_m) * back
         out[dt > self.horizon_s] = np.nan
         return out
 

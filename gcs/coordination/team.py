@@ -28,6 +28,7 @@ from __future__ import annotations
 
 import functools
 import math
+from collections.abc import Mapping
 from dataclasses import replace
 from typing import Any
 
@@ -77,6 +78,10 @@ way to one by height."""
 HOLD_ROOM_S = 60.0
 """A height resolution held on past its end (the pair not yet past) keeps its height only while
 it has room over the ground it flies this far ahead (flight s)."""
+RETURNING_M_S = 1.0
+"""A vehicle off its profile that climbs or sinks towards it this fast or faster (m/s) is
+forecast back on it at that rate (:attr:`~gcs.coordination.resolution.Ahead.off_profile_m`);
+slower, or level, it is forecast keeping its height off it."""
 NEIGHBOUR_SEPARATIONS = 2.0
 """A conflict's resolution is judged against the vehicles forecast within this many
 screening separations (:data:`RESOLVED_MARGIN` separations each) of either of the pair too
@@ -428,6 +433,7 @@ class TeamController(ZoneGuard, TeamTime):
         e, n = self.frame.to_local(fix.lat_deg, fix.lon_deg)
         e, n = float(e), float(n)
         m.east_m, m.north_m, m.alt_amsl_m = e, n, fix.alt_amsl_m
+        m.climb_m_s = fix.climb_m_s or 0.0
         if m.over:
             # Past its slot (circling where its mission ends) or aborted (flying home): no
             # longer timed, but still in the air, so its fixes still count for the separation
@@ -602,12 +608,18 @@ class TeamController(ZoneGuard, TeamTime):
             here_m = lo.s_m
         climbing = self.vertical.flying.get(m.vehicle_id)
         rise_m = None
+        off_m = 0.0
         if climbing is None:
-            # Its profile's changes of height ahead (a re-plan's lift among them): flying a
-            # height resolution, it holds the height it was asked.
+            # Its profile's changes of height ahead (a re-plan's lift among them), and, if it
+            # is climbing or sinking back to it (from a height resolution), its way back at
+            # that rate: flying one, it holds the height it was asked.
             vs = m.schedule
+            profile_m = vs.alt_at(here_m)
             rise_m = np.interp(track.flight_route_s_m(done), vs.wp_s_m, vs.wp_alt_m)
-            rise_m -= vs.alt_at(here_m)
+            rise_m -= profile_m
+            off_m = m.alt_amsl_m - profile_m
+            if off_m * m.climb_m_s > -RETURNING_M_S * abs(off_m):
+                off_m = 0.0  # level off it, or going away from it: kept where it is
         ahead = Ahead(
             m.vehicle_id,
             m.last_fix_s,
@@ -629,6 +641,8 @@ class TeamController(ZoneGuard, TeamTime):
             # (a fix without a ground speed: its airspeed)
             final_s=self.config.final_m / max(m.groundspeed_m_s or m.level_m_s, 1.0),
             route_rise_m=rise_m,
+            off_profile_m=off_m,
+            return_rate_m_s=min(abs(m.climb_m_s), self.config.vertical_rate_max_m_s),
             wind=m.schedule.wind if m.wind is None else m.wind,
         )
         r = m.resolving
@@ -776,8 +790,8 @@ class TeamController(ZoneGuard, TeamTime):
         own pair if it flies a speed resolution from it (one resolved at its top speed
         from another that was held on at its own, past the release it was forecast, came
         101 m apart). One forecast under the separation is resolved by height (a speed
-        resolution is flown on at the height asked), by one that flies no height
-        resolution yet, else said."""
+        resolution is flown on at the height asked; one flying a height resolution moves
+        on in its sense, held as long as it was to be), else said."""
         d_s = RESOLVED_MARGIN * self.scenario.separation_m
         for other in self.forecasts.near(m.vehicle_id, d_s, t):
             x = self.members[other]
@@ -789,13 +803,17 @@ class TeamController(ZoneGuard, TeamTime):
             if m.resolving is None and self._resolving_from(m) == other:
                 continue  # a height resolution from it: strengthened (_strengthen)
             pair = (m.vehicle_id, other)
-            a, b = (self._ahead(v, strengthening=True) for v in (m, x))
-            if a is None or b is None:
+            mine, theirs = (self._ahead(v, strengthening=True) for v in (m, x))
+            if mine is None or theirs is None:
                 continue
-            mine, theirs = (
-                replace(v, movable=v.movable and v.vehicle not in self.vertical) for v in (a, b)
-            )
-            up = self._resolve_vertically(mine, theirs, t)
+            # One off its height for another pair moves on away from it (two resolved from
+            # a third each onto heights 70 m apart came 233 m apart, neither moved again).
+            senses = {
+                vid: math.copysign(1.0, man.resolution.offset_m)
+                for vid in pair
+                if (man := self.vertical.flying.get(vid)) is not None
+            }
+            up = self._resolve_vertically(mine, theirs, t, senses)
             if up is None:
                 self._say_unresolved(mine, theirs, t, out)
                 continue
@@ -854,8 +872,12 @@ class TeamController(ZoneGuard, TeamTime):
         self._fly_height(up, t, out)
 
     def _fly_height(self, up: VerticalResolution, t: float, out: list[act.Action]) -> None:
-        """Its mover flies the height resolution ``up`` from now, forecast so for the others."""
+        """Its mover flies the height resolution ``up`` from now, forecast so for the others;
+        one it flies already is held as long as that one was to be (its pair is met too)."""
         mover = self.members[up.vehicle]
+        flying = self.vertical.flying.get(up.vehicle)
+        if flying is not None and flying.resolution.until_s > up.until_s:
+            up = replace(up, until_s=flying.resolution.until_s)
         self.vertical.start(mover, up, t, out)
         self._forecast_again(mover, t)
 
@@ -947,7 +969,9 @@ class TeamController(ZoneGuard, TeamTime):
         if ahead is not None:
             self.forecasts.update(ahead, t)
 
-    def _resolve_vertically(self, a: Ahead, b: Ahead, t: float) -> VerticalResolution | None:
+    def _resolve_vertically(
+        self, a: Ahead, b: Ahead, t: float, senses: Mapping[str, float] | None = None
+    ) -> VerticalResolution | None:
         """What no speed resolves, by height (:func:`gcs.coordination.vertical.
         resolve_vertical`): each of the pair within its room over the look-ahead, climbing or
         descending no steeper than the slower of the two may, and not into its neighbours
@@ -983,7 +1007,7 @@ class TeamController(ZoneGuard, TeamTime):
             a, b, now_s=t, separation_m=RESOLVED_MARGIN * d_s, layer_m=layer_m,
             rate_m_s=min(rates), room=rooms,
             look_ahead_s=cfg.vertical_horizon_s, response_s=cfg.resolve_response_s,
-            neighbours=neighbours, fast_rate_m_s=cfg.vertical_rate_max_m_s,
+            neighbours=neighbours, fast_rate_m_s=cfg.vertical_rate_max_m_s, senses=senses,
         )  # fmt: skip
 
     def _screen_horizon_s(self) -> float:

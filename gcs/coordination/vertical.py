@@ -17,15 +17,17 @@ own route at its present speed, :class:`~gcs.coordination.resolution.Ahead`) and
 mover's room (its ceiling, and its floor: the terrain under the stretch it flies meanwhile
 plus its clearance, :class:`Room`):
 
-1. the fewest layers;
-2. the one with more time to its slot (its arrival controller makes up what the height
-   changes in true airspeed; the other flies on untouched);
-3. the sense that widens the height between them as it is (the higher climbs, the lower
+1. one whose mover still makes its slot within its speed range (:func:`_keeps_slot`: a
+   height changes its true airspeed; its arrival controller makes that up);
+2. the fewest layers;
+3. the one with more time to its slot (the other flies on untouched);
+4. the sense that widens the height between them as it is (the higher climbs, the lower
    descends), so that a late or partial manoeuvre still helps;
-4. a climb before a descent (away from the terrain);
-5. the smaller vehicle id.
+5. a climb before a descent (away from the terrain);
+6. the smaller vehicle id.
 
-None when no choice keeps the separation (an alarm, as when nothing at all resolves it).
+None when no choice keeps the separation (an alarm, as when nothing at all resolves it): one
+that keeps it but not the mover's slot is still taken, as separation comes first.
 """
 
 from __future__ import annotations
@@ -39,6 +41,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from gcs.coordination.resolution import Ahead
+from planner.atmosphere import eas2tas
 from planner.layers import LAYER_STEPS
 
 FloatArray = NDArray[np.float64]
@@ -111,6 +114,7 @@ def resolve_vertical(
     max_layers: int = LAYER_STEPS,
     neighbours: Mapping[str, Sequence[Ahead]] | None = None,
     fast_rate_m_s: float | None = None,
+    senses: Mapping[str, float] | None = None,
 ) -> VerticalResolution | None:
     """The vertical manoeuvre that keeps ``a`` and ``b`` ``separation_m`` apart in 3-D if
     their tracks as they fly bring them closer within ``look_ahead_s`` (None if they do not,
@@ -118,7 +122,9 @@ def resolve_vertical(
     vehicle, the others near it; a choice that brings its mover under the separation of one
     of them, or closer than it comes as it flies, is not taken. ``fast_rate_m_s``: the
     fastest the mover may climb or sink when asked (its autopilot's limit); each choice is
-    judged with the mover anywhere between its heights at that rate and at ``rate_m_s``."""
+    judged with the mover anywhere between its heights at that rate and at ``rate_m_s``.
+    ``senses``: by vehicle, the one sense (+1 up, -1 down) it may move in (one off its
+    profile for another pair already moves on away from it)."""
     bound = min(a.t_s + a.horizon_s, b.t_s + b.horizon_s)
     end_s = min(bound, now_s + look_ahead_s)
     if end_s <= now_s:
@@ -150,6 +156,8 @@ def resolve_vertical(
         around = _around(pa if mover is a else pb, t, others, response_s)
         other_m = (pb if mover is a else pa)[:, 2]
         for layers, sense in itertools.product(range(1, max_layers + 1), (1.0, -1.0)):
+            if sense * (senses or {}).get(mover.vehicle, sense) < 0.0:
+                continue
             offset = sense * layers * layer_m
             target = mover.alt_m + offset
             if target > r.ceiling_m or target < r.floor_m:
@@ -167,7 +175,8 @@ def resolve_vertical(
                 mover.alt_m == other.alt_m and sense > 0.0
             )
             slot_left_s = mover.t_s + mover.horizon_s - now_s
-            rank = (layers, -slot_left_s, not widens, sense < 0.0, mover.vehicle)
+            late = not _keeps_slot(mover, target, start, until, now_s)
+            rank = (late, layers, -slot_left_s, not widens, sense < 0.0, mover.vehicle)
             choices.append((rank, mover, other, offset, target, least))
     if not choices:
         return None
@@ -183,6 +192,23 @@ def resolve_vertical(
         unresolved_m,
         at_s,
     )
+
+
+def _keeps_slot(mover: Ahead, alt_m: float, start_s: float, until_s: float, now_s: float) -> bool:
+    """Whether ``mover`` still makes its slot within its speed range if it flies at
+    ``alt_m`` from ``start_s`` to ``until_s``: its true airspeed there differs by the ratio of
+    the two heights' EAS-to-TAS, so the mean airspeed its slot asks (:meth:`~gcs.coordination.
+    resolution.Ahead.slot_airspeed_m_s`) changes by that ratio over the share of the time to
+    its slot it flies there. A descent of 450 m held until a few seconds before its slot,
+    flown at its top speed already, left the crowd's R00 2.3 s late."""
+    end_s = mover.t_s + mover.horizon_s
+    left_s = end_s - now_s
+    if left_s <= 0.0:
+        return True
+    share = max(min(until_s, end_s) - start_s, 0.0) / left_s
+    ratio = eas2tas(alt_m) / eas2tas(mover.alt_m)
+    wanted = mover.slot_airspeed_m_s(now_s) / (1.0 + share * (ratio - 1.0))
+    return mover.airspeed_min_m_s - 1e-6 <= wanted <= mover.airspeed_max_m_s + 1e-6
 
 
 def _around(

@@ -18,7 +18,8 @@ from gcs.coordination.events import EventKind
 from gcs.coordination.resolution import Ahead, Resolution, resolve
 from gcs.coordination.separation import Position
 from gcs.coordination.team import TeamController
-from gcs.coordination.vertical import Room, resolve_vertical
+from gcs.coordination.vertical import Room, VerticalResolution, resolve_vertical
+from gcs.coordination.verticalflight import Manoeuvre
 from tests.gcs.test_resolution import timed_alike
 from tests.gcs.test_team import airborne, fix, of, reports, seq_ahead
 from tests.planner.conftest import head_on_scenario
@@ -140,6 +141,43 @@ def test_a_mover_keeps_clear_of_the_height_the_others_profile_takes_it_to() -> N
     assert float(np.sqrt((ea - eb) ** 2 + (za - zb) ** 2).min()) < D_S
 
 
+def test_a_vehicle_above_its_profile_is_forecast_sinking_back_to_it() -> None:
+    """A is 600 m above its level profile (back from a height resolution) and its autopilot
+    sinks it back at 5 m/s, onto B's height as they meet head-on 120 s on. Forecast at its
+    present height they pass 600 m apart (the crowd's R00, forecast 320 m from R59 beneath,
+    came 186 m): forecast sinking, they meet, and the choice taken keeps the separation
+    against the test's own heights, second by second."""
+    a = dataclasses.replace(
+        _ahead("A", 0.0, 1.0, 1_600.0, slot_in_s=900.0),
+        route_rise_m=np.zeros(2),
+        off_profile_m=600.0,
+        return_rate_m_s=RATE_M_S,
+    )
+    b = _ahead("B", 6_000.0, -1.0, 1_000.0, slot_in_s=2_400.0)
+    room = {"A": Room(3_000.0, 400.0), "B": Room(3_000.0, 400.0)}
+    kw = {"now_s": NOW_S, "separation_m": D_S, "layer_m": LAYER_M, "rate_m_s": RATE_M_S}
+    held = dataclasses.replace(a, off_profile_m=0.0)
+    assert resolve_vertical(held, b, room=room, look_ahead_s=180.0, **kw) is None
+    v = resolve_vertical(a, b, room=room, look_ahead_s=180.0, **kw)
+    assert v is not None and v.unresolved_m == pytest.approx(0.0, abs=1.0)
+    t = np.arange(NOW_S, NOW_S + 400.0, 0.1)
+    ea, eb = _flown(0.0, 1.0, t), _flown(6_000.0, -1.0, t)
+    sinking = np.maximum(1_600.0 - RATE_M_S * (t - NOW_S), 1_000.0)
+    assert float(np.hypot(ea - eb, sinking - 1_000.0).min()) < 1.0  # as it flies
+    # Resolved: the mover asked its height from the start, and back to its profile (A: its
+    # level 1,000 m) at the rate after the release; the other as it flies.
+    if v.vehicle == "A":
+        asked = np.array([_height(1_600.0, v.offset_m, v.start_s, v.until_s, x) for x in t])
+        asked = np.where(t < v.start_s, sinking, asked)
+        back = np.maximum(v.alt_m - RATE_M_S * (t - v.until_s), 1_000.0)
+        za, zb = np.where(t > v.until_s, np.minimum(asked, back), asked), np.full_like(t, 1e3)
+    else:
+        za = sinking
+        zb = np.array([_height(1_000.0, v.offset_m, v.start_s, v.until_s, x) for x in t])
+    assert float(np.sqrt((ea - eb) ** 2 + (za - zb) ** 2).min()) >= D_S
+    assert room[v.vehicle].floor_m <= v.alt_m <= room[v.vehicle].ceiling_m
+
+
 def test_the_higher_of_a_pair_climbs_and_one_with_no_room_above_descends() -> None:
     a = _ahead("A", 0.0, 1.0, 1_100.0, slot_in_s=2_000.0)  # 100 m above B
     b = _ahead("B", 6_000.0, -1.0, 1_000.0, slot_in_s=2_000.0)
@@ -149,12 +187,41 @@ def test_the_higher_of_a_pair_climbs_and_one_with_no_room_above_descends() -> No
     # Two layers either way keep 500 m (one, 400 m of height, does not), and each widens
     # the gap: the climb.
     assert v is not None and (v.vehicle, v.offset_m) == ("A", 2 * LAYER_M)
+    # A may move only down (off its height for another pair, below it): the lower, B,
+    # descends instead.
+    v = resolve_vertical(a, b, room=free, look_ahead_s=180.0, senses={"A": -1.0}, **kw)
+    assert v is not None and (v.vehicle, v.offset_m) == ("B", -2 * LAYER_M)
     capped = {"A": Room(1_200.0, 400.0), "B": Room(1_200.0, 400.0)}
     v = resolve_vertical(a, b, room=capped, look_ahead_s=180.0, **kw)
     # A cannot climb under a 1,200 m ceiling; B descends to its floor, 400 m.
     assert v is not None and (v.vehicle, v.offset_m, v.alt_m) == ("B", -2 * LAYER_M, 400.0)
     boxed = {"A": Room(1_200.0, 1_000.0), "B": Room(1_200.0, 900.0)}
     assert resolve_vertical(a, b, room=boxed, look_ahead_s=180.0, **kw) is None
+
+
+def test_a_mover_at_its_top_speed_for_its_slot_is_not_sent_down() -> None:
+    """Under a 1,200 m ceiling A (100 m above B) and B can only descend, two layers either.
+    B has more time to its slot, so B descends; but with B flying its top speed for its slot
+    (30 m/s over 60 km in 2,000 s) a descent, slower over the ground at the same airspeed,
+    would make it late: A descends instead, and keeps its slot at 24 m/s."""
+    capped = {"A": Room(1_200.0, 400.0), "B": Room(1_200.0, 400.0)}
+    kw = {"now_s": NOW_S, "separation_m": D_S, "layer_m": LAYER_M, "rate_m_s": RATE_M_S}
+    short = np.array([0.0, 45_000.0])
+    a = dataclasses.replace(
+        _ahead("A", 0.0, 1.0, 1_100.0, slot_in_s=1_900.0), route_s_m=short, route_east_m=short
+    )
+    assert 45_000.0 / 1_900.0 < 30.0  # A's slot asks 23.7 m/s of 16-30
+    relaxed = _ahead("B", 9_000.0, -1.0, 1_000.0, slot_in_s=2_400.0)  # 25 m/s
+    v = resolve_vertical(a, relaxed, room=capped, look_ahead_s=240.0, **kw)
+    assert v is not None and (v.vehicle, v.offset_m) == ("B", -2 * LAYER_M)
+    pressed = _ahead("B", 9_000.0, -1.0, 1_000.0, slot_in_s=2_000.0)  # 30 m/s
+    v = resolve_vertical(a, pressed, room=capped, look_ahead_s=240.0, **kw)
+    assert v is not None and (v.vehicle, v.offset_m, v.alt_m) == ("A", -2 * LAYER_M, 500.0)
+    # The test's own check of A's choice: from 1,100 m down at 5 m/s, they meet 180 s on.
+    t = np.arange(NOW_S, NOW_S + 400.0, 0.1)
+    ea, eb = _flown(0.0, 1.0, t), _flown(9_000.0, -1.0, t)
+    za = np.array([_height(1_100.0, v.offset_m, v.start_s, v.until_s, x) for x in t])
+    assert float(np.sqrt((ea - eb) ** 2 + (za - 1_000.0) ** 2).min()) >= D_S
 
 
 def test_a_pair_that_keeps_its_separation_is_left_alone() -> None:
@@ -435,6 +502,20 @@ def test_a_pair_apart_and_not_closing_now_but_forecast_to_meet_is_not_past() -> 
     assert team._past(a, float(meet_s), "B")
 
 
+def _airborne_apart(team: TeamController, apart_m: float) -> float:
+    """A and B of the head-on team in the air: the first second (after their climbs) they are
+    less than ``apart_m`` apart east-west."""
+    a, b = team.members["A"], team.members["B"]
+    t = max(m.schedule.climb_end_s for m in team.members.values()) + 1.0
+    for x in (a, b):
+        airborne(team, x.vehicle_id, x.takeoff_s)
+    return next(
+        float(k)
+        for k in np.arange(t, 1500.0, 1.0)
+        if abs(a.schedule.position_at(float(k))[0] - b.schedule.position_at(float(k))[0]) < apart_m
+    )
+
+
 @pytest.mark.parametrize(
     "resolving_from", [{"A": "Z", "B": "Z"}, {"A": "B"}], ids=["both from a third", "A from B"]
 )
@@ -449,15 +530,7 @@ def test_a_pair_that_flies_speed_resolutions_no_one_screens_is_parted_by_height(
 
     def fly_busy(team: TeamController) -> list[act.Report]:
         a, b = team.members["A"], team.members["B"]
-        t = max(m.schedule.climb_end_s for m in team.members.values()) + 1.0
-        for x in (a, b):
-            airborne(team, x.vehicle_id, x.takeoff_s)
-        meet_s = next(
-            float(k)
-            for k in np.arange(t, 1500.0, 1.0)
-            if abs(a.schedule.position_at(float(k))[0] - b.schedule.position_at(float(k))[0])
-            < 10_000.0  # about 3.5 minutes before they meet
-        )
+        meet_s = _airborne_apart(team, 10_000.0)  # about 3.5 minutes before they meet
         said: list[act.Report] = []
         for k in range(6):  # fixes over the next few seconds, each vehicle resolving from Z
             now = meet_s + k
@@ -483,6 +556,68 @@ def test_a_pair_that_flies_speed_resolutions_no_one_screens_is_parted_by_height(
     unresolved = [r for r in said if (r.payload or {}).get("resolution") == "none"]
     assert [r.kind for r in unresolved] == [EventKind.CONFLICT, EventKind.ALARM]
     assert set((unresolved[0].payload or {})["pair"]) == {"A", "B"}
+
+
+def test_a_pair_each_off_its_height_for_a_third_is_parted_by_one_moving_on() -> None:
+    """A and B head-on, each asked 150 m up by a height resolution from a third vehicle (Z),
+    so at one height again: no one screens the pair as they fly, and their forecasts meet.
+    One of them climbs on, away from its third (never back down towards it), held at least
+    as long as its first resolution was; the test's own distances, as commanded, keep the
+    separation. Neither allowed to move again, the pair is only said."""
+
+    def fly_lifted(team: TeamController, moves: bool) -> tuple[list[act.Report], float]:
+        a, b = team.members["A"], team.members["B"]
+        meet_s = _airborne_apart(team, 10_000.0)  # about 3.5 minutes before they meet
+        said: list[act.Report] = []
+        for x in (a, b):
+            _, s_m, _ = x.schedule.state_at(meet_s)
+            alt_m = x.schedule.alt_at(s_m) + 150.0
+            lifted = VerticalResolution(
+                x.vehicle_id, "Z", 150.0, alt_m, meet_s - 60.0, meet_s + 300.0, 400.0, 100.0,
+                meet_s + 200.0,
+            )  # fmt: skip
+            team.vertical.flying[x.vehicle_id] = Manoeuvre(lifted, busy=True)
+        if not moves:
+            team.config = FlightConfig(vertical_layer_m=5_000.0)  # no room for a layer more
+        for k in range(6):
+            now = meet_s + k
+            for x in (a, b):
+                _, s_m, level = x.schedule.state_at(now)
+                f = dataclasses.replace(
+                    fix(team, x.vehicle_id, s_m, now, level),
+                    alt_amsl_m=x.schedule.alt_at(s_m) + 150.0,
+                )
+                out = team.handle(f, now)
+                said += reports(out, EventKind.CONFLICT) + reports(out, EventKind.ALARM)
+        return said, meet_s + 300.0
+
+    team = _head_on_team()
+    said, first_until_s = fly_lifted(team, moves=True)
+    heights = [r for r in said if (r.payload or {}).get("resolution") == "altitude"]
+    assert len(heights) == 1, [r.reason for r in said]
+    up = heights[0].payload or {}
+    mover, other = heights[0].vehicle, up["other"]
+    assert {mover, other} == {"A", "B"} and float(up["offset_m"]) > 0.0  # on up, from Z
+    res = team.vertical.flying[str(mover)].resolution
+    assert res.until_s == pytest.approx(float(up["until_s"]), abs=0.1)
+    assert res.until_s >= first_until_s  # held as long as the first was to be
+    # The test's own closest approach: both along their routes at the speeds they fly, the
+    # mover climbing at 5 m/s from its height to the one asked, the other level.
+    d_s = team.scenario.separation_m
+    m, o = team.members[str(mover)], team.members[str(other)]
+    t = np.arange(res.start_s, res.until_s, 0.5)
+    pm = np.array([m.schedule.position_at(float(x)) for x in t])
+    po = np.array([o.schedule.position_at(float(x)) for x in t])
+    zm = np.array([m.schedule.alt_at(m.schedule.state_at(float(x))[1]) for x in t]) + 150.0
+    zm = np.minimum(zm + 5.0 * (t - res.start_s), res.alt_m)
+    zo = np.array([o.schedule.alt_at(o.schedule.state_at(float(x))[1]) for x in t]) + 150.0
+    flat = np.hypot(pm[:, 0] - po[:, 0], pm[:, 1] - po[:, 1])
+    assert float(flat.min()) < 0.5 * d_s  # they meet over the ground
+    assert float(np.sqrt(flat**2 + (zm - zo) ** 2).min()) >= d_s
+    said, _ = fly_lifted(_head_on_team(), moves=False)
+    assert not [r for r in said if (r.payload or {}).get("resolution") == "altitude"]
+    unresolved = [r for r in said if (r.payload or {}).get("resolution") == "none"]
+    assert [r.kind for r in unresolved] == [EventKind.CONFLICT, EventKind.ALARM]
 
 
 def test_a_speed_resolution_is_past_only_if_released_now_it_keeps_clear() -> None:
