@@ -34,11 +34,14 @@ TIMING_SHIFTS_S = (15.0, -15.0, 30.0, -30.0, 60.0, -60.0, 120.0, -120.0)
 closest approach, s, the least first: 15 s is 300 m or more at the speeds flown, ``d_s`` of
 the generated teams."""
 
-SPEED_CHANGE_M_S2 = 1.0
-"""How fast a vehicle's airspeed follows a new command, m/s^2: ArduPlane's TECS limits its
-speed demand's rate to half the specific energy rate its climb and sink limits allow over its
-true airspeed (AP_TECS.cpp, update_speed: velRateMax = 0.5 * STEdot_max / TAS), about 1 m/s^2
-at 25 m/s with TECS_CLMB_MAX and TECS_SINK_MAX at 5 m/s."""
+TECS_CLMB_MAX_M_S = 5.0
+TECS_SINK_MIN_M_S = 2.0
+"""ArduPlane's TECS_CLMB_MAX and TECS_SINK_MIN (their defaults), m/s: its TECS limits the rate
+of its speed demand to half the specific energy rate they allow over its true airspeed
+(AP_TECS.cpp, update_speed: velRateMax = 0.5 * _STEdot_max / TAS, velRateMin = 0.5 *
+_STEdot_min / TAS, _STEdot_max = CLMB_MAX * g, _STEdot_min = -SINK_MIN * g): at 25 m/s about
+1 m/s^2 faster and 0.4 m/s^2 slower (:func:`speed_change_m_s2`)."""
+GRAVITY_M_S2 = 9.80665
 
 PLACES = 3
 """A re-planned vehicle is timed through the places of its closest approaches to this many
@@ -128,29 +131,38 @@ def retime_through(
     return Retimed(replace(tail.schedule, via=(via_s_m, via_t_s)), [*said, *tail.adjustments])
 
 
+def speed_change_m_s2(tas_m_s: float, faster: bool) -> float:
+    """How fast ArduPlane's true airspeed follows a new command (:data:`TECS_CLMB_MAX_M_S`),
+    m/s^2."""
+    rate_m_s = TECS_CLMB_MAX_M_S if faster else TECS_SINK_MIN_M_S
+    return 0.5 * rate_m_s * GRAVITY_M_S2 / max(tas_m_s, 1.0)
+
+
 def _absorbs_the_change(
     v: Vehicle, head: VehicleSchedule, tail: VehicleSchedule, via_s_m: float
 ) -> None:
     """Raise unless the speed range left over the way from ``via_s_m`` to the slot (no loiter
-    turns on it) makes up the ground a change of speed there gains or loses while the airspeed
-    follows its command (:data:`SPEED_CHANGE_M_S2`): a vehicle timed to pass 0.7 km before its
-    goal at 27.5 m/s and to fly the rest at 16.2 m/s, its minimum 16, went on 50 m further
+    turns on it) makes up the ground a change of speed there gains or loses while the true
+    airspeed follows its command (:func:`speed_change_m_s2`): a vehicle timed to pass 0.7 km
+    before its goal at 27.5 m/s and to fly the rest at 16.2 m/s, its minimum 16, went on
     while it slowed and arrived 3.3 s early."""
     after = [leg for leg in tail.legs if leg.s_start_m >= via_s_m - 1e-6]
     if not head.legs or not after or any(lo.s_m >= via_s_m - 1e-6 for lo in tail.loiters):
         return
-    was_m_s, now_m_s = head.legs[-1].speed_m_s, after[0].speed_m_s
-    lag_m = (was_m_s - now_m_s) ** 2 / (2.0 * SPEED_CHANGE_M_S2)
     span_s = after[-1].t_end_s - after[0].t_start_s
     if span_s <= 0.0:
         return
+    last, first = head.legs[-1], after[0]
+    was_m_s, now_m_s = last.true_airspeed_m_s, first.true_airspeed_m_s
+    faster = now_m_s > was_m_s
+    lag_m = (was_m_s - now_m_s) ** 2 / (2.0 * speed_change_m_s2(now_m_s, faster))
     mean_m_s = sum(leg.speed_m_s * (leg.t_end_s - leg.t_start_s) for leg in after) / span_s
-    spare_m_s = mean_m_s - v.speed_min_m_s if was_m_s > now_m_s else v.speed_max_m_s - mean_m_s
-    if spare_m_s * span_s < lag_m:
+    spare_m_s = v.speed_max_m_s - mean_m_s if faster else mean_m_s - v.speed_min_m_s
+    if spare_m_s * first.tas_per_eas * span_s < lag_m:
         raise InfeasibleError(
-            f"{v.id}: from {was_m_s:.1f} to {now_m_s:.1f} m/s at {via_s_m / 1000.0:.1f} km, "
-            f"{lag_m:.0f} m gained or lost while it changes, which {span_s:.0f} s to its slot "
-            f"cannot make up",
+            f"{v.id}: from {last.speed_m_s:.1f} to {first.speed_m_s:.1f} m/s at "
+            f"{via_s_m / 1000.0:.1f} km, {lag_m:.0f} m gained or lost while its airspeed "
+            f"follows, which {span_s:.0f} s to its slot cannot make up",
             vehicle=v.id,
         )
 

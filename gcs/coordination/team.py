@@ -28,7 +28,6 @@ from __future__ import annotations
 
 import functools
 import math
-from collections.abc import Mapping
 from dataclasses import replace
 from typing import Any
 
@@ -43,7 +42,7 @@ from gcs.coordination.resolution import Ahead, Forecasts, Resolution, closest_m,
 from gcs.coordination.separation import Position, SeparationWatch
 from gcs.coordination.teamtime import TeamTime, TeamTimeRefused
 from gcs.coordination.tracks import TruthSample, closest_approach
-from gcs.coordination.vertical import Room, VerticalResolution, resolve_vertical
+from gcs.coordination.vertical import Held, Room, VerticalResolution, resolve_vertical
 from gcs.coordination.verticalflight import VerticalFlight, room_ahead
 from gcs.coordination.zoneguard import Exposure, ZoneGuard
 from planner.atmosphere import eas2tas
@@ -79,9 +78,12 @@ HOLD_ROOM_S = 60.0
 """A height resolution held on past its end (the pair not yet past) keeps its height only while
 it has room over the ground it flies this far ahead (flight s)."""
 RETURNING_M_S = 1.0
-"""A vehicle off its profile that climbs or sinks towards it this fast or faster (m/s) is
-forecast back on it at that rate (:attr:`~gcs.coordination.resolution.Ahead.off_profile_m`);
-slower, or level, it is forecast keeping its height off it."""
+"""A vehicle off its profile that closes on it this fast or faster (m/s: its climb or sink
+less the profile's own where it is) is forecast back on it at that rate (:attr:`~gcs.
+coordination.resolution.Ahead.off_profile_m`); slower, it is forecast keeping its height off
+it (as its profile climbs or falls)."""
+PROFILE_SLOPE_STEP_M = 25.0
+"""Its profile's slope where it is is taken over this far on either side, m."""
 NEIGHBOUR_SEPARATIONS = 2.0
 """A conflict's resolution is judged against the vehicles forecast within this many
 screening separations (:data:`RESOLVED_MARGIN` separations each) of either of the pair too
@@ -433,7 +435,9 @@ class TeamController(ZoneGuard, TeamTime):
         e, n = self.frame.to_local(fix.lat_deg, fix.lon_deg)
         e, n = float(e), float(n)
         m.east_m, m.north_m, m.alt_amsl_m = e, n, fix.alt_amsl_m
-        m.climb_m_s = fix.climb_m_s or 0.0
+        m.climb_m_s = (
+            fix.climb_m_s if fix.climb_m_s is not None and math.isfinite(fix.climb_m_s) else 0.0
+        )
         if m.over:
             # Past its slot (circling where its mission ends) or aborted (flying home): no
             # longer timed, but still in the air, so its fixes still count for the separation
@@ -608,7 +612,7 @@ class TeamController(ZoneGuard, TeamTime):
             here_m = lo.s_m
         climbing = self.vertical.flying.get(m.vehicle_id)
         rise_m = None
-        off_m = 0.0
+        off_m = closing_m_s = 0.0
         if climbing is None:
             # Its profile's changes of height ahead (a re-plan's lift among them), and, if it
             # is climbing or sinking back to it (from a height resolution), its way back at
@@ -618,8 +622,12 @@ class TeamController(ZoneGuard, TeamTime):
             rise_m = np.interp(track.flight_route_s_m(done), vs.wp_s_m, vs.wp_alt_m)
             rise_m -= profile_m
             off_m = m.alt_amsl_m - profile_m
-            if off_m * m.climb_m_s > -RETURNING_M_S * abs(off_m):
-                off_m = 0.0  # level off it, or going away from it: kept where it is
+            # How fast it closes on its profile: its climb less the profile's own there.
+            step_m = PROFILE_SLOPE_STEP_M
+            slope = (vs.alt_at(here_m + step_m) - vs.alt_at(here_m - step_m)) / (2.0 * step_m)
+            closing_m_s = -math.copysign(1.0, off_m) * (m.climb_m_s - slope * m.groundspeed_m_s)
+            if closing_m_s < RETURNING_M_S:
+                off_m = 0.0  # level off it, or not closing on it: kept off it as it is
         ahead = Ahead(
             m.vehicle_id,
             m.last_fix_s,
@@ -642,7 +650,7 @@ class TeamController(ZoneGuard, TeamTime):
             final_s=self.config.final_m / max(m.groundspeed_m_s or m.level_m_s, 1.0),
             route_rise_m=rise_m,
             off_profile_m=off_m,
-            return_rate_m_s=min(abs(m.climb_m_s), self.config.vertical_rate_max_m_s),
+            return_rate_m_s=min(closing_m_s, self.config.vertical_rate_max_m_s),
             wind=m.schedule.wind if m.wind is None else m.wind,
         )
         r = m.resolving
@@ -808,12 +816,7 @@ class TeamController(ZoneGuard, TeamTime):
                 continue
             # One off its height for another pair moves on away from it (two resolved from
             # a third each onto heights 70 m apart came 233 m apart, neither moved again).
-            senses = {
-                vid: math.copysign(1.0, man.resolution.offset_m)
-                for vid in pair
-                if (man := self.vertical.flying.get(vid)) is not None
-            }
-            up = self._resolve_vertically(mine, theirs, t, senses)
+            up = self._resolve_vertically(mine, theirs, t)
             if up is None:
                 self._say_unresolved(mine, theirs, t, out)
                 continue
@@ -872,12 +875,8 @@ class TeamController(ZoneGuard, TeamTime):
         self._fly_height(up, t, out)
 
     def _fly_height(self, up: VerticalResolution, t: float, out: list[act.Action]) -> None:
-        """Its mover flies the height resolution ``up`` from now, forecast so for the others;
-        one it flies already is held as long as that one was to be (its pair is met too)."""
+        """Its mover flies the height resolution ``up`` from now, forecast so for the others."""
         mover = self.members[up.vehicle]
-        flying = self.vertical.flying.get(up.vehicle)
-        if flying is not None and flying.resolution.until_s > up.until_s:
-            up = replace(up, until_s=flying.resolution.until_s)
         self.vertical.start(mover, up, t, out)
         self._forecast_again(mover, t)
 
@@ -893,10 +892,12 @@ class TeamController(ZoneGuard, TeamTime):
 
     def _manoeuvre_over(self, m: Member, t: float, res: VerticalResolution) -> str | None:
         """Why ``m``'s height resolution, its end come, is over (None: held on): the pair is
-        past each other, or the height it holds has no room over the ground it flies next
-        (checked over the minute ahead: the manoeuvre's own room was checked only as far as
-        it was foreseen to last)."""
-        if self._past(m, t, res.other):
+        past each other (and ``m`` past those it took a height for before), or the height it
+        holds has no room over the ground it flies next (checked over the minute ahead: the
+        manoeuvre's own room was checked only as far as it was foreseen to last)."""
+        man = self.vertical.flying.get(m.vehicle_id)
+        also = () if man is None else man.also
+        if all(self._past(m, t, o) for o in (res.other, *also)):
             return "past"
         if self.world is None:
             return None
@@ -969,9 +970,7 @@ class TeamController(ZoneGuard, TeamTime):
         if ahead is not None:
             self.forecasts.update(ahead, t)
 
-    def _resolve_vertically(
-        self, a: Ahead, b: Ahead, t: float, senses: Mapping[str, float] | None = None
-    ) -> VerticalResolution | None:
+    def _resolve_vertically(self, a: Ahead, b: Ahead, t: float) -> VerticalResolution | None:
         """What no speed resolves, by height (:func:`gcs.coordination.vertical.
         resolve_vertical`): each of the pair within its room over the look-ahead, climbing or
         descending no steeper than the slower of the two may, and not into its neighbours
@@ -989,6 +988,13 @@ class TeamController(ZoneGuard, TeamTime):
             heights=False,
         )
         layer_m = cfg.vertical_layer_m or layer_step_m(self.scenario)
+        # One off its height already (for this pair or a third) moves on in its sense, as
+        # long at least as it was to hold it.
+        held = {
+            vid: Held(math.copysign(1.0, man.resolution.offset_m), man.resolution.until_s)
+            for vid in (a.vehicle, b.vehicle)
+            if (man := self.vertical.flying.get(vid)) is not None
+        }
         rooms: dict[str, Room] = {}
         rates: list[float] = []
         for ahead in (a, b):
@@ -1007,7 +1013,8 @@ class TeamController(ZoneGuard, TeamTime):
             a, b, now_s=t, separation_m=RESOLVED_MARGIN * d_s, layer_m=layer_m,
             rate_m_s=min(rates), room=rooms,
             look_ahead_s=cfg.vertical_horizon_s, response_s=cfg.resolve_response_s,
-            neighbours=neighbours, fast_rate_m_s=cfg.vertical_rate_max_m_s, senses=senses,
+            neighbours=neighbours, fast_rate_m_s=cfg.vertical_rate_max_m_s,
+            held=held or None,
         )  # fmt: skip
 
     def _screen_horizon_s(self) -> float:

@@ -46,7 +46,7 @@ from planner.layers import LAYER_STEPS
 
 FloatArray = NDArray[np.float64]
 
-__all__ = ["Room", "VerticalResolution", "height_profile", "resolve_vertical"]
+__all__ = ["Held", "Room", "VerticalResolution", "height_profile", "resolve_vertical"]
 
 
 @dataclass(frozen=True)
@@ -79,6 +79,16 @@ class VerticalResolution:
     """Their closest approach as they fly, m."""
     at_s: float
     """When that would be."""
+
+
+@dataclass(frozen=True)
+class Held:
+    """A height resolution a vehicle flies already, as a new one for it must respect."""
+
+    sense: float
+    """+1 up, -1 down: the new one moves on this way, away from the pair it resolves."""
+    until_s: float
+    """The new one holds its height at least until then."""
 
 
 def height_profile(
@@ -114,7 +124,7 @@ def resolve_vertical(
     max_layers: int = LAYER_STEPS,
     neighbours: Mapping[str, Sequence[Ahead]] | None = None,
     fast_rate_m_s: float | None = None,
-    senses: Mapping[str, float] | None = None,
+    held: Mapping[str, Held] | None = None,
 ) -> VerticalResolution | None:
     """The vertical manoeuvre that keeps ``a`` and ``b`` ``separation_m`` apart in 3-D if
     their tracks as they fly bring them closer within ``look_ahead_s`` (None if they do not,
@@ -123,8 +133,8 @@ def resolve_vertical(
     of them, or closer than it comes as it flies, is not taken. ``fast_rate_m_s``: the
     fastest the mover may climb or sink when asked (its autopilot's limit); each choice is
     judged with the mover anywhere between its heights at that rate and at ``rate_m_s``.
-    ``senses``: by vehicle, the one sense (+1 up, -1 down) it may move in (one off its
-    profile for another pair already moves on away from it)."""
+    ``held``: by vehicle, the height resolution it flies already: it moves only on in its
+    sense, and holds the new height at least as long."""
     bound = min(a.t_s + a.horizon_s, b.t_s + b.horizon_s)
     end_s = min(bound, now_s + look_ahead_s)
     if end_s <= now_s:
@@ -155,15 +165,17 @@ def resolve_vertical(
         others = (neighbours or {}).get(mover.vehicle, ())
         around = _around(pa if mover is a else pb, t, others, response_s)
         other_m = (pb if mover is a else pa)[:, 2]
+        flying = (held or {}).get(mover.vehicle)
+        hold_s = until if flying is None else max(until, flying.until_s)
         for layers, sense in itertools.product(range(1, max_layers + 1), (1.0, -1.0)):
-            if sense * (senses or {}).get(mover.vehicle, sense) < 0.0:
+            if flying is not None and sense * flying.sense < 0.0:
                 continue
             offset = sense * layers * layer_m
             target = mover.alt_m + offset
             if target > r.ceiling_m or target < r.floor_m:
                 continue
             band = [
-                height_profile(mover.alt_m, offset, t, start_s=start, until_s=until, rate_m_s=r)
+                height_profile(mover.alt_m, offset, t, start_s=start, until_s=hold_s, rate_m_s=r)
                 for r in (rate_m_s, max(fast_rate_m_s or rate_m_s, rate_m_s))
             ]
             lo, hi = np.minimum(*band), np.maximum(*band)
@@ -175,19 +187,19 @@ def resolve_vertical(
                 mover.alt_m == other.alt_m and sense > 0.0
             )
             slot_left_s = mover.t_s + mover.horizon_s - now_s
-            late = not _keeps_slot(mover, target, start, until, now_s)
+            late = not _keeps_slot(mover, target, start, hold_s, now_s)
             rank = (late, layers, -slot_left_s, not widens, sense < 0.0, mover.vehicle)
-            choices.append((rank, mover, other, offset, target, least))
+            choices.append((rank, mover, other, offset, target, hold_s, least))
     if not choices:
         return None
-    _, mover, other, offset, target, least = min(choices, key=lambda c: c[0])
+    _, mover, other, offset, target, hold_s, least = min(choices, key=lambda c: c[0])
     return VerticalResolution(
         mover.vehicle,
         other.vehicle,
         offset,
         target,
         start,
-        until,
+        hold_s,
         least,
         unresolved_m,
         at_s,

@@ -63,6 +63,9 @@ class Manoeuvre:
     """One vehicle's vertical resolution as it is flown."""
 
     resolution: VerticalResolution
+    also: tuple[str, ...] = ()
+    """The others it took the height for before (a resolution that replaced theirs): it is
+    over only once past them too."""
     asked_seq: int | None = None
     """The mission item the height was last asked for (None: to be asked)."""
     busy: bool = False
@@ -80,8 +83,12 @@ class VerticalFlight:
         return vehicle_id in self.flying
 
     def start(self, m: Member, res: VerticalResolution, t_s: float, out: list[act.Action]) -> None:
-        """``m`` flies ``res`` from now: said, and its height asked."""
-        self.flying[m.vehicle_id] = Manoeuvre(res)
+        """``m`` flies ``res`` from now: said, and its height asked (in place of one it
+        flies, whose others it must still pass)."""
+        before = self.flying.get(m.vehicle_id)
+        also = () if before is None else (*before.also, before.resolution.other)
+        also = tuple(dict.fromkeys(o for o in also if o != res.other))
+        self.flying[m.vehicle_id] = Manoeuvre(res, also)
         sense = "climbs" if res.offset_m > 0.0 else "descends"
         out.append(
             act.Report(

@@ -18,7 +18,7 @@ from gcs.coordination.events import EventKind
 from gcs.coordination.resolution import Ahead, Resolution, resolve
 from gcs.coordination.separation import Position
 from gcs.coordination.team import TeamController
-from gcs.coordination.vertical import Room, VerticalResolution, resolve_vertical
+from gcs.coordination.vertical import Held, Room, VerticalResolution, resolve_vertical
 from gcs.coordination.verticalflight import Manoeuvre
 from tests.gcs.test_resolution import timed_alike
 from tests.gcs.test_team import airborne, fix, of, reports, seq_ahead
@@ -178,6 +178,37 @@ def test_a_vehicle_above_its_profile_is_forecast_sinking_back_to_it() -> None:
     assert room[v.vehicle].floor_m <= v.alt_m <= room[v.vehicle].ceiling_m
 
 
+def test_a_vehicle_is_forecast_back_on_its_profile_only_while_it_closes_on_it() -> None:
+    """A, level on its profile, is 200 m above it at a fix: sinking at 4 m/s it is forecast
+    back on it at 4 m/s (on it 50 s later); level, or climbing away, or sinking at 0.5 m/s, it
+    is forecast keeping the 200 m; 200 m below and climbing at 3 m/s, back up at 3 m/s."""
+    team = _head_on_team()
+    a = team.members["A"]
+    t0 = max(m.schedule.climb_end_s for m in team.members.values()) + 60.0
+    fixes = iter(t0 + k for k in range(9))
+    airborne(team, "A", a.takeoff_s)
+    s_m = a.schedule.state_at(t0)[1]
+    profile_m = a.schedule.alt_at(s_m)
+    assert a.schedule.alt_at(s_m + 5_000.0) == pytest.approx(profile_m)  # level here
+
+    def heights(off_m: float, climb_m_s: float) -> np.ndarray:
+        t = next(fixes)  # a fix a second after the last
+        _, s_m, level = a.schedule.state_at(t)
+        f = fix(team, "A", s_m, t, level)
+        f = dataclasses.replace(f, alt_amsl_m=profile_m + off_m, climb_m_s=climb_m_s)
+        team.handle(f, t)
+        ahead = team._ahead(a)
+        assert ahead is not None
+        return ahead.positions(np.array([t, t + 25.0, t + 50.0, t + 100.0]), level, 0.0)[:, 2]
+
+    above = profile_m + 200.0
+    assert heights(200.0, -4.0) == pytest.approx([above, above - 100.0, profile_m, profile_m])
+    for climb_m_s in (0.0, 2.0, -0.5):
+        assert heights(200.0, climb_m_s) == pytest.approx([above] * 4), climb_m_s
+    below = profile_m - 200.0
+    assert heights(-200.0, 3.0) == pytest.approx([below, below + 75.0, below + 150.0, profile_m])
+
+
 def test_the_higher_of_a_pair_climbs_and_one_with_no_room_above_descends() -> None:
     a = _ahead("A", 0.0, 1.0, 1_100.0, slot_in_s=2_000.0)  # 100 m above B
     b = _ahead("B", 6_000.0, -1.0, 1_000.0, slot_in_s=2_000.0)
@@ -189,7 +220,8 @@ def test_the_higher_of_a_pair_climbs_and_one_with_no_room_above_descends() -> No
     assert v is not None and (v.vehicle, v.offset_m) == ("A", 2 * LAYER_M)
     # A may move only down (off its height for another pair, below it): the lower, B,
     # descends instead.
-    v = resolve_vertical(a, b, room=free, look_ahead_s=180.0, senses={"A": -1.0}, **kw)
+    held = {"A": Held(-1.0, NOW_S)}
+    v = resolve_vertical(a, b, room=free, look_ahead_s=180.0, held=held, **kw)
     assert v is not None and (v.vehicle, v.offset_m) == ("B", -2 * LAYER_M)
     capped = {"A": Room(1_200.0, 400.0), "B": Room(1_200.0, 400.0)}
     v = resolve_vertical(a, b, room=capped, look_ahead_s=180.0, **kw)
