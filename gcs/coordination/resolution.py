@@ -292,15 +292,24 @@ class Ahead:
         it does) to the end of its flight at its slot (its horizon), in its range: what it
         is timed to once a resolution is released. The ground made good per unit of airspeed
         is the fix's."""
+        wanted_m_s = self.slot_groundspeed_m_s(from_s)
+        if wanted_m_s is None:
+            return self.airspeed_min_m_s
+        per_airspeed = self.groundspeed_m_s / max(self.airspeed_m_s, 1.0)
+        wanted = wanted_m_s / max(per_airspeed, 1e-3)
+        return min(max(wanted, self.airspeed_min_m_s), self.airspeed_max_m_s)
+
+    def slot_groundspeed_m_s(self, from_s: float) -> float | None:
+        """The mean speed over the ground that takes it from where it is at ``from_s``
+        (flying as it does) to the end of its flight at its slot, m/s (None: its slot is
+        then)."""
         dt = np.array([max(from_s - self.t_s, 0.0)])
         own = self.airspeed_m_s
         there = float(self._along_any(dt, own, 0.0, 0.0, own)[0])
         left_s = self.t_s + self.horizon_s - max(from_s, self.t_s)
         if left_s <= 0.0:
-            return self.airspeed_min_m_s
-        per_airspeed = self.groundspeed_m_s / max(self.airspeed_m_s, 1.0)
-        wanted = (float(self.route_s_m[-1]) - there) / left_s / max(per_airspeed, 1e-3)
-        return min(max(wanted, self.airspeed_min_m_s), self.airspeed_max_m_s)
+            return None
+        return (float(self.route_s_m[-1]) - there) / left_s
 
 
 @dataclass(frozen=True)

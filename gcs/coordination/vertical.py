@@ -208,19 +208,22 @@ def resolve_vertical(
 
 def _keeps_slot(mover: Ahead, alt_m: float, start_s: float, until_s: float, now_s: float) -> bool:
     """Whether ``mover`` still makes its slot within its speed range if it flies at
-    ``alt_m`` from ``start_s`` to ``until_s``: its true airspeed there differs by the ratio of
-    the two heights' EAS-to-TAS, so the mean airspeed its slot asks (:meth:`~gcs.coordination.
-    resolution.Ahead.slot_airspeed_m_s`) changes by that ratio over the share of the time to
-    its slot it flies there. A descent of 450 m held until a few seconds before its slot,
-    flown at its top speed already, left the crowd's R00 2.3 s late."""
-    end_s = mover.t_s + mover.horizon_s
-    left_s = end_s - now_s
-    if left_s <= 0.0:
+    ``alt_m`` from ``start_s`` to ``until_s``: there its true airspeed per unit of airspeed
+    differs by the ratio of the two heights' EAS-to-TAS, and the wind it makes good against
+    (its true airspeed less its ground speed at its fix) stays, so the airspeed that makes
+    the mean ground speed its slot asks (:meth:`~gcs.coordination.resolution.Ahead.
+    slot_groundspeed_m_s`) changes over the share of the time to its slot it flies there.
+    A descent of 450 m held until a few seconds before its slot, flown at its top speed
+    already, left the crowd's R00 2.3 s late."""
+    wanted_m_s = mover.slot_groundspeed_m_s(now_s)
+    if wanted_m_s is None:
         return True
-    share = max(min(until_s, end_s) - start_s, 0.0) / left_s
-    ratio = eas2tas(alt_m) / eas2tas(mover.alt_m)
-    wanted = mover.slot_airspeed_m_s(now_s) / (1.0 + share * (ratio - 1.0))
-    return mover.airspeed_min_m_s - 1e-6 <= wanted <= mover.airspeed_max_m_s + 1e-6
+    end_s = mover.t_s + mover.horizon_s
+    share = max(min(until_s, end_s) - start_s, 0.0) / max(end_s - now_s, 1e-9)
+    per_eas = mover.tas_per_eas * (1.0 + share * (eas2tas(alt_m) / eas2tas(mover.alt_m) - 1.0))
+    against_m_s = mover.airspeed_m_s * mover.tas_per_eas - mover.groundspeed_m_s
+    airspeed_m_s = (wanted_m_s + against_m_s) / per_eas
+    return mover.airspeed_min_m_s - 1e-6 <= airspeed_m_s <= mover.airspeed_max_m_s + 1e-6
 
 
 def _around(
