@@ -18,6 +18,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 __all__ = [
+    "GRAVITY_M_S2",
     "ISA_LAPSE_K_M",
     "ISA_SEA_LEVEL_DENSITY_KG_M3",
     "ISA_SEA_LEVEL_PRESSURE_PA",
@@ -35,8 +36,9 @@ ISA_SEA_LEVEL_DENSITY_KG_M3 = 1.225
 ISA_LAPSE_K_M = 0.0065
 """Temperature lapse rate of the troposphere, K/m."""
 _GAS_CONSTANT_J_KG_K = 287.05287
-_GRAVITY_M_S2 = 9.80665
-_EXPONENT = _GRAVITY_M_S2 / (_GAS_CONSTANT_J_KG_K * ISA_LAPSE_K_M)  # 5.2559
+GRAVITY_M_S2 = 9.80665
+"""Standard gravity, m/s^2."""
+_EXPONENT = GRAVITY_M_S2 / (_GAS_CONSTANT_J_KG_K * ISA_LAPSE_K_M)  # 5.2559
 _TROPOPAUSE_M = 11_000.0
 _FLOOR_M = -1_000.0
 

@@ -37,10 +37,11 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
+from planner.atmosphere import GRAVITY_M_S2
+
 __all__ = ["LINED_UP_RAD", "LoiterFlight", "loiter_flight", "way_out_m"]
 
 _TAU = 2.0 * math.pi
-_G = 9.80665
 WP_RADIUS_M = 90.0
 """ArduPlane's default WP_RADIUS, m."""
 L1_PERIOD_S = 17.0
@@ -156,7 +157,7 @@ def way_out_m(de: float, dn: float, course_rad: float, ground_speed_m_s: float) 
 
 def _turn_radius_m(ground_speed_m_s: float) -> float:
     """The radius of a turn at the roll limit, m."""
-    return ground_speed_m_s**2 / (_G * math.tan(ROLL_LIMIT_RAD))
+    return ground_speed_m_s**2 / (GRAVITY_M_S2 * math.tan(ROLL_LIMIT_RAD))
 
 
 def _wrap(a: float) -> float:

@@ -19,6 +19,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
+from planner.atmosphere import GRAVITY_M_S2
 from planner.deconflict import Separation, TeamSamples
 from planner.errors import InfeasibleError
 from planner.retime import Retimed, retime_on_path
@@ -41,7 +42,6 @@ of its speed demand to half the specific energy rate they allow over its true ai
 (AP_TECS.cpp, update_speed: velRateMax = 0.5 * _STEdot_max / TAS, velRateMin = 0.5 *
 _STEdot_min / TAS, _STEdot_max = CLMB_MAX * g, _STEdot_min = -SINK_MIN * g): at 25 m/s about
 1 m/s^2 faster and 0.4 m/s^2 slower (:func:`speed_change_m_s2`)."""
-GRAVITY_M_S2 = 9.80665
 
 PLACES = 3
 """A re-planned vehicle is timed through the places of its closest approaches to this many

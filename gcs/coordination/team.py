@@ -814,8 +814,6 @@ class TeamController(ZoneGuard, TeamTime):
             mine, theirs = (self._ahead(v, strengthening=True) for v in (m, x))
             if mine is None or theirs is None:
                 continue
-            # One off its height for another pair moves on away from it (two resolved from
-            # a third each onto heights 70 m apart came 233 m apart, neither moved again).
             up = self._resolve_vertically(mine, theirs, t)
             if up is None:
                 self._say_unresolved(mine, theirs, t, out)
@@ -989,7 +987,8 @@ class TeamController(ZoneGuard, TeamTime):
         )
         layer_m = cfg.vertical_layer_m or layer_step_m(self.scenario)
         # One off its height already (for this pair or a third) moves on in its sense, as
-        # long at least as it was to hold it.
+        # long at least as it was to hold it (two resolved from a third each onto heights
+        # 70 m apart came 233 m apart, neither moved again).
         held = {
             vid: Held(math.copysign(1.0, man.resolution.offset_m), man.resolution.until_s)
             for vid in (a.vehicle, b.vehicle)

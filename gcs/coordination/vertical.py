@@ -167,6 +167,7 @@ def resolve_vertical(
         other_m = (pb if mover is a else pa)[:, 2]
         flying = (held or {}).get(mover.vehicle)
         hold_s = until if flying is None else max(until, flying.until_s)
+        slot_m_s = mover.slot_groundspeed_m_s(now_s)
         for layers, sense in itertools.product(range(1, max_layers + 1), (1.0, -1.0)):
             if flying is not None and sense * flying.sense < 0.0:
                 continue
@@ -187,7 +188,7 @@ def resolve_vertical(
                 mover.alt_m == other.alt_m and sense > 0.0
             )
             slot_left_s = mover.t_s + mover.horizon_s - now_s
-            late = not _keeps_slot(mover, target, start, hold_s, now_s)
+            late = not _keeps_slot(mover, slot_m_s, target, start, hold_s, now_s)
             rank = (late, layers, -slot_left_s, not widens, sense < 0.0, mover.vehicle)
             choices.append((rank, mover, other, offset, target, hold_s, least))
     if not choices:
@@ -206,16 +207,22 @@ def resolve_vertical(
     )
 
 
-def _keeps_slot(mover: Ahead, alt_m: float, start_s: float, until_s: float, now_s: float) -> bool:
+def _keeps_slot(
+    mover: Ahead,
+    wanted_m_s: float | None,
+    alt_m: float,
+    start_s: float,
+    until_s: float,
+    now_s: float,
+) -> bool:
     """Whether ``mover`` still makes its slot within its speed range if it flies at
     ``alt_m`` from ``start_s`` to ``until_s``: there its true airspeed per unit of airspeed
     differs by the ratio of the two heights' EAS-to-TAS, and the wind it makes good against
     (its true airspeed less its ground speed at its fix) stays, so the airspeed that makes
-    the mean ground speed its slot asks (:meth:`~gcs.coordination.resolution.Ahead.
-    slot_groundspeed_m_s`) changes over the share of the time to its slot it flies there.
-    A descent of 450 m held until a few seconds before its slot, flown at its top speed
-    already, left the crowd's R00 2.3 s late."""
-    wanted_m_s = mover.slot_groundspeed_m_s(now_s)
+    ``wanted_m_s``, the mean ground speed its slot asks from ``now_s`` (:meth:`~gcs.
+    coordination.resolution.Ahead.slot_groundspeed_m_s`; None: none), changes over the share
+    of the time to its slot it flies there. A descent of 450 m held until a few seconds
+    before its slot, flown at its top speed already, left the crowd's R00 2.3 s late."""
     if wanted_m_s is None:
         return True
     end_s = mover.t_s + mover.horizon_s
