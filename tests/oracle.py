@@ -22,6 +22,7 @@ geoid's slope over a scenario's tens of kilometres moves a distance by centimetr
 
 from __future__ import annotations
 
+import itertools
 import json
 import math
 from collections.abc import Iterable, Mapping, Sequence
@@ -337,6 +338,19 @@ Slot = tuple[float, float]
 ``windows``."""
 
 
+def waves(arrival: Mapping[str, Any], slots_s: Mapping[str, float]) -> list[list[str]]:
+    """The waves' vehicles: as named (``groups``), or, given only their sizes (the planner
+    fills them, soonest first), read from the slots ``slots_s`` in time order."""
+    groups = arrival.get("groups")
+    if groups is not None:
+        return [list(g) for g in groups]
+    order, out, k = sorted(slots_s, key=slots_s.__getitem__), [], 0
+    for size in arrival["sizes"]:
+        out.append(order[k : k + size])
+        k += size
+    return out
+
+
 def planned_slots(scenario: Mapping[str, Any], record: Mapping[str, Any]) -> dict[str, Slot]:
     """Each vehicle's slot as the schedule set it before launch (the record's
     ``planned_arrival_s``), checked here against the scenario's arrival rule: one team time
@@ -366,14 +380,7 @@ def planned_slots(scenario: Mapping[str, Any], record: Mapping[str, Any]) -> dic
         rule = {v: ref + k * float(arrival["interval_s"]) for k, v in enumerate(order)}
     elif kind == "waves":
         gap_s = float(arrival["gap_s"])
-        groups = arrival.get("groups")
-        if groups is None:
-            # Only the sizes: the planner fills the waves (soonest first); who is in which
-            # is read from the planned times, the sizes and gap checked.
-            order, groups, k = sorted(planned, key=planned.__getitem__), [], 0
-            for size in arrival["sizes"]:
-                groups.append(order[k : k + size])
-                k += size
+        groups = waves(arrival, planned)
         rule = {v: ref + k * gap_s for k, group in enumerate(groups) for v in group}
     else:
         raise ValueError(f"arrival kind {kind!r}")
@@ -382,24 +389,63 @@ def planned_slots(scenario: Mapping[str, Any], record: Mapping[str, Any]) -> dic
     return {v: (t, t) for v, t in rule.items()}
 
 
+def slot_rule_breaks(scenario: Mapping[str, Any], slots_s: Mapping[str, float]) -> list[str]:
+    """How the slots ``slots_s`` (mission s, each vehicle's, as moved in flight) break the
+    scenario's arrival rule, where slots move apart (ordered kinds): ``spaced``, consecutive
+    slots (in their order as moved: a vehicle may take a later place) closer than the
+    interval; ``waves``, a wave's vehicles on different slots, or consecutive waves closer
+    than the gap; ``simultaneous``, vehicles on different slots. Nothing for ``windows``."""
+    arrival = scenario["arrival"]
+    kind = arrival["kind"]
+    same_s = 1e-3
+    if kind == "windows" or not slots_s:
+        return []
+    if kind == "simultaneous":
+        lo, hi = min(slots_s.values()), max(slots_s.values())
+        return (
+            [f"slots {lo:.3f}-{hi:.3f} s apart in a simultaneous arrival"]
+            if hi - lo > same_s
+            else []
+        )
+    if kind == "spaced":
+        spacing_s, groups = float(arrival["interval_s"]), [[v] for v in slots_s]
+    else:
+        spacing_s, groups = float(arrival["gap_s"]), waves(arrival, slots_s)
+    out = []
+    at: list[tuple[float, list[str]]] = []
+    for group in groups:
+        times = [slots_s[v] for v in group if v in slots_s]
+        if not times:
+            continue
+        if max(times) - min(times) > same_s:
+            out.append(f"one wave on slots {min(times):.3f}-{max(times):.3f} s: {group}")
+        at.append((min(times), group))
+    at.sort(key=lambda x: x[0])
+    for (t0, g0), (t1, g1) in itertools.pairwise(at):
+        if t1 - t0 < spacing_s - same_s:
+            out.append(f"{g0} and {g1} on slots {t1 - t0:.3f} s apart (at least {spacing_s:g})")
+    return out
+
+
 def arrival_misses(
     passages: Mapping[str, float | None],
     slots: Mapping[str, Slot],
     *,
     tolerance_s: float,
-    shift_s: float = 0.0,
+    shift_s: float | Mapping[str, float] = 0.0,
 ) -> dict[str, Any]:
     """The vehicles that did not pass their goal within ``tolerance_s`` of their slot moved by
-    ``shift_s`` (a team time the test allowed to move), with how far off (s) or ``None``
-    (never passed)."""
+    ``shift_s`` (a team time the test allowed to move, or each vehicle's own slot's move),
+    with how far off (s) or ``None`` (never passed)."""
     out: dict[str, Any] = {}
     for vid, (lo, hi) in slots.items():
         t = passages.get(vid)
+        shift_s_v = shift_s[vid] if isinstance(shift_s, Mapping) else shift_s
+        lo, hi = lo + shift_s_v, hi + shift_s_v
         if t is None:
             out[vid] = None
-        elif not lo + shift_s - tolerance_s <= t <= hi + shift_s + tolerance_s:
-            off = t - (lo + shift_s) if t < lo + shift_s else t - (hi + shift_s)
-            out[vid] = round(off, 2)
+        elif not lo - tolerance_s <= t <= hi + tolerance_s:
+            out[vid] = round(t - lo if t < lo else t - hi, 2)
     return out
 
 

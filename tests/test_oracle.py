@@ -45,7 +45,12 @@ def _record(planned: dict[str, float], team_s: float | None = ARRIVE_S) -> dict[
         "start_utc_s": START_UTC,
         "planned_arrival_s": team_s,
         "vehicles": [
-            {"id": v, "system_id": k + 1, "planned_arrival_s": t}
+            {
+                "id": v,
+                "system_id": k + 1,
+                "planned_arrival_s": t,
+                "target_arrival_utc_s": START_UTC + t,
+            }
             for k, (v, t) in enumerate(planned.items())
         ],
     }
@@ -112,6 +117,30 @@ def test_a_team_on_its_slots_passes_and_a_vehicle_two_seconds_late_fails(tmp_pat
     shifted = oracle.arrival_misses(passed, {v: (ARRIVE_S, ARRIVE_S) for v in GOALS},
                                     tolerance_s=1.0, shift_s=2.0)  # fmt: skip
     assert set(shifted) == set(GOALS)
+    # Or each slot its own move (ordered slots move apart): B's and C's 2 s, A's none.
+    moves = {"A": 0.0, "B": 2.0, "C": 2.0}
+    apart = oracle.arrival_misses(passed, {v: (ARRIVE_S, ARRIVE_S) for v in GOALS},
+                                  tolerance_s=1.0, shift_s=moves)  # fmt: skip
+    assert set(apart) == {"B", "C"} and apart["B"] == pytest.approx(-2.0, abs=0.01)
+
+
+def test_slots_moved_apart_are_held_to_the_arrival_rule() -> None:
+    """Spaced: any order (a vehicle may take a later place), never closer than the
+    interval; waves: one slot a wave, the gap between waves; simultaneous: one slot."""
+    spaced = {"arrival": {"kind": "spaced", "interval_s": 90.0, "order": ["A", "B", "C"]}}
+    assert oracle.slot_rule_breaks(spaced, {"A": 100.0, "B": 230.0, "C": 320.0}) == []
+    assert oracle.slot_rule_breaks(spaced, {"A": 100.0, "B": 280.0, "C": 190.0}) == []
+    (close,) = oracle.slot_rule_breaks(spaced, {"A": 100.0, "B": 230.0, "C": 300.0})
+    assert "['B'] and ['C'] on slots 70.000 s apart" in close
+    waves = {"arrival": {"kind": "waves", "gap_s": 60.0, "groups": [["A", "B"], ["C"]]}}
+    assert oracle.slot_rule_breaks(waves, {"A": 100.0, "B": 100.0, "C": 175.0}) == []
+    split, near = oracle.slot_rule_breaks(waves, {"A": 100.0, "B": 120.0, "C": 150.0})
+    assert "one wave on slots 100.000-120.000 s" in split and "50.000 s apart" in near
+    together = {"arrival": {"kind": "simultaneous"}}
+    assert oracle.slot_rule_breaks(together, {"A": 100.0, "B": 100.0}) == []
+    assert oracle.slot_rule_breaks(together, {"A": 100.0, "B": 101.0})
+    windows = {"arrival": {"kind": "windows", "windows": []}}
+    assert oracle.slot_rule_breaks(windows, {"A": 100.0, "B": 100.5}) == []
 
 
 def test_a_vehicle_that_misses_its_goal_by_more_than_the_radius_never_passed_it(
@@ -298,6 +327,20 @@ def test_a_truth_log_that_is_not_one_says_which_line(tmp_path: Path) -> None:
     assert math.isfinite(float(oracle.read_tracks(good)[1].terrain_m[0]))
 
 
+def _moved(
+    record: dict[str, Any], team_s: float, own_s: dict[str, float] | None = None
+) -> dict[str, Any]:
+    """``record`` with its team time moved ``team_s`` later and every slot with it, or each
+    slot by its own ``own_s``."""
+    own_s = own_s or {}
+    vehicles = [
+        {**v, "target_arrival_utc_s": v["target_arrival_utc_s"] + own_s.get(v["id"], team_s)}
+        for v in record["vehicles"]
+    ]
+    return {**record, "required_arrival_s": record["required_arrival_s"] + team_s,
+            "vehicles": vehicles}  # fmt: skip
+
+
 def test_the_flight_verdict_says_every_way_a_flight_failed(tmp_path: Path) -> None:
     """:func:`tests.verdict.judge` on the logs made here: the team on its slots, apart and out
     of the zones has no problem; a team time moved past its bound, a vehicle 2 s late, a pair
@@ -317,15 +360,21 @@ def test_the_flight_verdict_says_every_way_a_flight_failed(tmp_path: Path) -> No
     judged.check()
     assert judged.together_s == pytest.approx(ARRIVE_S + 60.0 + PERIOD_S)
     # The team time moved 3 s later: past a bound of 0 s, and everyone 3 s early for it.
-    moved = verdict.judge({**record, "required_arrival_s": ARRIVE_S + 3.0}, clean, **kw)
-    (shifted, early) = moved.problems()
+    moved = verdict.judge(_moved(record, 3.0), clean, **kw)
+    (shifted, slots, early) = moved.problems()
     assert "moved +3.0 s" in shifted and "'A': -3.0" in early
+    assert slots == "slots moved by (s) {'A': 3.0, 'B': 3.0, 'C': 3.0} (allowed 0)"
     with pytest.raises(AssertionError, match="moved"):
         moved.check()
     # Allowed to move 3 s and every one on it: no problem.
     late = _write_truth(tmp_path / "late.jsonl", late_s=dict.fromkeys(GOALS, 3.0))
-    assert verdict.judge({**record, "required_arrival_s": ARRIVE_S + 3.0}, late,
+    assert verdict.judge(_moved(record, 3.0), late,
                          **{**kw, "team_shift_max_s": 3.0}).problems() == []  # fmt: skip
+    # Only B's slot moved, in a simultaneous arrival: the rule is broken, B on its slot.
+    b_only = _moved(record, 0.0, {"B": 3.0})
+    b_late = _write_truth(tmp_path / "b_late.jsonl", late_s={"B": 3.0})
+    (broken,) = verdict.judge(b_only, b_late, **{**kw, "team_shift_max_s": 3.0}).problems()
+    assert "break the arrival rule" in broken and "simultaneous" in broken
     # One 2 s late; a pair 100 m apart; a sample in a disc; too short together.
     b_late = verdict.judge(record, _write_truth(tmp_path / "b.jsonl", late_s={"B": 2.0}), **kw)
     assert b_late.problems() == ["off their slots by (s, None: never passed): {'B': 2.0}"]

@@ -9,7 +9,9 @@ asserts, all failures said together with the figures and the flight's story:
 - the team time moved by no more than the test allows (``required_arrival_s`` against the
   ``planned_arrival_s`` set before launch);
 - every vehicle that should arrive passed its goal within ``tolerance_s`` of its planned slot
-  (moved by that shift);
+  moved as the coordinator moved it (the record's ``target_arrival_utc_s``: ordered slots
+  move apart, the ones before a late vehicle's staying), each move within the test's bound and
+  the moved slots keeping the scenario's rule (spacing, waves, one time), checked here;
 - every pair kept the scenario's separation in 3-D at every truth sample both were airborne,
   the whole flight long, and every pair flew together long enough for that to mean something;
 - no airborne true sample lies inside a forbidden zone (the scenario's, from when each was
@@ -40,6 +42,12 @@ class Verdict:
     passages_s: dict[str, float | None]
     slots_s: dict[str, oracle.Slot]
     shift_s: float
+    """How far the team time moved (the first slot's, for ordered slots)."""
+    slot_moves_s: dict[str, float]
+    """How far each vehicle's slot moved in flight (0 for windows: the window is its slot)."""
+    rule_breaks: list[str]
+    """How the slots as moved break the scenario's arrival rule (:func:`tests.oracle.
+    slot_rule_breaks`)."""
     separation: oracle.Separation
     together_s: float
     """The least time any pair was airborne together (truth samples times the period)."""
@@ -63,7 +71,7 @@ class Verdict:
             {v: t for v, t in self.passages_s.items() if v in self.arriving},
             {v: s for v, s in self.slots_s.items() if v in self.arriving},
             tolerance_s=self.tolerance_s,
-            shift_s=self.shift_s,
+            shift_s=self.slot_moves_s,
         )
 
     def entries(self) -> list[tuple[str, str, float]]:
@@ -77,6 +85,12 @@ class Verdict:
             out.append(
                 f"the team time moved {self.shift_s:+.1f} s (allowed {self.team_shift_max_s:g})"
             )
+        moved = {
+            v: round(s, 1) for v, s in self.slot_moves_s.items() if abs(s) > self.team_shift_max_s
+        }
+        if moved:
+            out.append(f"slots moved by (s) {moved} (allowed {self.team_shift_max_s:g})")
+        out.extend(f"the slots as moved break the arrival rule: {b}" for b in self.rule_breaks)
         misses = self.misses()
         if misses:
             out.append(f"off their slots by (s, None: never passed): {misses}")
@@ -105,13 +119,18 @@ class Verdict:
         out: dict[str, float | None] = {}
         for vid, (lo, hi) in self.slots_s.items():
             t = self.passages_s.get(vid)
-            lo, hi = lo + self.shift_s, hi + self.shift_s
+            lo, hi = lo + self.slot_moves_s[vid], hi + self.slot_moves_s[vid]
             out[vid] = None if t is None else round(min(0.0, t - lo) + max(0.0, t - hi), 3)
         return out
 
     def __str__(self) -> str:
+        apart = {
+            v: round(s, 1) for v, s in self.slot_moves_s.items() if abs(s - self.shift_s) > 1e-3
+        }
         return (
-            f"team time moved {self.shift_s:+.1f} s; passages against the slots (s): "
+            f"team time moved {self.shift_s:+.1f} s"
+            + (f" (slots moved apart: {apart})" if apart else "")
+            + "; passages against the slots (s): "
             f"{self.errors_s()}; "
             f"least separation {self.separation}; pairs together at least "
             f"{self.together_s:.0f} s"
@@ -123,6 +142,20 @@ def team_shift_s(record: Mapping[str, Any]) -> float:
     (0 with no team time, as for windows)."""
     final, planned = record["required_arrival_s"], record["planned_arrival_s"]
     return 0.0 if final is None or planned is None else float(final) - float(planned)
+
+
+def slot_moves_s(
+    scenario: Mapping[str, Any], record: Mapping[str, Any]
+) -> tuple[dict[str, float], dict[str, float]]:
+    """How far each vehicle's slot moved in flight (the record's ``target_arrival_utc_s``
+    against its ``planned_arrival_s``; 0 for windows, judged against the window itself), and
+    each slot as moved (mission s)."""
+    start = float(record["start_utc_s"])
+    if scenario["arrival"]["kind"] == "windows":
+        return {v["id"]: 0.0 for v in record["vehicles"]}, {}
+    final = {v["id"]: float(v["target_arrival_utc_s"]) - start for v in record["vehicles"]}
+    moves = {v["id"]: final[v["id"]] - float(v["planned_arrival_s"]) for v in record["vehicles"]}
+    return moves, final
 
 
 def least_overlap_s(tracks: Mapping[str, oracle.Track]) -> float:
@@ -159,6 +192,7 @@ def judge(
     tracks = oracle.tracks_by_vehicle(truth, record)
     ground = oracle.Ground.of(scenario)
     slots = oracle.planned_slots(scenario, record)
+    moves, final = slot_moves_s(scenario, record)
     zones = [*oracle.scenario_zones(scenario, start, oracle.takeoffs(tracks)), *extra_zones]
     return Verdict(
         start_utc_s=start,
@@ -167,6 +201,8 @@ def judge(
         passages_s=oracle.passages(tracks, ground, oracle.goals(scenario), start),
         slots_s=slots,
         shift_s=team_shift_s(record),
+        slot_moves_s=moves,
+        rule_breaks=oracle.slot_rule_breaks(scenario, final),
         separation=oracle.separation(tracks),
         together_s=least_overlap_s(tracks),
         zones=zones,

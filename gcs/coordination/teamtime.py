@@ -2,7 +2,10 @@
 it later (to its earliest arrival plus a margin), unless another has already arrived, or
 another could not arrive that late (its minimum speed, and no loiter turns left to splice in
 before its goal; or on its final approach, where no speed is asked): then the late vehicle
-alone is released from its slot, with an alarm, and the others keep theirs; with arrival
+alone is released from its slot, with an alarm, and the others keep theirs. Ordered slots
+(spaced arrivals, landing slots, waves) move from the late vehicle's on: the slots before it
+stay, those after it move only as far as their spacing needs, and a spaced vehicle that the
+ones after it cannot wait for takes a later place in the order if one serves. With arrival
 windows a late vehicle's own slot moves within its window. A lost vehicle can bring it
 earlier; the operator moves it (refused with the earliest feasible time). Ground vehicles
 re-time their takeoff, in the wind the airborne ones measure once one does (the schedule's
@@ -25,13 +28,15 @@ from gcs.coordination.events import EventKind
 from gcs.coordination.member import Member
 from gcs.errors import GcsError
 from planner.retime import earliest_from_ground_s, takeoff_for
-from planner.scenario import Scenario, Windows
+from planner.scenario import Scenario, Spaced, Waves, Windows
 from planner.schedule import VehicleSchedule
 from planner.wind import Wind
 
 __all__ = ["TeamTime", "TeamTimeRefused", "names_of"]
 
 ON_FINAL = "on its final approach, at the speed it flies"
+SAME_SLOT_S = 1e-6
+"""Slots closer than this (s) are one (a wave's vehicles share theirs)."""
 """Why a vehicle on its final approach arrives when it does (:meth:`TeamTime.on_final_eta_s`)."""
 
 
@@ -120,27 +125,34 @@ class TeamTime:
             return None
         return m.last_fix_s + max(m.track.length_m - m.s_m, 0.0) / max(m.groundspeed_m_s, 1.0)
 
+    def _latest_s(self, other: Member, slot_s: float) -> float | None:
+        """None if ``other`` can still arrive at ``slot_s`` (mission s, later than its slot),
+        else the latest it can (one on its final approach: its arrival as it flies; one that
+        has arrived: then)."""
+        if other.arrival_s is not None:
+            return other.arrival_s
+        tolerance_s = self.config.tolerance_s
+        final_s = self.on_final_eta_s(other)
+        if final_s is not None:
+            return None if slot_s <= final_s + tolerance_s else final_s
+        d = other.last_decision
+        slower_s = math.inf if other.phase == "ground" or d is None else d.eta_max_s
+        if slot_s <= slower_s + tolerance_s:
+            return None  # it follows (flying slower; room for turns is not looked for)
+        follow_s = self.latest_arrival_s(other)
+        return None if slot_s <= follow_s + tolerance_s else follow_s
+
     def _cannot_follow(self, new_ref: float, movers: Collection[str]) -> list[tuple[str, float]]:
         """The vehicles other than ``movers`` (the late ones) that a team time of ``new_ref``
         would make early whatever they do, each with the latest team time it can follow (one
         on its final approach: its arrival as it flies)."""
         out = []
-        tolerance_s = self.config.tolerance_s
         for other in self.members.values():
             if other.vehicle_id in movers or other.done:
                 continue
-            final_s = self.on_final_eta_s(other)
-            if final_s is not None:
-                if new_ref > final_s - other.offset_s + tolerance_s:
-                    out.append((other.vehicle_id, final_s - other.offset_s))
-                continue
-            d = other.last_decision
-            slower_s = math.inf if other.phase == "ground" or d is None else d.eta_max_s
-            if new_ref <= slower_s - other.offset_s + tolerance_s:
-                continue  # it follows (flying slower; room for turns is not looked for)
-            follow_s = self.latest_arrival_s(other) - other.offset_s
-            if new_ref > follow_s + tolerance_s:
-                out.append((other.vehicle_id, follow_s))
+            latest_s = self._latest_s(other, new_ref + other.offset_s)
+            if latest_s is not None:
+                out.append((other.vehicle_id, latest_s - other.offset_s))
         return out
 
     def _retime_without(self, lost: Member, now: float, out: list[act.Action]) -> None:
@@ -244,6 +256,9 @@ class TeamTime:
             if isinstance(self.scenario.arrival, Windows):
                 self._late_in_window(m, d, t, out)
             return
+        if isinstance(self.scenario.arrival, Spaced | Waves):
+            self._late_in_order(m, d, t, out)
+            return
         new_ref = d.eta_min_s - m.offset_s + self._late_margin_s(d.eta_min_s, t)
         if new_ref <= ref:
             return
@@ -284,6 +299,168 @@ class TeamTime:
             m.vehicle_id,
             out,
         )
+
+    def _slots(self) -> list[list[Member]]:
+        """The team's slots in their order, each with the vehicles that arrive in it (one
+        each when spaced, a wave's), the lost and aborted ones left out."""
+        timed = [x for x in self.members.values() if not x.done or x.arrival_s is not None]
+        timed.sort(key=lambda x: (x.target_s, x.offset_s))
+        slots: list[list[Member]] = []
+        for x in timed:
+            if slots and abs(slots[-1][0].target_s - x.target_s) < SAME_SLOT_S:
+                slots[-1].append(x)
+            else:
+                slots.append([x])
+        return slots
+
+    def _spacing_s(self) -> float:
+        """How far apart the slots are kept (s): the spacing, or the gap between waves."""
+        arrival = self.scenario.arrival
+        assert isinstance(arrival, Spaced | Waves)
+        return arrival.interval_s if isinstance(arrival, Spaced) else arrival.gap_s
+
+    def _pushed(
+        self, slots: list[list[Member]], first_s: float, mover: Member
+    ) -> tuple[dict[str, float], list[tuple[str, float]]]:
+        """The first of ``slots`` moved to ``first_s``, each after it kept its spacing after
+        the one before (moved only as far as that needs): the new slots by vehicle, and the
+        vehicles other than ``mover`` that cannot follow, each with the latest it can
+        arrive."""
+        spacing_s = self._spacing_s()
+        moves: dict[str, float] = {}
+        stuck: list[tuple[str, float]] = []
+        at_s = first_s
+        for i, slot in enumerate(slots):
+            if i and slot[0].target_s >= at_s - SAME_SLOT_S:
+                break
+            for x in slot:
+                moves[x.vehicle_id] = at_s
+                latest_s = None if x is mover else self._latest_s(x, at_s)
+                if latest_s is not None:
+                    stuck.append((x.vehicle_id, latest_s))
+            at_s += spacing_s
+        return moves, stuck
+
+    def _earliest_s(self, m: Member, now_s: float) -> tuple[float, str]:
+        """The earliest a vehicle still flying to its slot can arrive (mission s), and why."""
+        if m.phase == "ground":
+            v = self.scenario.vehicle(m.vehicle_id)
+            t0 = max(now_s, v.takeoff_window_s[0])
+            earliest = earliest_from_ground_s(v, self._from_ground(m), t0)
+            return earliest, (
+                f"on the ground: taking off at {t0:.0f} s, climbing out and flying at top speed"
+            )
+        if (final_s := self.on_final_eta_s(m)) is not None:
+            return final_s, ON_FINAL
+        if m.last_decision is not None:
+            # The ETA at top speed from its last decision, moved on to now.
+            return (
+                m.last_decision.eta_min_s,
+                f"at {m.limits.airspeed_max_m_s:g} m/s from where it is",
+            )
+        return m.target_s, "still climbing out"  # no estimate yet: it keeps its slot
+
+    def _later_place(
+        self, slots: list[list[Member]], k: int, wanted_s: float, now_s: float
+    ) -> tuple[dict[str, float], int] | None:
+        """Spaced arrivals: the first later place the late vehicle of slot ``k`` can take (it
+        goes after the vehicle of slot ``j``, each of those it lets by one place earlier,
+        which each must make; the slots after its new one pushed as far as their spacing
+        needs, which each must follow): the new slots by vehicle and ``j``; None if there is
+        none."""
+        mover = slots[k][0]
+        tolerance_s = self.config.tolerance_s
+        earlier: dict[str, float] = {}
+        for j in range(k + 1, len(slots)):
+            (passed,) = slots[j]
+            place_s = slots[j - 1][0].target_s
+            if (
+                passed.arrival_s is not None
+                or self._earliest_s(passed, now_s)[0] > place_s + tolerance_s
+            ):
+                return None  # it cannot be let by, nor any after it
+            earlier[passed.vehicle_id] = place_s
+            moves, stuck = self._pushed(
+                [[mover], *slots[j + 1 :]], max(wanted_s, passed.target_s), mover
+            )
+            if not stuck:
+                return earlier | moves, j
+        return None
+
+    def _late_in_order(self, m: Member, d: Decision, t: float, out: list[act.Action]) -> None:
+        """Ordered slots (spaced arrivals and landing slots, waves): the late vehicle's slot
+        (its whole wave's) moves to the earliest it can make plus the margin, and each slot
+        after it only as far as its spacing after the one before needs; the slots before it
+        stay, and so do those of the vehicles that have arrived. Where one that would move
+        cannot follow, a spaced vehicle takes the first later place it can make, the vehicles
+        it lets by each one place earlier; failing that it alone is released from its slot,
+        with an alarm naming those that cannot follow."""
+        wanted_s = d.eta_min_s + self._late_margin_s(d.eta_min_s, t)
+        if wanted_s <= m.target_s or m.late_said:
+            return
+        slots = self._slots()
+        k = next(i for i, slot in enumerate(slots) if any(x is m for x in slot))
+        why = (
+            f"{m.vehicle_id} cannot arrive before {d.eta_min_s:.1f} s even at "
+            f"{m.limits.airspeed_max_m_s:g} m/s"
+        )
+        moves, stuck = self._pushed(slots[k:], wanted_s, m)
+        if not stuck:
+            self._move_slots(moves, t, f"slots moved from place {k + 1} on: {why}", m, out)
+            return
+        if isinstance(self.scenario.arrival, Spaced) and all(len(s) == 1 for s in slots):
+            later = self._later_place(slots, k, wanted_s, t)
+            if later is not None:
+                moves, j = later
+                let_by = ", ".join(x[0].vehicle_id for x in slots[k + 1 : j + 1])
+                self._move_slots(
+                    moves,
+                    t,
+                    f"{m.vehicle_id} takes place {j + 1} in the order, after {let_by} (each "
+                    f"one place earlier): {why}, and {names_of(stuck)} cannot arrive as late "
+                    f"as its place needs",
+                    m,
+                    out,
+                )
+                return
+        self._say_late(
+            m,
+            f"late by {d.eta_min_s - m.target_s:.1f} s at top speed: its slot stays "
+            f"{m.target_s:.1f} s, as {names_of(stuck)} cannot arrive as late as the slots "
+            "after it would need",
+            d.eta_min_s - m.target_s,
+            t,
+            out,
+        )
+
+    def _move_slots(
+        self, moves: dict[str, float], t: float, reason: str, m: Member, out: list[act.Action]
+    ) -> None:
+        """Give each vehicle of ``moves`` its new slot (mission s): the team time is the first
+        slot's again, each vehicle's offset from it kept; one event with the reason, the late
+        vehicle's new slot and every slot that moved."""
+        for vid, slot_s in moves.items():
+            x = self.members[vid]
+            x.target_s = slot_s
+            x.next_decision_s = -math.inf
+        self.team_ref_s = min(x.target_s for slot in self._slots() for x in slot)
+        for x in self.members.values():
+            x.offset_s = x.target_s - self.team_ref_s
+        self.version += 1
+        out.append(
+            act.Report(
+                EventKind.ARRIVAL,
+                reason,
+                m.vehicle_id,
+                value=round(moves[m.vehicle_id], 3),
+                t_s=t,
+                payload={"slots": {vid: round(s, 3) for vid, s in moves.items()}},
+            )
+        )
+        for vid in moves:
+            x = self.members[vid]
+            if x.phase == "ground":
+                self._retime_takeoff(x, t, out)
 
     def _set_team_time(
         self, new_ref: float, t: float, reason: str, vehicle: str | None, out: list[act.Action]
@@ -342,23 +519,7 @@ class TeamTime:
         for m in self.members.values():
             if m.done:
                 continue
-            if m.phase == "ground":
-                v = self.scenario.vehicle(m.vehicle_id)
-                t0 = max(now_s, v.takeoff_window_s[0])
-                earliest = earliest_from_ground_s(v, self._from_ground(m), t0)
-                why = (
-                    f"on the ground: taking off at {t0:.0f} s, climbing out and flying at top speed"
-                )
-            elif (final_s := self.on_final_eta_s(m)) is not None:
-                earliest = final_s
-                why = ON_FINAL
-            elif m.last_decision is not None:
-                # The ETA at top speed from its last decision, moved on to now.
-                earliest = m.last_decision.eta_min_s
-                why = f"at {m.limits.airspeed_max_m_s:g} m/s from where it is"
-            else:
-                earliest = m.target_s  # climbing: no estimate yet; keep its slot
-                why = "still climbing out"
+            earliest, why = self._earliest_s(m, now_s)
             earliest -= m.offset_s
             if best is None or earliest > best[0]:
                 best = (earliest, m.vehicle_id, why)

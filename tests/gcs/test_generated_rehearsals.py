@@ -8,9 +8,11 @@ Each seed flies unless it is listed as refused before launch (:data:`REFUSED`, w
 reason it must give): an unlisted refusal fails, and so does a listed seed that flies. A
 flight must end completed with every vehicle on its slot, judged by :mod:`tests.verdict` from
 the simulator's truth log alone: each vehicle's goal passage within 1 s of the slot the
-schedule set before launch (checked against the scenario's arrival rule) moved by the team
-time's shift, which may only be later and by no more than :data:`TEAM_SHIFT_MAX_S`, and every
-pair at least the scenario's separation apart in 3-D the whole flight long.
+schedule set before launch (checked against the scenario's arrival rule) moved as the
+coordinator moved it (ordered slots from a late vehicle's on, the ones before it staying),
+each move only later and by no more than :data:`TEAM_SHIFT_MAX_S`, the slots as moved still
+keeping the rule, and every pair at least the scenario's separation apart in 3-D the whole
+flight long.
 """
 
 from __future__ import annotations
@@ -70,5 +72,5 @@ async def test_a_generated_scenario_flies_each_vehicle_to_its_slot_or_is_refused
         team_shift_max_s=TEAM_SHIFT_MAX_S,
         together_min_s=TOGETHER_MIN_S,
     )
-    assert verdict.shift_s >= 0.0, f"the team time moved earlier: {verdict}"
+    assert min(verdict.slot_moves_s.values()) > -1e-3, f"a slot moved earlier: {verdict}"
     print(f"seed {seed} ({kind}, wind {wind}): {verdict}")

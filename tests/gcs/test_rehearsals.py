@@ -370,7 +370,7 @@ async def test_connect_rehearsal_flies_separately_started_vehicles_one_behind_ma
         assert told_utc is not None, vid
         (slot_s, _), passed_s = verdict.slots_s[vid], verdict.passages_s[vid]
         assert passed_s is not None, vid
-        assert abs(told_utc - (start + slot_s + verdict.shift_s)) <= 1.0, vid
+        assert abs(told_utc - (start + slot_s + verdict.slot_moves_s[vid])) <= 1.0, vid
         assert abs(told_utc - (start + passed_s)) <= 0.5, (vid, told_utc - start, passed_s)
     strategies = {a["strategy"] for a in record["adjustments"]}
     assert strategies >= {"takeoff_delay", "speed", "loiter"}
