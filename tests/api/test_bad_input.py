@@ -561,3 +561,68 @@ async def test_a_lockstep_file_is_joined_only_from_the_folder_the_service_names(
             assert "lockstep" in detail and why in detail, (body, detail)
             assert (await client.get("/v1/flights", headers=auth("observe"))).json() == []
     assert pace.read_bytes() == kept
+
+
+# -- the team time of ordered slots and of windows ----------------------------------------------
+
+
+async def _slots(client: httpx.AsyncClient, fid: str, version: int) -> dict[str, float]:
+    """Each vehicle's slot in the flight's snapshot once it shows team time ``version`` (its
+    worker tells it within a moment: waited for however long a busy machine takes)."""
+    while True:
+        view = (await client.get(f"/v1/flights/{fid}", headers=auth("observe"))).json()
+        if view["team_time_version"] == version:
+            return {v["id"]: v["slot_s"] for v in view["vehicles"]}
+        await asyncio.sleep(0.05)
+
+
+@pytest.mark.parametrize("kind", ["spaced", "windows"])
+async def test_a_team_time_move_of_spaced_slots_or_windows_is_409_naming_why(
+    client: httpx.AsyncClient, kind: str
+) -> None:
+    """The operator's move on the paper flight (bundled simulator vehicles, planned, not
+    launched) with its arrivals 60 s apart, or in windows of their own. Spaced: a time
+    before the earliest the team can make is 409 with the earliest feasible time and the
+    vehicle that forces it, every slot kept; one it can make moves every slot alike, the
+    spacing kept. Windows: every move is 409, as there is no team time to move."""
+    vehicles = ("UAV1", "UAV2", "UAV3")
+    arrival: dict[str, Any] = (
+        {"kind": "spaced", "interval_s": 60.0}
+        if kind == "spaced"
+        else {
+            "kind": "windows",
+            "windows": [{"vehicle": v, "earliest_s": 0, "latest_s": 20_000} for v in vehicles],
+        }
+    )
+    r = await client.post("/v1/scenarios", json=_paper_with("arrival", arrival), headers=JSON)
+    assert r.status_code == 201, r.text
+    schedule = await _planned(client, r.json()["id"])
+    r = await client.post(
+        "/v1/flights",
+        json={"schedule_id": schedule["id"], "rehearsal": {"speedup": 200, "seed": 1}},
+        headers=auth("operate"),
+    )
+    assert r.status_code == 201, r.text
+    fid = r.json()["flight_id"]
+    path = f"/v1/flights/{fid}/team-time"
+    now = (await client.get(path, headers=auth("observe"))).json()
+    slots = await _slots(client, fid, now["version"])
+    if kind == "windows":
+        assert now["team_time_s"] is None
+        r = await client.put(path, json={"arrival_s": 6_000.0}, headers=auth("operate"))
+        assert "per-vehicle windows: no team time to move" in problem(r, 409)["detail"]
+        assert await _slots(client, fid, now["version"]) == slots
+        return
+    team_s = now["team_time_s"]
+    assert sorted(slots.values()) == pytest.approx([team_s, team_s + 60.0, team_s + 120.0])
+    r = await client.put(path, json={"arrival_s": team_s - 900.0}, headers=auth("operate"))
+    body = problem(r, 409)
+    assert body["vehicle"] in vehicles and body["vehicle"] in body["detail"], body
+    assert team_s - 900.0 < body["earliest_feasible_s"] <= team_s + 1e-6, body
+    assert f"earliest feasible {body['earliest_feasible_s']:.1f} s" in body["detail"]
+    assert await _slots(client, fid, now["version"]) == slots
+    moved = await client.put(path, json={"arrival_s": team_s + 60.0}, headers=auth("operate"))
+    assert moved.status_code == 200, moved.text
+    assert moved.json() == {"team_time_s": team_s + 60.0, "version": now["version"] + 1}
+    after = await _slots(client, fid, now["version"] + 1)
+    assert after == {v: pytest.approx(s + 60.0, abs=1e-3) for v, s in slots.items()}
