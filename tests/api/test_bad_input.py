@@ -117,6 +117,20 @@ async def _planned(client: httpx.AsyncClient, scenario_id: str) -> dict[str, Any
     return result
 
 
+async def _rehearsal_of(client: httpx.AsyncClient, scenario_id: str) -> str:
+    """A flight of the scenario's schedule on bundled simulator vehicles (planned, not
+    launched): its id."""
+    schedule = await _planned(client, scenario_id)
+    r = await client.post(
+        "/v1/flights",
+        json={"schedule_id": schedule["id"], "rehearsal": {"speedup": 200, "seed": 1}},
+        headers=auth("operate"),
+    )
+    assert r.status_code == 201, r.text
+    fid: str = r.json()["flight_id"]
+    return fid
+
+
 # -- malformed scenarios ----------------------------------------------------------------------
 
 
@@ -451,14 +465,7 @@ async def test_stale_if_match_is_412(
     """A flight of the paper schedule on bundled simulator vehicles (planned, not launched):
     a move with the version read is taken, one with a stale version is refused."""
     client, app = fresh
-    schedule = await _planned(client, await _keep_paper(client))
-    r = await client.post(
-        "/v1/flights",
-        json={"schedule_id": schedule["id"], "rehearsal": {"speedup": 200, "seed": 1}},
-        headers=auth("operate"),
-    )
-    assert r.status_code == 201, r.text
-    fid = r.json()["flight_id"]
+    fid = await _rehearsal_of(client, await _keep_paper(client))
     path = f"/v1/flights/{fid}/team-time"
     read = await client.get(path, headers=auth("observe"))
     assert read.status_code == 200, read.text
@@ -596,14 +603,7 @@ async def test_a_team_time_move_of_spaced_slots_or_windows_is_409_naming_why(
     )
     r = await client.post("/v1/scenarios", json=_paper_with("arrival", arrival), headers=JSON)
     assert r.status_code == 201, r.text
-    schedule = await _planned(client, r.json()["id"])
-    r = await client.post(
-        "/v1/flights",
-        json={"schedule_id": schedule["id"], "rehearsal": {"speedup": 200, "seed": 1}},
-        headers=auth("operate"),
-    )
-    assert r.status_code == 201, r.text
-    fid = r.json()["flight_id"]
+    fid = await _rehearsal_of(client, r.json()["id"])
     path = f"/v1/flights/{fid}/team-time"
     now = (await client.get(path, headers=auth("observe"))).json()
     slots = await _slots(client, fid, now["version"])
