@@ -45,6 +45,7 @@ from planner.schedule import (
     Stage,
     VehicleSchedule,
 )
+from planner.slots import ordered_targets, slot_spacing_s
 from planner.threats import ThreatZone, active, build_threats
 from planner.timing import TIME_TOL_S
 
@@ -231,10 +232,15 @@ def apply_popup(
         if where[v.id][0] != "arrived"
     ]
     natural = {vs.vehicle_id: vs.arrival_s for vs in current.vehicles}
+    spacing_s = slot_spacing_s(scenario)
     try:
-        targets, ref, reason = arrival_targets(
-            scenario, windows, current.required_arrival_s, natural
-        )
+        if spacing_s is None:
+            targets, ref, reason = arrival_targets(
+                scenario, windows, current.required_arrival_s, natural
+            )
+        else:
+            # Ordered slots: only the slots from a vehicle that cannot make its own move.
+            targets, ref, reason = ordered_targets(windows, natural, spacing_s)
     except InfeasibleError as err:
         if not others_may_stay:
             raise

@@ -29,6 +29,7 @@ from planner.retime import can_loiter_after, clear_of_team
 from planner.scenario import Appearance, Scenario, Threat
 from planner.schedule import Adjustment, Anchor, Schedule, VehicleSchedule
 from planner.schedulefile import PathMission, path_mission, splice_mission
+from planner.slots import slot_spacing_s
 from planner.threats import ThreatZone, active, build_threats
 from planner.wind import CALM, Wind
 
@@ -59,6 +60,10 @@ class MissionChanges:
     replan_overdue: set[str]
     _cannot_follow: Callable[[float, Collection[str]], list[tuple[str, float]]]
     """The team-time part's (:meth:`gcs.coordination.teamtime.TeamTime._cannot_follow`)."""
+    _slots_cannot_follow: Callable[[dict[str, float], Collection[str]], list[tuple[str, float]]]
+    """The team-time part's (:meth:`gcs.coordination.teamtime.TeamTime._slots_cannot_follow`)."""
+    _set_slots: Callable[[dict[str, float]], None]
+    """The team-time part's (:meth:`gcs.coordination.teamtime.TeamTime._set_slots`)."""
 
     def hold_anchor_s_m(self, m: Member, zone_id: str) -> float | None:
         """Where the vehicle holds short of the zone (m along its path); None: not holding
@@ -615,7 +620,16 @@ class MissionChanges:
         outcome: PopupOutcome = r.result
         new_ref = outcome.schedule.required_arrival_s
         stuck = []
-        if new_ref is not None and self.team_ref_s is not None and new_ref > self.team_ref_s:
+        # Ordered slots (spaced, landing slots, waves) move apart: each vehicle's its own.
+        slots: dict[str, float] | None = None
+        if new_ref is not None and slot_spacing_s(self.scenario) is not None:
+            slots = {
+                m.vehicle_id: outcome.schedule.vehicle(m.vehicle_id).arrival_s
+                for m in self.members.values()
+                if not m.done
+            }
+            stuck = self._slots_cannot_follow(slots, outcome.affected)
+        elif new_ref is not None and self.team_ref_s is not None and new_ref > self.team_ref_s:
             stuck = self._cannot_follow(new_ref, outcome.affected)
         for ev in outcome.events:
             if stuck and ev.kind == EventKind.ARRIVAL:
@@ -647,7 +661,10 @@ class MissionChanges:
                 )
             )
             new_ref = self.team_ref_s
-        if (
+            slots = None if slots is None else {}
+        if slots is not None:
+            self._set_slots(slots)
+        elif (
             new_ref is not None
             and self.team_ref_s is not None
             and abs(new_ref - self.team_ref_s) > 1e-3
@@ -658,7 +675,7 @@ class MissionChanges:
             out.append(self._adjustment(a, t))
         for m in self.members.values():
             vs = outcome.schedule.vehicle(m.vehicle_id)
-            if new_ref is not None:
+            if new_ref is not None and slots is None:
                 m.target_s = new_ref + m.offset_s
             m.next_decision_s = -math.inf
             if vs is m.schedule or m.vehicle_id not in job.keeps or m.done:

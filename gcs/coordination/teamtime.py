@@ -30,13 +30,12 @@ from gcs.errors import GcsError
 from planner.retime import earliest_from_ground_s, takeoff_for
 from planner.scenario import Scenario, Spaced, Waves, Windows
 from planner.schedule import VehicleSchedule
+from planner.slots import SAME_SLOT_S, pushed, slot_spacing_s
 from planner.wind import Wind
 
 __all__ = ["TeamTime", "TeamTimeRefused", "names_of"]
 
 ON_FINAL = "on its final approach, at the speed it flies"
-SAME_SLOT_S = 1e-6
-"""Slots closer than this (s) are one (a wave's vehicles share theirs)."""
 """Why a vehicle on its final approach arrives when it does (:meth:`TeamTime.on_final_eta_s`)."""
 
 
@@ -313,32 +312,29 @@ class TeamTime:
                 slots.append([x])
         return slots
 
-    def _spacing_s(self) -> float:
-        """How far apart the slots are kept (s): the spacing, or the gap between waves."""
-        arrival = self.scenario.arrival
-        assert isinstance(arrival, Spaced | Waves)
-        return arrival.interval_s if isinstance(arrival, Spaced) else arrival.gap_s
-
     def _pushed(
         self, slots: list[list[Member]], first_s: float, mover: Member
     ) -> tuple[dict[str, float], list[tuple[str, float]]]:
-        """The first of ``slots`` moved to ``first_s``, each after it kept its spacing after
-        the one before (moved only as far as that needs): the new slots by vehicle, and the
-        vehicles other than ``mover`` that cannot follow, each with the latest it can
-        arrive."""
-        spacing_s = self._spacing_s()
-        moves: dict[str, float] = {}
-        stuck: list[tuple[str, float]] = []
-        at_s = first_s
-        for i, slot in enumerate(slots):
-            if i and slot[0].target_s >= at_s - SAME_SLOT_S:
-                break
-            for x in slot:
-                moves[x.vehicle_id] = at_s
-                latest_s = None if x is mover else self._latest_s(x, at_s)
-                if latest_s is not None:
-                    stuck.append((x.vehicle_id, latest_s))
-            at_s += spacing_s
+        """``mover``'s slot (the first of ``slots``; its wave's) moved to ``first_s``, each
+        slot after it as far as its spacing after the one before needs (:func:`planner.
+        slots.pushed`): the new slots of those that move, by vehicle, and the vehicles other
+        than ``mover`` that cannot follow, each with the latest it can arrive."""
+        spacing_s = slot_spacing_s(self.scenario)
+        assert spacing_s is not None
+        now = {x.vehicle_id: x.target_s for slot in slots for x in slot}
+        new = pushed(now, {mover.vehicle_id: first_s}, spacing_s)
+        moves = {
+            vid: slot_s
+            for vid, slot_s in new.items()
+            if vid == mover.vehicle_id or slot_s > now[vid] + SAME_SLOT_S
+        }
+        stuck = []
+        for vid, slot_s in moves.items():
+            latest_s = (
+                None if vid == mover.vehicle_id else self._latest_s(self.members[vid], slot_s)
+            )
+            if latest_s is not None:
+                stuck.append((vid, latest_s))
         return moves, stuck
 
     def _earliest_s(self, m: Member, now_s: float) -> tuple[float, str]:
@@ -433,20 +429,44 @@ class TeamTime:
             out,
         )
 
+    def _set_slots(self, slots: dict[str, float]) -> None:
+        """Give each vehicle of ``slots`` its slot (mission s; re-decided at its next fix):
+        the team time is the first slot's again, each vehicle's offset from it kept; a new
+        version if any moved."""
+        moved = False
+        for vid, slot_s in slots.items():
+            x = self.members[vid]
+            moved = moved or abs(x.target_s - slot_s) > 1e-3
+            x.target_s = slot_s
+            x.next_decision_s = -math.inf
+        self.team_ref_s = min(x.target_s for slot in self._slots() for x in slot)
+        for x in self.members.values():
+            x.offset_s = x.target_s - self.team_ref_s
+        if moved:
+            self.version += 1
+
+    def _slots_cannot_follow(
+        self, slots: dict[str, float], movers: Collection[str]
+    ) -> list[tuple[str, float]]:
+        """The vehicles other than ``movers`` that the new ``slots`` (mission s) would make
+        early whatever they do, each with the latest it can arrive."""
+        out = []
+        for vid, slot_s in slots.items():
+            x = self.members[vid]
+            if vid in movers or x.done or slot_s <= x.target_s + 1e-6:
+                continue
+            latest_s = self._latest_s(x, slot_s)
+            if latest_s is not None:
+                out.append((vid, latest_s))
+        return out
+
     def _move_slots(
         self, moves: dict[str, float], t: float, reason: str, m: Member, out: list[act.Action]
     ) -> None:
         """Give each vehicle of ``moves`` its new slot (mission s): the team time is the first
         slot's again, each vehicle's offset from it kept; one event with the reason, the late
         vehicle's new slot and every slot that moved."""
-        for vid, slot_s in moves.items():
-            x = self.members[vid]
-            x.target_s = slot_s
-            x.next_decision_s = -math.inf
-        self.team_ref_s = min(x.target_s for slot in self._slots() for x in slot)
-        for x in self.members.values():
-            x.offset_s = x.target_s - self.team_ref_s
-        self.version += 1
+        self._set_slots(moves)
         out.append(
             act.Report(
                 EventKind.ARRIVAL,
