@@ -244,8 +244,12 @@ def apply_popup(
     except InfeasibleError as err:
         if not others_may_stay:
             raise
+        # In flight a route round the zone matters more than a window that no longer can be
+        # met: the vehicle is timed to the nearest it can make (the coordinator alarms it).
         own = [w for w in windows if w.vehicle_id in affected]
-        targets, ref, reason = arrival_targets(scenario, own, current.required_arrival_s, natural)
+        targets, ref, reason = arrival_targets(
+            scenario, own, current.required_arrival_s, natural, missed_ok=True
+        )
         reason = f"{reason}; with the others none remains ({err}): they keep their schedules"
     events.append(Event(at_s, "arrival", f"team arrival {format_arrival(ref)}: {reason}"))
     # Fig. 9: the constant speed each vehicle would now need, in range or not.

@@ -543,15 +543,25 @@ def arrival_targets(
     windows: Sequence[ArrivalWindow],
     requested_s: float | None,
     natural_s: Mapping[str, float],
+    *,
+    missed_ok: bool = False,
 ) -> tuple[dict[str, float], float | None, str]:
-    """Each vehicle's target arrival, the team reference and the reason for it."""
+    """Each vehicle's target arrival, the team reference and the reason for it.
+    ``missed_ok``: a vehicle that can no longer make its own arrival window (in flight, a
+    route round a zone too long for it) is timed to the nearest arrival it can make, said in
+    the reason, rather than refused."""
     arrival = scenario.arrival
     if isinstance(arrival, Windows):
         own = {w.vehicle: (w.earliest_s, w.latest_s) for w in arrival.windows}
         out: dict[str, float] = {}
+        missed: list[str] = []
         for w in windows:
             lo_s, hi_s = own[w.vehicle_id]
             lo, hi = max(w.t_min_s, lo_s), min(w.t_max_s, hi_s)
+            if lo > hi + TIME_TOL_S and missed_ok:
+                out[w.vehicle_id] = w.t_min_s if w.t_min_s > hi_s else w.t_max_s
+                missed.append(f"{w.vehicle_id} (at {out[w.vehicle_id]:.1f} s)")
+                continue
             if lo > hi + TIME_TOL_S:
                 short = lo - hi
                 why = w.min_reason if w.t_min_s > hi_s else w.max_reason
@@ -564,7 +574,10 @@ def arrival_targets(
             # arrival a second off its aim still meets the window.
             margin_s = min(WINDOW_MARGIN_S, max(hi - lo, 0.0) / 2.0)
             out[w.vehicle_id] = min(max(natural_s[w.vehicle_id], lo + margin_s), hi - margin_s)
-        return out, None, "each vehicle within its own arrival window"
+        reason = "each vehicle within its own arrival window"
+        if missed:
+            reason += f"; cannot make its window, timed to the nearest it can: {', '.join(missed)}"
+        return out, None, reason
     offsets = scenario.arrival_offsets_s()
     ref, reason = team_arrival(windows, requested_s, offsets_s=offsets)
     return {w.vehicle_id: ref + offsets[w.vehicle_id] for w in windows}, ref, reason

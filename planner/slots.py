@@ -74,14 +74,16 @@ def ordered_targets(
     Raises
     ------
     InfeasibleError
-        A vehicle cannot arrive as late as its slot would move (named, with why).
+        A vehicle cannot arrive as late as its slot would move to (named, with why).
     """
     win = {w.vehicle_id: w for w in windows}
     new = pushed(slots_s, {vid: w.t_min_s for vid, w in win.items()}, spacing_s)
     for vid, slot_s in new.items():
         w = win.get(vid)
         latest_s = slots_s[vid] if w is None else w.t_max_s
-        if slot_s > latest_s + TIME_TOL_S:
+        # Only a slot that moves is checked: one that stays is no worse than it was (a
+        # vehicle that will be early for its own slot, say, whatever the move).
+        if slot_s > slots_s[vid] + TIME_TOL_S and slot_s > latest_s + TIME_TOL_S:
             why = "it has arrived" if w is None else w.max_reason
             raise InfeasibleError(
                 f"vehicle {vid} cannot arrive as late as {slot_s:.1f} s ({why})", vehicle=vid

@@ -9,7 +9,10 @@ from typing import Any
 import numpy as np
 import yaml
 
+from planner.plan import build_world, plan
+from planner.retime import build_schedule
 from planner.scenario import load_scenario, parse_scenario
+from planner.schedule import Schedule
 from planner.terrain import build_terrain
 
 PAPER = Path(__file__).resolve().parents[1] / "scenarios" / "paper_three_uav.yaml"
@@ -301,3 +304,50 @@ def compact_paper(scale: float = 0.25) -> dict[str, Any]:
         b["radius_m"] = max(1_200, round(b["radius_m"] * scale))
     doc["name"] = f"paper_three_uav at {scale:g} scale"
     return doc
+
+
+def box_across(
+    doc: dict[str, Any],
+    vid: str,
+    along: float,
+    across_m: float,
+    depth_m: float,
+    appears: float,
+    clear_m: float,
+) -> tuple[dict[str, Any], Schedule]:
+    """An operator's no-fly box (``OP1``) across the route the scenario's schedule plans for
+    ``vid``, at ``along`` of its length, ``across_m`` wide and ``depth_m`` along it, appearing
+    ``appears`` of the way through its flight (from its takeoff to its slot, as planned);
+    and the schedule. Asserted (the test's own check of its scenario): every other vehicle's
+    planned route stays ``clear_m`` from it, so that only ``vid`` meets it."""
+    scenario = parse_scenario(doc)
+    world = build_world(scenario)
+    schedule = build_schedule(scenario, plan(scenario, world=world), world=world)
+    held = schedule.vehicle(vid)
+    appears_s = held.takeoff_s + appears * (held.arrival_s - held.takeoff_s)
+    path = held.path
+    pose = path.pose_at(along * path.length_m)
+    ue, un = math.sin(pose.heading_rad), math.cos(pose.heading_rad)
+    corners = [
+        (
+            pose.east_m + a * depth_m / 2.0 * ue + c * across_m / 2.0 * un,
+            pose.north_m + a * depth_m / 2.0 * un - c * across_m / 2.0 * ue,
+        )
+        for a, c in ((-1, -1), (1, -1), (1, 1), (-1, 1))
+    ]
+    centre = np.array([pose.east_m, pose.north_m])
+    reach_m = math.hypot(across_m, depth_m) / 2.0
+    for vs in schedule.vehicles:
+        if vs.vehicle_id == vid:
+            continue
+        s = np.linspace(0.0, vs.path.length_m, 400)
+        en = np.array([[p.east_m, p.north_m] for p in map(vs.path.pose_at, s)])
+        gap_m = float(np.min(np.hypot(*(en - centre).T))) - reach_m
+        assert gap_m > clear_m, (vs.vehicle_id, gap_m)
+    box = {
+        "kind": "no_fly",
+        "id": "OP1",
+        "polygon": [{"east_m": round(e, 1), "north_m": round(n, 1)} for e, n in corners],
+        "appears": {"at_s": round(appears_s, 1)},
+    }
+    return box, schedule

@@ -51,7 +51,7 @@ from planner.loiterflight import way_out_m
 from planner.mission import MAV_CMD_DO_CHANGE_SPEED, MAV_CMD_NAV_WAYPOINT
 from planner.plan import World
 from planner.popup import popup_zones
-from planner.scenario import Scenario, Threat
+from planner.scenario import Scenario, Threat, Windows
 from planner.schedule import Schedule
 from planner.threats import ThreatZone
 from planner.wind import Wind
@@ -88,6 +88,11 @@ NEIGHBOUR_SEPARATIONS = 2.0
 """A conflict's resolution is judged against the vehicles forecast within this many
 screening separations (:data:`RESOLVED_MARGIN` separations each) of either of the pair too
 (:func:`gcs.coordination.resolution.resolve`)."""
+TAKEOFF_RECHECK_S = 30.0
+"""How often (mission s) the vehicles still on the ground are timed again in the wind the
+ones aloft measure, with arrival windows (where no team time moves to re-time them):
+scheduled in a still-air forecast and flown into 7 m/s, a vehicle that took off as planned
+could no longer make its 40 s window even at its top speed."""
 LANDING_MARGIN_S = 120.0
 """Flare, roll-out and the disarm delay, on top of the glide (see ``landing_bound_s``)."""
 POPUP_SEEN_LATE_S = 5.0
@@ -140,6 +145,10 @@ class TeamController(ZoneGuard, TeamTime):
     Build it from a schedule (:meth:`__init__`), take :meth:`initial_uploads`, then
     :meth:`start` at a UTC and feed inputs with :meth:`handle`.
     """
+
+    next_takeoff_check_s: float = -math.inf
+    """When the vehicles on the ground are next timed again in the measured wind
+    (:data:`TAKEOFF_RECHECK_S`)."""
 
     def __init__(
         self,
@@ -372,6 +381,13 @@ class TeamController(ZoneGuard, TeamTime):
             out.append(act.Report(EventKind.ABORT, f"{self.stopped}; stopping the loop", t_s=now))
             out.append(act.Stop(self.stopped))
             return
+        if now >= self.next_takeoff_check_s and isinstance(self.scenario.arrival, Windows):
+            # Windows: no team time moves, which re-times the takeoffs for the others.
+            self.next_takeoff_check_s = now + TAKEOFF_RECHECK_S
+            if self._measured_wind() is not None:
+                for m in self.members.values():
+                    if m.phase == "ground" and not m.arm_sent and not m.schedule.airborne_start:
+                        self._retime_takeoff(m, now, out)
         for m in self.members.values():
             arm_due = now >= m.takeoff_s - self.config.arm_lead_s
             if m.phase == "ground" and arm_due and not (m.schedule.airborne_start or m.arm_sent):

@@ -190,8 +190,8 @@ class TeamTime:
 
     def _late_in_window(self, m: Member, d: Decision, t: float, out: list[act.Action]) -> None:
         """Arrival windows: no team time; the late vehicle's own slot moves to the earliest it
-        can make (plus the margin) while that is in its window, else an alarm, once, and it
-        flies at top speed to the earliest."""
+        can make (plus the margin) while that is in its window, else to the window's end with
+        an alarm, once, and it flies at top speed."""
         arrival = self.scenario.arrival
         assert isinstance(arrival, Windows)
         w = next(x for x in arrival.windows if x.vehicle == m.vehicle_id)
@@ -213,7 +213,9 @@ class TeamTime:
                 )
             )
         else:
-            m.target_s = d.eta_min_s
+            # Its slot stays the window's end, the nearest it can come: flown at its top
+            # speed, its arrival is judged (and a rehearsal passed) against the window.
+            m.target_s = w.latest_s
             self._say_late(
                 m,
                 f"misses its window [{w.earliest_s:g}, {w.latest_s:g}] s: it cannot arrive "

@@ -20,21 +20,15 @@ later. The flight's ``--json`` record and ``--report`` are written.
 from __future__ import annotations
 
 import json
-import math
 from pathlib import Path
-from typing import Any
 
-import numpy as np
 import pytest
 import yaml
 
 from gcs.__main__ import main
-from planner.plan import build_world, plan
-from planner.retime import build_schedule
-from planner.scenario import parse_scenario
 from tests import oracle
 from tests.flightstory import story
-from tests.teams import landing_scenario
+from tests.teams import box_across, landing_scenario
 from tests.verdict import assert_flown
 
 pytestmark = pytest.mark.slow
@@ -45,8 +39,8 @@ BOX_ALONG = 0.3
 """Where the box lies on G1's planned route (fraction of its length)."""
 BOX_ACROSS_M = 4_000.0
 BOX_DEPTH_M = 500.0
-APPEARS_S = 60.0
-"""Mission time the box appears: G1 has flown under a tenth of its route by then."""
+APPEARS = 0.1
+"""When the box appears: a tenth of the way through G1's flight as planned."""
 CLEAR_M = 1_500.0
 """How far every other vehicle's planned route stays from the box (the test's own check of
 its scenario: only G1 is to be held up)."""
@@ -55,40 +49,6 @@ SLOT_MOVE_MAX_S = 240.0
 """How far a slot may move, and only later: G1's detour (some 2 km at under 30 m/s over the
 ground) and the unforecast wind the first in meets (the landing test's bound, at 7-10 m/s)."""
 TOGETHER_MIN_S = 200.0
-
-
-def _box(doc: dict[str, Any]) -> tuple[dict[str, Any], list[tuple[float, float]]]:
-    """The operator's box across G1's planned route at :data:`BOX_ALONG` of it (planned
-    here, as the coordinator plans it), and its corners."""
-    scenario = parse_scenario(doc)
-    world = build_world(scenario)
-    schedule = build_schedule(scenario, plan(scenario, world=world), world=world)
-    path = schedule.vehicle(HELD).path
-    pose = path.pose_at(BOX_ALONG * path.length_m)
-    ue, un = math.sin(pose.heading_rad), math.cos(pose.heading_rad)
-    corners = [
-        (
-            pose.east_m + a * BOX_DEPTH_M / 2.0 * ue + c * BOX_ACROSS_M / 2.0 * un,
-            pose.north_m + a * BOX_DEPTH_M / 2.0 * un - c * BOX_ACROSS_M / 2.0 * ue,
-        )
-        for a, c in ((-1, -1), (1, -1), (1, 1), (-1, 1))
-    ]
-    centre = np.array([pose.east_m, pose.north_m])
-    reach_m = math.hypot(BOX_ACROSS_M, BOX_DEPTH_M) / 2.0
-    for vs in schedule.vehicles:
-        if vs.vehicle_id == HELD:
-            continue
-        s = np.linspace(0.0, vs.path.length_m, 400)
-        en = np.array([[p.east_m, p.north_m] for p in map(vs.path.pose_at, s)])
-        gap_m = float(np.min(np.hypot(*(en - centre).T))) - reach_m
-        assert gap_m > CLEAR_M, (vs.vehicle_id, gap_m)
-    box = {
-        "kind": "no_fly",
-        "id": "OP1",
-        "polygon": [{"east_m": round(e, 1), "north_m": round(n, 1)} for e, n in corners],
-        "appears": {"at_s": APPEARS_S},
-    }
-    return box, corners
 
 
 def test_a_vehicle_held_up_early_moves_its_slot_and_those_after_it_the_one_ahead_keeps_its(
@@ -101,7 +61,7 @@ def test_a_vehicle_held_up_early_moves_its_slot_and_those_after_it_the_one_ahead
     wind = (max(wind_m_s, WIND_MIN_M_S), (doc["landing"]["heading_deg"] + 180.0) % 360.0)
     order = doc["arrival"]["order"]
     assert order.index(HELD) == 1
-    box, _ = _box(doc)
+    box, _ = box_across(doc, HELD, BOX_ALONG, BOX_ACROSS_M, BOX_DEPTH_M, APPEARS, CLEAR_M)
     path = tmp_path / "scenario.yaml"
     path.write_text(yaml.safe_dump(doc), encoding="utf-8")
     threats = tmp_path / "threats.jsonl"
@@ -127,7 +87,7 @@ def test_a_vehicle_held_up_early_moves_its_slot_and_those_after_it_the_one_ahead
         tolerance_s=1.0,
         team_shift_max_s=SLOT_MOVE_MAX_S,
         together_min_s=TOGETHER_MIN_S,
-        extra_zones=[oracle.Zone.of(box, record["start_utc_s"] + APPEARS_S)],
+        extra_zones=[oracle.Zone.of(box, record["start_utc_s"] + box["appears"]["at_s"])],
     )
     moves = verdict.slot_moves_s
     assert min(moves.values()) > -1e-3, f"a slot moved earlier: {verdict}"

@@ -25,7 +25,7 @@ from gcs.coordination.events import EventKind, FlightEvent
 from gcs.coordination.member import Member, VehicleState
 from gcs.coordination.routetrack import LoiterSpec, RouteTrack
 from gcs.coordination.separation import Position, SeparationWatch
-from gcs.coordination.team import TeamController, TeamTimeRefused
+from gcs.coordination.team import TAKEOFF_RECHECK_S, TeamController, TeamTimeRefused
 from gcs.errors import GcsError
 from gcs.store.repository import EventWriter, Store
 from planner.flightpath import FlightPath, smooth_polyline
@@ -1980,3 +1980,39 @@ def test_the_operator_cannot_move_the_team_time_later_than_a_vehicle_can_wait(
     within = ref + 0.5 * (latest - ref)
     team.move_team_time(within, t_near)
     assert team.team_ref_s == within
+
+
+def test_windows_the_ground_vehicles_are_re_timed_in_the_wind_measured_aloft(
+    windows_team_parts: tuple[Scenario, World, Schedule],
+) -> None:
+    """Arrival windows (no team time moves to re-time the takeoffs): one vehicle aloft says
+    it flies in 10 m/s; at the next tick those still on the ground (none armed yet) take off
+    for their slots in that wind, not the schedule's calm, within ``TAKEOFF_RECHECK_S``; and
+    not again while it holds."""
+    scenario, world, schedule = windows_team_parts
+    team = TeamController(scenario, schedule, world, FlightConfig(), rng=np.random.default_rng(3))
+    team.start(START_UTC)
+    first = min(team.members.values(), key=lambda x: x.takeoff_s)
+    airborne(team, first.vehicle_id, first.takeoff_s)
+    ground = [x for x in team.members.values() if x.phase == "ground" and not x.arm_sent]
+    assert ground
+    g = ground[0]
+    start, end = g.schedule.path.pose_at(0.0), g.schedule.path.pose_at(g.schedule.path.length_m)
+    to_deg = math.degrees(math.atan2(end.east_m - start.east_m, end.north_m - start.north_m))
+    wind_to = (10.0 * math.sin(math.radians(to_deg)), 10.0 * math.cos(math.radians(to_deg)))
+    t0 = first.takeoff_s + 120.0
+    heard = dataclasses.replace(
+        fix(team, first.vehicle_id, 1_000.0, t0, 25.0),
+        wind_speed_m_s=10.0,
+        wind_from_deg=(to_deg + 180) % 360,
+    )
+    team.handle(heard, t0)
+    out = team.handle(act.Tick(), t0 + TAKEOFF_RECHECK_S)
+    (retimed,) = [r for r in reports(out, EventKind.TAKEOFF) if r.vehicle == g.vehicle_id]
+    want_s = _takeoff_in_wind_s(team, g.vehicle_id, wind_to)
+    assert retimed.value == pytest.approx(want_s, abs=10.0)
+    assert g.takeoff_s == pytest.approx(retimed.value, abs=1e-3)
+    calm_s = _takeoff_in_wind_s(team, g.vehicle_id, (0.0, 0.0))
+    assert abs(retimed.value - calm_s) > 60.0, (retimed.value, calm_s)
+    again = team.handle(act.Tick(), t0 + 2 * TAKEOFF_RECHECK_S)
+    assert not [r for r in reports(again, EventKind.TAKEOFF) if r.vehicle == g.vehicle_id]

@@ -78,3 +78,12 @@ def test_an_arrived_vehicle_slot_cannot_move() -> None:
     would push B's: refused, naming B."""
     with pytest.raises(InfeasibleError, match=r"vehicle B cannot arrive as late as 110\.0 s"):
         ordered_targets([_window("A", 20.0, 100.0)], {"A": 0.0, "B": 90.0}, 90.0)
+
+
+def test_a_vehicle_early_for_its_own_slot_does_not_stop_the_ones_after_it_moving() -> None:
+    """A will be early for its slot (it can arrive no later than -20 s) whatever happens;
+    B's new route cannot make 90 s before 120: B's slot moves, A's stays, and nothing is
+    refused for A."""
+    windows = [_window("A", -50.0, -20.0), _window("B", 120.0, 400.0)]
+    targets, _, _ = ordered_targets(windows, {"A": 0.0, "B": 90.0}, 90.0)
+    assert targets == {"A": 0.0, "B": 120.0}
