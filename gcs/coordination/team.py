@@ -486,6 +486,11 @@ class TeamController(ZoneGuard, TeamTime):
                     )
                 )
             else:
+                if self.guarded and m.launched_s is not None:
+                    # Climbing out, not yet timed, but watched for a zone across its route as
+                    # one on it is: a box that appeared while a vehicle climbed (its re-plan
+                    # had no waypoint far enough ahead) was flown into, 248 m deep.
+                    self._guard(m, t, m.track.locate(e, n)[0], out)
                 return
         if m.phase != "route":
             return

@@ -17,12 +17,14 @@ from collections.abc import Sequence
 
 import numpy as np
 import pytest
+from pydantic import TypeAdapter
 
 from gcs.coordination import actions as act
 from gcs.coordination.events import EventKind
 from gcs.coordination.member import VehicleState
 from gcs.coordination.team import TeamController
 from planner.popup import popup_zones
+from planner.scenario import Threat
 from planner.threats import RadarSite, build_threats
 from tests.gcs.test_team import airborne, fix, of, reports
 
@@ -275,3 +277,46 @@ def test_a_route_clear_of_the_zone_is_never_held(team: TeamController) -> None:
     # It flew its route to the end (not cut short by the time limit) without a hold.
     assert team.members["UAV3"].done, (t, team.members["UAV3"].state)
     assert all(x.entry_s_m is None for x in team.exposures.get("UAV3", {}).values())
+
+
+def test_a_vehicle_climbing_out_towards_a_zone_that_appears_is_held_short_of_it(
+    team: TeamController,
+) -> None:
+    """A no-fly box appears across UAV2's route 3 km along it while UAV2 still climbs out (its
+    mission on its takeoff item: not yet timed, and no waypoint far enough ahead to re-plan
+    from). The guard watches it as one on its route: when due, an alarm and a hold short of
+    the box, its point outside the box (worked out here from the box's corners)."""
+    vid = "UAV2"
+    m = team.members[vid]
+    airborne(team, vid, m.takeoff_s)
+    assert m.phase == "takeoff" and m.launched_s is not None
+    path = m.schedule.path
+    p = path.pose_at(3_000.0)
+    half = 500.0
+    corners = ((-half, -half), (half, -half), (half, half), (-half, half))
+    box = [(p.east_m + de, p.north_m + dn) for de, dn in corners]
+    op1 = TypeAdapter(Threat).validate_python(
+        {"kind": "no_fly", "id": "OP1", "polygon": [{"east_m": e, "north_m": n} for e, n in box]}
+    )
+    t = m.takeoff_s + 10.0
+    team.add_threat(op1, t)
+    team.handle(act.Tick(), t)
+    climbing = m.mission.first_route_seq - 1
+    held: list[act.Hold] = []
+    said: list[act.Report] = []
+    for k in range(80):
+        s_k, t_k = 300.0 + 40.0 * k, t + 2.0 * k
+        f = dataclasses.replace(fix(team, vid, s_k, t_k, 20.0), mission_seq=climbing)
+        out = team.handle(f, t_k)
+        held += of(out, act.Hold)
+        said += [r for r in reports(out, EventKind.ALARM) if r.vehicle == vid]
+        if held:
+            break
+    assert m.phase == "takeoff"  # still climbing out when held
+    (hold,) = held
+    assert hold.zone_id == "OP1"
+    assert said and "its route enters OP1" in said[0].reason
+    e, n = (float(x) for x in team.frame.to_local(hold.lat_deg, hold.lon_deg))
+    outside_m = max(abs(e - p.east_m), abs(n - p.north_m)) - half
+    assert outside_m > 0.0, (e, n)
+    assert s_k < 3_000.0 - half  # held before it reached the box
