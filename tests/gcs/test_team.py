@@ -1398,12 +1398,33 @@ def test_a_pair_under_the_separation_is_said_again_each_step_closer_and_checkpoi
 def windows_team_parts(
     paper: tuple[Scenario, World, Schedule],
 ) -> tuple[Scenario, World, Schedule]:
-    scenario, _world, _ = paper
     own = {"UAV1": (5_300.0, 7_000.0), "UAV2": (5_300.0, 5_320.0), "UAV3": (5_300.0, 7_000.0)}
     arrival = {
         "kind": "windows",
         "windows": [{"vehicle": v, "earliest_s": a, "latest_s": b} for v, (a, b) in own.items()],
     }
+    return _paper_arriving(paper, arrival)
+
+
+def _found_behind(
+    team: TeamController, vid: str, s_m: float, late_s: float
+) -> tuple[list[act.Action], float, float]:
+    """``vid`` launched, its first fix ``s_m`` along its route (at 25 m/s) at the time from
+    which its top speed (still air, the test's own arithmetic) brings it ``late_s`` after its
+    slot: the actions, that time and its earliest arrival from there."""
+    m = team.members[vid]
+    airborne(team, vid, m.takeoff_s)
+    v_max = m.limits.airspeed_max_m_s
+    t = m.target_s + late_s - still_air_eta_s(team, vid, s_m, 0.0, v_max)
+    earliest = still_air_eta_s(team, vid, s_m, t, v_max)
+    return team.handle(fix(team, vid, s_m, t, 25.0), t), t, earliest
+
+
+def _paper_arriving(
+    paper: tuple[Scenario, World, Schedule], arrival: dict[str, Any]
+) -> tuple[Scenario, World, Schedule]:
+    """The paper scenario with another arrival rule: planned and scheduled."""
+    scenario, _world, _ = paper
     data = scenario.model_dump(mode="json", exclude_none=True) | {"arrival": arrival}
     scen = parse_scenario(data)
     w = build_world(scen)
@@ -1421,12 +1442,8 @@ def test_windows_a_late_vehicle_moves_its_own_slot_within_its_window_or_alarms(
     slots = {v: m.target_s for v, m in team.members.items()}
     # UAV1 far enough behind to be ~200 s late at top speed: inside its wide window.
     m1 = team.members["UAV1"]
-    airborne(team, "UAV1", m1.takeoff_s)
     v_max = m1.limits.airspeed_max_m_s
-    s1 = 5_000.0
-    t1 = m1.target_s + 200.0 - still_air_eta_s(team, "UAV1", s1, 0.0, v_max)
-    earliest = still_air_eta_s(team, "UAV1", s1, t1, v_max)
-    out = team.handle(fix(team, "UAV1", s1, t1, 25.0), t1)
+    out, _, earliest = _found_behind(team, "UAV1", 5_000.0, 200.0)
     (moved,) = reports(out, EventKind.ARRIVAL)
     assert "within its window [5300, 7000] s" in moved.reason
     said = float(re.search(r"cannot arrive before ([\d.]+) s", moved.reason).group(1))  # type: ignore[union-attr]
@@ -2016,3 +2033,52 @@ def test_windows_the_ground_vehicles_are_re_timed_in_the_wind_measured_aloft(
     assert abs(retimed.value - calm_s) > 60.0, (retimed.value, calm_s)
     again = team.handle(act.Tick(), t0 + 2 * TAKEOFF_RECHECK_S)
     assert not [r for r in reports(again, EventKind.TAKEOFF) if r.vehicle == g.vehicle_id]
+
+
+# -- waves -----------------------------------------------------------------------------------------
+
+
+@pytest.fixture(scope="module")
+def waves_team_parts(
+    paper: tuple[Scenario, World, Schedule],
+) -> tuple[Scenario, World, Schedule]:
+    arrival = {"kind": "waves", "gap_s": 120.0, "groups": [["UAV1", "UAV2"], ["UAV3"]]}
+    return _paper_arriving(paper, arrival)
+
+
+def test_waves_a_late_vehicle_moves_its_own_wave_and_not_the_one_before(
+    waves_team_parts: tuple[Scenario, World, Schedule],
+) -> None:
+    """Two waves 120 s apart: UAV3, alone in the second, is found far behind. Its wave's slot
+    moves to its earliest at top speed plus the margin (the test's own still-air arithmetic,
+    within what one ratio of true airspeed leaves), the first wave keeps its slot (UAV1 and
+    UAV2 together), and the event names the slots that moved. Then UAV1, in the first wave,
+    is found late: its whole wave moves, and the second wave only as far as the gap needs."""
+    scenario, world, schedule = waves_team_parts
+    team = TeamController(scenario, schedule, world, FlightConfig(), rng=np.random.default_rng(3))
+    team.start(START_UTC)
+    slots = {v: m.target_s for v, m in team.members.items()}
+    assert slots["UAV1"] == slots["UAV2"] == pytest.approx(slots["UAV3"] - 120.0)
+    m3 = team.members["UAV3"]
+    out, t3, earliest = _found_behind(team, "UAV3", 2_000.0, 150.0)
+    (moved,) = reports(out, EventKind.ARRIVAL)
+    assert moved.vehicle == "UAV3" and "from place 2 on" in moved.reason
+    assert set(moved.payload["slots"]) == {"UAV3"}
+    assert m3.target_s == pytest.approx(earliest + FlightConfig().late_margin_s, abs=25.0)
+    assert m3.target_s > slots["UAV3"] + 100.0
+    assert team.members["UAV1"].target_s == team.members["UAV2"].target_s == slots["UAV1"]
+    assert team.team_ref_s == slots["UAV1"]
+    # UAV1 late by 30 s: the first wave moves as one; the second stays, 120 s after it at
+    # least already.
+    m1 = team.members["UAV1"]
+    airborne(team, "UAV1", m1.takeoff_s)
+    length, v1_max = m1.track.length_m, m1.limits.airspeed_max_m_s
+    t1 = t3 + 10.0
+    s1 = length - (m1.target_s + 30.0 - t1) * v1_max * m1.schedule.tas_per_eas(length)
+    s1 = length - (m1.target_s + 30.0 - t1) * v1_max * m1.schedule.tas_per_eas(s1)
+    out = team.handle(fix(team, "UAV1", s1, t1, 25.0), t1)
+    (moved,) = reports(out, EventKind.ARRIVAL)
+    assert set(moved.payload["slots"]) == {"UAV1", "UAV2"}, moved
+    first = team.members["UAV1"].target_s
+    assert team.members["UAV2"].target_s == first and first > slots["UAV1"] + 20.0
+    assert m3.target_s >= first + 120.0 - 1e-6
