@@ -556,10 +556,13 @@ class MissionChanges:
     @staticmethod
     def _speed_ahead_m_s(m: Member) -> float:
         """The speed (m/s) the vehicle is taken to fly on at: its ground speed on its route;
-        in loiter turns its true airspeed (round a circle the ground speed of one fix is the
-        side of the wind it is on: 14 m/s upwind for one averaging 17 m/s round its circle
-        set a splice 200 s late, and the team time moved for it)."""
-        tas_m_s = m.tas_m_s(m.s_m or 0.0) if m.in_loiter() else None
+        in loiter turns, or circling where it holds short of a zone, its true airspeed (round
+        a circle the ground speed of one fix is the side of the wind it is on: 14 m/s upwind
+        for one averaging 17 m/s round its circle set a splice 200 s late, and the team time
+        moved for it; one holding short of another zone was taken to fly on at 10 m/s, and the
+        slots after it moved 370 s)."""
+        circling = m.in_loiter() or m.hold_zone is not None
+        tas_m_s = m.tas_m_s(m.s_m or 0.0) if circling else None
         return max(m.groundspeed_m_s if tas_m_s is None else tas_m_s, 10.0)
 
     @staticmethod

@@ -320,3 +320,37 @@ def test_a_vehicle_climbing_out_towards_a_zone_that_appears_is_held_short_of_it(
     outside_m = max(abs(e - p.east_m), abs(n - p.north_m)) - half
     assert outside_m > 0.0, (e, n)
     assert s_k < 3_000.0 - half  # held before it reached the box
+
+
+def test_a_vehicle_holding_short_of_one_zone_is_timed_for_another_at_its_true_airspeed(
+    team: TeamController,
+) -> None:
+    """UAV2 circles its hold point short of one zone (its ground speed 3 m/s as it heads into
+    the wind) when a second box appears across its route far ahead: its re-plan anchor, at a
+    waypoint ahead, is timed at its true airspeed from where it is (the test's own arithmetic:
+    path to the waypoint over the airspeed it reports times the route's true-airspeed ratio),
+    not at the ground speed of one fix on its circle."""
+    vid = "UAV2"
+    m = team.members[vid]
+    airborne(team, vid, m.takeoff_s)
+    t = m.takeoff_s + 600.0
+    s_now = 10_000.0
+    team.handle(fix(team, vid, s_now, t, 25.0), t)
+    assert m.s_m is not None and m.airspeed_m_s == 25.0
+    m.hold_zone = "OP0"  # holding short of another zone, circling upwind
+    m.groundspeed_m_s = 3.0
+    p = m.schedule.path.pose_at(s_now + 25_000.0)
+    half = 500.0
+    corners = ((-half, -half), (half, -half), (half, half), (-half, half))
+    op1 = TypeAdapter(Threat).validate_python(
+        {
+            "kind": "no_fly",
+            "id": "OP1",
+            "polygon": [{"east_m": p.east_m + de, "north_m": p.north_m + dn} for de, dn in corners],
+        }
+    )
+    team.add_threat(op1, t)
+    (job,) = [a.job for a in of(team.handle(act.Tick(), t), act.Compute)]
+    anchor = job.anchors[vid]
+    tas = 25.0 * m.tas_per_eas(m.s_m)
+    assert anchor.t_s == pytest.approx(t + (anchor.s_m - m.s_m) / tas, rel=0.02)
