@@ -19,6 +19,7 @@ from planner.plan import build_world, plan
 from planner.popup import replay_popups
 from planner.retime import (
     WINDOW_MARGIN_S,
+    arrival_targets,
     build_schedule,
     can_loiter_after,
     check_arrival,
@@ -28,6 +29,7 @@ from planner.retime import (
 )
 from planner.scenario import load_scenario, parse_scenario
 from planner.schedule import Leg, Schedule, VehicleSchedule
+from planner.timing import ArrivalWindow
 from tests.planner.conftest import crossing_scenario, small_scenario
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -165,6 +167,27 @@ def test_unreachable_window_names_vehicle_and_shortfall() -> None:
     ]
     with pytest.raises(InfeasibleError, match=r"vehicle A: .*short by \d+\.\d s"):
         _small(arrival={"kind": "windows", "windows": windows})
+
+
+def test_in_flight_a_window_that_cannot_be_made_is_timed_to_the_nearest_arrival() -> None:
+    """A re-plan in flight (``missed_ok``): A can no longer arrive before 250 s, after its
+    window [100, 200] s: it is timed to 250 s and named in the reason; B keeps its window.
+    Before launch (the default) the same is refused, naming A."""
+    windows = [
+        {"vehicle": "A", "earliest_s": 100, "latest_s": 200},
+        {"vehicle": "B", "earliest_s": 1900, "latest_s": 2000},
+    ]
+    scenario = parse_scenario(small_scenario(arrival={"kind": "windows", "windows": windows}))
+    reach = [
+        ArrivalWindow("A", 250.0, 900.0, "A at its top speed", "A at its slowest"),
+        ArrivalWindow("B", 1500.0, 2500.0, "B at its top speed", "B at its slowest"),
+    ]
+    natural = {"A": 400.0, "B": 1950.0}
+    targets, ref, reason = arrival_targets(scenario, reach, None, natural, missed_ok=True)
+    assert targets == {"A": 250.0, "B": 1950.0} and ref is None
+    assert "cannot make its window, timed to the nearest it can: A (at 250.0 s)" in reason
+    with pytest.raises(InfeasibleError, match=r"vehicle A: window \[100, 200\] s cannot be met"):
+        arrival_targets(scenario, reach, None, natural)
 
 
 def test_airborne_vehicle_that_cannot_wait_names_itself_and_the_shortfall() -> None:
