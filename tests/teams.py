@@ -351,3 +351,16 @@ def box_across(
         "appears": {"at_s": round(appears_s, 1)},
     }
     return box, schedule
+
+
+def headwind_loss_s(vehicle: dict[str, Any], wind_m_s: float) -> float:
+    """What a wind the scenario does not forecast can cost a vehicle planned at its top speed
+    in still air: ``L (1 / (v - w) - 1 / v)``, its whole route ``L`` (under 1.2 times the
+    straight line to its goal) flown at its top airspeed ``v`` (equivalent; the true airspeed
+    aloft is higher, and the delay less) straight into the wind ``w`` (s)."""
+    straight_m = math.hypot(
+        vehicle["goal"]["east_m"] - vehicle["start"]["east_m"],
+        vehicle["goal"]["north_m"] - vehicle["start"]["north_m"],
+    )
+    top_m_s = float(vehicle["speed_max_m_s"])
+    return 1.2 * straight_m * (1.0 / (top_m_s - wind_m_s) - 1.0 / top_m_s)

@@ -30,7 +30,7 @@ from gcs.errors import GcsError
 from planner.retime import earliest_from_ground_s, takeoff_for
 from planner.scenario import Scenario, Spaced, Waves, Windows
 from planner.schedule import VehicleSchedule
-from planner.slots import SAME_SLOT_S, pushed, slot_spacing_s
+from planner.slots import SAME_SLOT_S, pushed, slot_groups, slot_spacing_s
 from planner.wind import Wind
 
 __all__ = ["TeamTime", "TeamTimeRefused", "names_of"]
@@ -301,18 +301,16 @@ class TeamTime:
             out,
         )
 
+    def _timed(self) -> list[Member]:
+        """The vehicles that have a slot: still flying to it, or arrived (not lost or
+        aborted)."""
+        return [x for x in self.members.values() if not x.done or x.arrival_s is not None]
+
     def _slots(self) -> list[list[Member]]:
         """The team's slots in their order, each with the vehicles that arrive in it (one
-        each when spaced, a wave's), the lost and aborted ones left out."""
-        timed = [x for x in self.members.values() if not x.done or x.arrival_s is not None]
-        timed.sort(key=lambda x: (x.target_s, x.offset_s))
-        slots: list[list[Member]] = []
-        for x in timed:
-            if slots and abs(slots[-1][0].target_s - x.target_s) < SAME_SLOT_S:
-                slots[-1].append(x)
-            else:
-                slots.append([x])
-        return slots
+        each when spaced, a wave's; :func:`planner.slots.slot_groups`)."""
+        groups = slot_groups({x.vehicle_id: x.target_s for x in self._timed()})
+        return [[self.members[vid] for vid in group] for group in groups]
 
     def _pushed(
         self, slots: list[list[Member]], first_s: float, mover: Member
@@ -441,7 +439,7 @@ class TeamTime:
             moved = moved or abs(x.target_s - slot_s) > 1e-3
             x.target_s = slot_s
             x.next_decision_s = -math.inf
-        self.team_ref_s = min(x.target_s for slot in self._slots() for x in slot)
+        self.team_ref_s = min(x.target_s for x in self._timed())
         for x in self.members.values():
             x.offset_s = x.target_s - self.team_ref_s
         if moved:

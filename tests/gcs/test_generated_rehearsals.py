@@ -18,7 +18,6 @@ flight long.
 from __future__ import annotations
 
 import json
-import math
 from pathlib import Path
 from typing import Any
 
@@ -29,7 +28,13 @@ from gcs.__main__ import main
 from planner.errors import PlannerError
 from tests import oracle
 from tests.flightstory import story
-from tests.teams import ARRIVAL_KINDS, box_across, generated_scenario, rehearse_doc
+from tests.teams import (
+    ARRIVAL_KINDS,
+    box_across,
+    generated_scenario,
+    headwind_loss_s,
+    rehearse_doc,
+)
 from tests.verdict import assert_flown
 
 pytestmark = pytest.mark.slow
@@ -99,17 +104,9 @@ teamtime`)."""
 
 def _slot_move_max_s(doc: dict[str, Any], wind_m_s: float) -> float:
     """How far a slot may move, and only later, in a wind the scenario does not forecast:
-    the most any vehicle that sets it can lose, ``L (1 / (v - w) - 1 / v)`` over its whole
-    route ``L`` (under 1.2 times the straight line to its goal) at its top airspeed ``v``
-    straight into the wind ``w``, plus :data:`DETOUR_S`."""
-    lost = []
-    for v in doc["vehicles"]:
-        straight_m = math.hypot(
-            v["goal"]["east_m"] - v["start"]["east_m"], v["goal"]["north_m"] - v["start"]["north_m"]
-        )
-        top = float(v["speed_max_m_s"])
-        lost.append(1.2 * straight_m * (1.0 / (top - wind_m_s) - 1.0 / top))
-    return max(lost) + DETOUR_S
+    the most any vehicle that sets it can lose (:func:`tests.teams.headwind_loss_s`), plus
+    :data:`DETOUR_S`."""
+    return max(headwind_loss_s(v, wind_m_s) for v in doc["vehicles"]) + DETOUR_S
 
 
 @pytest.mark.parametrize(("seed", "kind"), FAULT_CASES, ids=[f"{s}-{k}" for s, k in FAULT_CASES])

@@ -21,7 +21,7 @@ import pytest
 
 from tests import oracle
 from tests.flightstory import story
-from tests.teams import landing_scenario, rehearse_doc
+from tests.teams import headwind_loss_s, landing_scenario, rehearse_doc
 from tests.verdict import assert_flown
 
 pytestmark = pytest.mark.slow
@@ -43,17 +43,10 @@ speeds up to its top airspeed."""
 def _team_shift_max_s(doc: dict[str, Any], wind_m_s: float) -> float:
     """How far the slots may move in flight, and only later. The scenario forecasts no wind:
     the first in, planned at its top speed in calm air, is late by the wind it meets and the
-    slots move with it: by at most ``L (1 / (v - w) - 1 / v)``, its whole route ``L`` (under
-    1.2 times the straight line to its fix) flown at its top airspeed ``v`` (equivalent; the
-    true airspeed aloft is higher, and the delay less) straight into the simulator's wind
-    ``w``, plus :data:`TAKEOVER_S`."""
+    slots move with it: by at most its :func:`tests.teams.headwind_loss_s` in the
+    simulator's wind, plus :data:`TAKEOVER_S`."""
     first = next(v for v in doc["vehicles"] if v["id"] == doc["arrival"]["order"][0])
-    straight_m = math.hypot(
-        first["goal"]["east_m"] - first["start"]["east_m"],
-        first["goal"]["north_m"] - first["start"]["north_m"],
-    )
-    v_m_s = float(first["speed_max_m_s"])
-    return 1.2 * straight_m * (1.0 / (v_m_s - wind_m_s) - 1.0 / v_m_s) + TAKEOVER_S
+    return headwind_loss_s(first, wind_m_s) + TAKEOVER_S
 
 
 def _crossing(
