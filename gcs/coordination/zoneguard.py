@@ -375,6 +375,9 @@ class ZoneGuard(MissionChanges):
         # DO_CHANGE_SPEED airspeed on every mode change (ArduPlane/mode.cpp Mode::enter,
         # new_airspeed_cm = -1), and the next decision commands one.
         m.level_m_s = None
+        # It jumps to the item: those before it in the new mission (the route's first speed
+        # among them) were never run.
+        m.last_seq = up.seq
         m.rejoin_seq = up.seq
         m.next_decision_s = -math.inf
         m.progress = None
