@@ -95,6 +95,12 @@ class Ahead:
     forecast to keep that height, it was forecast 320 m from R59 beneath and came 186 m."""
     return_rate_m_s: float = 5.0
     """How fast it climbs or sinks back to its profile, m/s."""
+    hold_until_s: float | None = None
+    """Flying a height resolution: it holds :attr:`alt_m` (the height asked) until then, and
+    is back on its profile after it as fast as it returns (:attr:`off_profile_m` is then how
+    far the height asked lies off its profile where it is). Forecast at that height all along,
+    the crowd's R00, held 300 m under its profile for R03, was climbed over by R01 from a
+    forecast that never had it back; it came back up, and the pair came 272 m apart."""
     until_s: float = math.inf
     """Flying a speed resolution (:attr:`airspeed_m_s`): when it is released. Flown as it
     flies, it is forecast at :attr:`resume_m_s` after it."""
@@ -221,6 +227,12 @@ class Ahead:
         out[..., 1] = np.interp(s, self.route_s_m, self.route_north_m)
         if self.route_rise_m is None:
             out[..., 2] = self.alt_m
+        elif self.hold_until_s is not None:
+            profile = np.interp(s, self.route_s_m, self.route_rise_m)
+            profile += self.alt_m - self.off_profile_m
+            off = self.alt_m - profile
+            back = np.maximum(t_s - self.hold_until_s, 0.0) * self.return_rate_m_s
+            out[..., 2] = profile + np.sign(off) * np.maximum(np.abs(off) - back, 0.0)
         else:
             out[..., 2] = np.interp(s, self.route_s_m, self.route_rise_m)
             out[..., 2] += self.alt_m

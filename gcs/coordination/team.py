@@ -77,6 +77,9 @@ way to one by height."""
 HOLD_ROOM_S = 60.0
 """A height resolution held on past its end (the pair not yet past) keeps its height only while
 it has room over the ground it flies this far ahead (flight s)."""
+SPEED_CHANGING_M_S = 1.0
+"""A vehicle whose airspeed at a fix is this far or farther from the one it was asked is
+still changing speed: forecast at the ground speed the airspeed asked makes good (m/s)."""
 RETURNING_M_S = 1.0
 """A vehicle off its profile that closes on it this fast or faster (m/s: its climb or sink
 less the profile's own where it is) is forecast back on it at that rate (:attr:`~gcs.
@@ -632,16 +635,20 @@ class TeamController(ZoneGuard, TeamTime):
             at_m = lo.s_m + min(m.loiter_flown_m, lo.length_m)
             here_m = lo.s_m
         climbing = self.vertical.flying.get(m.vehicle_id)
-        rise_m = None
-        off_m = closing_m_s = 0.0
-        if climbing is None:
-            # Its profile's changes of height ahead (a re-plan's lift among them), and, if it
-            # is climbing or sinking back to it (from a height resolution), its way back at
-            # that rate: flying one, it holds the height it was asked.
-            vs = m.schedule
-            profile_m = vs.alt_at(here_m)
-            rise_m = np.interp(track.flight_route_s_m(done), vs.wp_s_m, vs.wp_alt_m)
-            rise_m -= profile_m
+        # Its profile's changes of height ahead (a re-plan's lift among them), and, if it is
+        # climbing or sinking back to it (from a height resolution), its way back at that
+        # rate; flying one, it holds the height it was asked until the resolution's end, and
+        # is back on its profile after it at the fastest rate it is asked.
+        vs = m.schedule
+        profile_m = vs.alt_at(here_m)
+        rise_m = np.interp(track.flight_route_s_m(done), vs.wp_s_m, vs.wp_alt_m)
+        rise_m -= profile_m
+        hold_until_s = None
+        if climbing is not None:
+            off_m = climbing.resolution.alt_m - profile_m
+            closing_m_s = self.config.vertical_rate_max_m_s
+            hold_until_s = max(climbing.resolution.until_s, m.last_fix_s)
+        else:
             off_m = m.alt_amsl_m - profile_m
             # How fast it closes on its profile: its climb less the profile's own there.
             step_m = PROFILE_SLOPE_STEP_M
@@ -649,12 +656,20 @@ class TeamController(ZoneGuard, TeamTime):
             closing_m_s = -math.copysign(1.0, off_m) * (m.climb_m_s - slope * m.groundspeed_m_s)
             if closing_m_s < RETURNING_M_S:
                 off_m = 0.0  # level off it, or not closing on it: kept off it as it is
+        flies_m_s = m.level_m_s if m.resolving is None else m.resolving.airspeed_m_s
+        gs_m_s = m.groundspeed_m_s
+        if m.airspeed_m_s is not None and abs(flies_m_s - m.airspeed_m_s) >= SPEED_CHANGING_M_S:
+            # Not yet at the airspeed it was asked (a resolution's, just commanded): forecast
+            # at the ground speed that airspeed makes good, not at the one its fix measured on
+            # the way to it (sped from 22.8 to 30 m/s, one was forecast a second later at its
+            # old ground speed 270 m from the other, and said unresolved: flown, 660 m).
+            gs_m_s += (flies_m_s - m.airspeed_m_s) * m.tas_per_eas(m.s_m)
         ahead = Ahead(
             m.vehicle_id,
             m.last_fix_s,
             at_m,
-            m.groundspeed_m_s,
-            m.level_m_s if m.resolving is None else m.resolving.airspeed_m_s,
+            gs_m_s,
+            flies_m_s,
             m.tas_per_eas(m.s_m),
             m.limits.airspeed_min_m_s,
             m.limits.airspeed_max_m_s,
@@ -672,6 +687,7 @@ class TeamController(ZoneGuard, TeamTime):
             route_rise_m=rise_m,
             off_profile_m=off_m,
             return_rate_m_s=min(closing_m_s, self.config.vertical_rate_max_m_s),
+            hold_until_s=hold_until_s,
             wind=m.schedule.wind if m.wind is None else m.wind,
         )
         r = m.resolving
@@ -888,6 +904,9 @@ class TeamController(ZoneGuard, TeamTime):
         mine = self._ahead(m, strengthening=True)
         if mine is None:
             return
+        # Its height is held until it is past the other (:meth:`VerticalFlight.fly`), not
+        # only until the resolution's end.
+        mine = replace(mine, hold_until_s=math.inf)
         up = self._resolve_vertically(mine, theirs, t)
         if up is None or (up.vehicle == other and self._resolving_from(x) is not None):
             return

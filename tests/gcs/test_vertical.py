@@ -209,6 +209,92 @@ def test_a_vehicle_is_forecast_back_on_its_profile_only_while_it_closes_on_it() 
     assert heights(-200.0, 3.0) == pytest.approx([below, below + 75.0, below + 150.0, profile_m])
 
 
+def test_a_vehicle_flying_a_height_resolution_is_forecast_back_on_its_profile_after_it() -> None:
+    """A flies a height resolution from a third vehicle: 600 m above its level profile
+    (1,000 m) until 60 s on, then back to it at 5 m/s. B meets it head-on on its profile's
+    height 120 s on, when A is 300 m above it by the test's own ramp. Forecast at the height
+    it was asked all along (the crowd's R00, held under its profile for R03, was climbed over
+    by R01 and came back up into it: 272 m), A and B pass 600 m apart and nothing is done;
+    forecast back on its profile after its hold, B moves, and the choice keeps the separation
+    against the test's own heights, second by second."""
+    until_s = NOW_S + 60.0
+    a = dataclasses.replace(
+        _ahead("A", 0.0, 1.0, 1_600.0, slot_in_s=900.0),
+        route_rise_m=np.zeros(2),
+        off_profile_m=600.0,
+        return_rate_m_s=RATE_M_S,
+        hold_until_s=until_s,
+        movable=False,  # flying its own resolution
+    )
+    b = _ahead("B", 6_000.0, -1.0, 1_000.0, slot_in_s=2_400.0)
+    t = np.arange(NOW_S, NOW_S + 400.0, 0.1)
+    za = np.where(t <= until_s, 1_600.0, np.maximum(1_600.0 - RATE_M_S * (t - until_s), 1e3))
+    assert a.positions(t, SPEED_M_S, 0.0)[:, 2] == pytest.approx(za)
+    room = {"A": Room(3_000.0, 400.0), "B": Room(3_000.0, 400.0)}
+    kw = {"now_s": NOW_S, "separation_m": D_S, "layer_m": LAYER_M, "rate_m_s": RATE_M_S}
+    never_back = dataclasses.replace(a, hold_until_s=math.inf)
+    assert resolve_vertical(never_back, b, room=room, look_ahead_s=180.0, **kw) is None
+    v = resolve_vertical(a, b, room=room, look_ahead_s=180.0, **kw)
+    assert v is not None and v.vehicle == "B"
+    assert v.unresolved_m == pytest.approx(300.0, abs=1.0)
+    ea, eb = _flown(0.0, 1.0, t), _flown(6_000.0, -1.0, t)
+    assert float(np.hypot(ea - eb, za - 1_000.0).min()) < D_S  # as they fly
+    zb = np.array([_height(1_000.0, v.offset_m, v.start_s, v.until_s, x) for x in t])
+    assert float(np.sqrt((ea - eb) ** 2 + (za - zb) ** 2).min()) >= D_S
+    assert room["B"].floor_m <= v.alt_m <= room["B"].ceiling_m
+
+
+def test_the_team_forecasts_a_vehicle_flying_a_height_resolution_back_after_its_end() -> None:
+    """The controller's forecast of A, flying a climb of 150 m that ends 40 s after a fix: at
+    the height asked until then, and back on its profile at the fastest rate it is asked
+    (FlightConfig.vertical_rate_max_m_s) after it."""
+    team = _head_on_team()
+    a = team.members["A"]
+    t0 = max(m.schedule.climb_end_s for m in team.members.values()) + 60.0
+    airborne(team, "A", a.takeoff_s)
+    _, s_m, level = a.schedule.state_at(t0)
+    profile_m = a.schedule.alt_at(s_m)
+    assert a.schedule.alt_at(s_m + 5_000.0) == pytest.approx(profile_m)  # level here
+    lifted = VerticalResolution(
+        "A", "B", 150.0, profile_m + 150.0, t0 - 30.0, t0 + 40.0, 600.0, 100.0, t0 + 20.0
+    )
+    team.vertical.flying["A"] = Manoeuvre(lifted, busy=True)
+    f = dataclasses.replace(fix(team, "A", s_m, t0, level), alt_amsl_m=profile_m + 150.0)
+    team.handle(f, t0)
+    ahead = team._ahead(a)
+    assert ahead is not None and ahead.hold_until_s == t0 + 40.0
+    rate = team.config.vertical_rate_max_m_s
+    t = np.array([t0, t0 + 40.0, t0 + 40.0 + 10.0, t0 + 40.0 + 150.0 / rate + 5.0])
+    up = profile_m + 150.0
+    want = [up, up, up - 10.0 * rate, profile_m]
+    assert ahead.positions(t, level, 0.0)[:, 2] == pytest.approx(want)
+
+
+def test_a_vehicle_still_changing_speed_is_forecast_at_the_speed_it_was_asked() -> None:
+    """A has just been given a speed resolution 6 m/s above the airspeed it flies; its fix
+    still reports the old airspeed and the ground speed that makes. Forecast from the fix,
+    it covers 20 s at the ground speed of the airspeed asked (a vehicle sped from 22.8 to
+    30 m/s, forecast at its old ground speed, was said 270 m from another it passed 660 m
+    from); a fix within SPEED_CHANGING_M_S of it keeps the fix's own ground speed."""
+    team = _head_on_team()
+    a = team.members["A"]
+    t0 = max(m.schedule.climb_end_s for m in team.members.values()) + 60.0
+    airborne(team, "A", a.takeoff_s)
+    _, s_m, level = a.schedule.state_at(t0)
+    team.handle(act.SpeedCommanded("A", level, "plan", t0), t0)
+    faster = level + 6.0
+    a.resolving = Resolution("A", "B", faster, t0 + 200.0, 600.0, 100.0, t0 + 100.0)
+    tas = a.schedule.tas_per_eas(s_m)
+    for k, (flown, covers) in enumerate(((level, faster), (faster - 0.5, faster - 0.5))):
+        t = t0 + k
+        team.handle(fix(team, "A", s_m, t, flown), t)
+        ahead = team._ahead(a)
+        assert ahead is not None and ahead.t_s == pytest.approx(t)
+        p = ahead.positions(np.array([t, t + 20.0]), ahead.airspeed_m_s, 0.0)
+        gone_m = float(np.hypot(*(p[1, :2] - p[0, :2])))
+        assert gone_m == pytest.approx(covers * tas * 20.0, rel=1e-3), flown
+
+
 def test_the_higher_of_a_pair_climbs_and_one_with_no_room_above_descends() -> None:
     a = _ahead("A", 0.0, 1.0, 1_100.0, slot_in_s=2_000.0)  # 100 m above B
     b = _ahead("B", 6_000.0, -1.0, 1_000.0, slot_in_s=2_000.0)
